@@ -1,0 +1,27 @@
+// headcast-bench: shared pieces of the benchmark suites.
+#pragma once
+
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "common/core/timer.h"
+
+namespace headcast::bench {
+
+struct BenchOptions {
+  int repeats = 200;        // timed runs per measurement
+  int warmup = 20;          // untimed runs first
+  std::string json_path;    // where to write results ("" = stdout only)
+};
+
+// Times `fn` (after warm-up) and returns microseconds per call.
+SampleStats TimeUs(const BenchOptions& options, const std::function<void()>& fn);
+
+// Adds median/p95/mean of `stats` under `prefix` (e.g. "forward_us").
+void AddStats(nlohmann::json* out, const std::string& prefix, const SampleStats& stats);
+
+nlohmann::json RunHeadModelSuite(const BenchOptions& options);
+nlohmann::json RunRasterSuite(const BenchOptions& options);
+
+}  // namespace headcast::bench

@@ -1,0 +1,67 @@
+// headcast-bench: runs one benchmark suite, prints its figures and how to reproduce them.
+#include <CLI/CLI.hpp>
+#include <fstream>
+#include <iostream>
+#include <thread>
+
+#include "bench/bench.h"
+#include "common/core/log.h"
+
+namespace headcast::bench {
+
+SampleStats TimeUs(const BenchOptions& options, const std::function<void()>& fn) {
+  for (int i = 0; i < options.warmup; ++i) fn();
+  SampleStats stats;
+  for (int i = 0; i < options.repeats; ++i) {
+    Stopwatch watch;
+    fn();
+    stats.Add(watch.ElapsedUs());
+  }
+  return stats;
+}
+
+void AddStats(nlohmann::json* out, const std::string& prefix, const SampleStats& s) {
+  (*out)[prefix + "_median"] = s.Median();
+  (*out)[prefix + "_p95"] = s.Percentile(95);
+  (*out)[prefix + "_mean"] = s.Mean();
+  (*out)[prefix + "_samples"] = s.count();
+}
+
+}  // namespace headcast::bench
+
+int main(int argc, char** argv) {
+  using namespace headcast;
+  CLI::App app{"headcast-bench: benchmark suites; each prints JSON with its figures"};
+  app.require_subcommand(1);
+  bench::BenchOptions options;
+  auto add_common = [&](CLI::App* sub) {
+    sub->add_option("--json", options.json_path, "write the results to this JSON file");
+    sub->add_option("--repeats", options.repeats, "timed runs per figure")->check(CLI::Range(1, 1000000));
+    sub->add_option("--warmup", options.warmup, "untimed runs first")->check(CLI::Range(0, 1000000));
+  };
+  auto* headmodel = app.add_subcommand("headmodel", "head-model forward pass (Eigen, one frame)");
+  auto* raster = app.add_subcommand("raster", "CPU rasteriser on a head mesh");
+  add_common(headmodel);
+  add_common(raster);
+  CLI11_PARSE(app, argc, argv);
+  try {
+    InitLogging("warn");
+    nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options) : bench::RunRasterSuite(options);
+    std::string cmd = "build/bin/headcast-bench";
+    for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];
+    result["command"] = cmd;
+    result["machine"] = {{"hardware_threads", std::thread::hardware_concurrency()}};
+    const std::string text = result.dump(2);
+    std::cout << text << "\n";
+    if (!options.json_path.empty()) {
+      std::ofstream out(options.json_path);
+      if (!out) throw std::runtime_error(options.json_path + ": cannot write");
+      out << text << "\n";
+    }
+    std::cout << "reproduce: " << cmd << "\n";
+  } catch (const std::exception& e) {
+    std::cerr << "headcast-bench: " << e.what() << "\n";
+    return 1;
+  }
+  return 0;
+}

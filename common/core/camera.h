@@ -1,0 +1,36 @@
+// Pinhole camera in OpenCV's convention (x right, y down, z forward; pixel centres at integers).
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+
+namespace headcast {
+
+struct PinholeCamera {
+  double fx = 500;   // focal length, pixels
+  double fy = 500;   // focal length, pixels
+  double cx = 320;   // principal point, pixels
+  double cy = 240;   // principal point, pixels
+  int width = 640;   // image width, pixels
+  int height = 480;  // image height, pixels
+
+  // A camera whose vertical field of view is `fov_y_deg` with the principal point centred.
+  static PinholeCamera FromFovY(int width, int height, double fov_y_deg);
+
+  Eigen::Vector2d Project(const Eigen::Vector3d& point_in_cam) const;
+  // 2x3 Jacobian of Project at `point_in_cam`.
+  Eigen::Matrix<double, 2, 3> ProjectJacobian(const Eigen::Vector3d& point_in_cam) const;
+  // The point at `depth` (metres along z) seen at `pixel`.
+  Eigen::Vector3d Unproject(const Eigen::Vector2d& pixel, double depth) const;
+
+  // Intrinsics for the same view resampled to another image size (e.g. a NeRF
+  // feature map): pixel-area-preserving, so (c + 0.5) scales with the image.
+  PinholeCamera Resized(int new_width, int new_height) const;
+  PinholeCamera Scaled(double factor) const;
+
+  Eigen::Matrix3d K() const;
+  void Check() const;  // throws std::invalid_argument naming what is wrong
+  std::string ToString() const;
+};
+
+}  // namespace headcast

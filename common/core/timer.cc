@@ -1,0 +1,31 @@
+// Summary statistics of timings.
+#include "common/core/timer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+namespace headcast {
+
+double SampleStats::Mean() const {
+  if (values_.empty()) return std::numeric_limits<double>::quiet_NaN();
+  return std::accumulate(values_.begin(), values_.end(), 0.0) / values_.size();
+}
+double SampleStats::Min() const {
+  return values_.empty() ? std::numeric_limits<double>::quiet_NaN() : *std::min_element(values_.begin(), values_.end());
+}
+double SampleStats::Max() const {
+  return values_.empty() ? std::numeric_limits<double>::quiet_NaN() : *std::max_element(values_.begin(), values_.end());
+}
+double SampleStats::Percentile(double p) const {
+  if (values_.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> v = values_;
+  std::sort(v.begin(), v.end());
+  const double pos = std::clamp(p, 0.0, 100.0) / 100.0 * (v.size() - 1);
+  const size_t lo = static_cast<size_t>(std::floor(pos));
+  const size_t hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - lo) * (v[hi] - v[lo]);
+}
+
+}  // namespace headcast

@@ -1,0 +1,274 @@
+// headcast-headmodel: convert head-model sources, summarise a model, render previews.
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <opencv2/imgproc.hpp>
+
+#include "common/core/image_io.h"
+#include "common/core/log.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/headmodel/head_render.h"
+#include "common/headmodel/ict_converter.h"
+
+namespace headcast {
+namespace {
+
+struct RenderArgs {
+  std::string model = "builtin";
+  std::string out;
+  std::string video;
+  std::string sweep;  // "", expression, jaw, turn, all
+  std::string view = "front";
+  int size = 512;
+  double yaw = 0, pitch = 0, jaw_deg = 0;
+  std::vector<std::string> expressions;  // name=value
+  bool landmarks = false;
+};
+
+// Framing that fits the face for any model: centred on the landmarks.
+struct Framing {
+  PinholeCamera camera;
+  double distance;
+  Eigen::Vector3d target;
+};
+
+Framing FrameModel(const HeadModel& model, int size) {
+  const HeadModelOutput rest = model.Forward(HeadModelParams{});
+  const Eigen::RowVector3f centre = rest.landmarks.colwise().mean();
+  const float extent = rest.landmarks.col(1).maxCoeff() - rest.landmarks.col(1).minCoeff();
+  Framing f;
+  const double fov = 24.0;
+  f.camera = PinholeCamera::FromFovY(size, size, fov);
+  f.target = centre.cast<double>().transpose() + Eigen::Vector3d(0, -0.1 * extent, 0);
+  f.distance = 2.0 * extent / (2 * std::tan(0.5 * fov * M_PI / 180));
+  return f;
+}
+
+cv::Mat RenderOne(const HeadModel& model, const HeadModelParams& params, const Framing& framing, double yaw, double pitch,
+                  const cv::Mat& albedo, bool landmarks) {
+  const HeadModelOutput out = model.Forward(params);
+  const RigidTransform cam_from_head = FrontalCamFromHead(framing.distance, yaw, pitch, framing.target);
+  HeadRender r = RenderHead(model, out.vertices, cam_from_head, framing.camera, albedo);
+  if (landmarks) {
+    std::vector<Eigen::Vector2d> pts;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      pts.push_back(framing.camera.Project(cam_from_head.Apply(out.landmarks.row(l).transpose().cast<double>())));
+    DrawPoints(&r.image_bgr, pts, cv::Scalar(60, 255, 60), std::max(1, framing.camera.width / 256));
+  }
+  return r.image_bgr;
+}
+
+void Label(cv::Mat* image, const std::string& text) {
+  const double scale = image->cols / 512.0 * 0.6;
+  cv::putText(*image, text, {8, static_cast<int>(24 * scale / 0.6)}, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255, 255, 255), 1,
+              cv::LINE_AA);
+}
+
+HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
+  HeadModelParams p;
+  p.shape = Eigen::VectorXd::Zero(model.num_shape());
+  p.expression = Eigen::VectorXd::Zero(model.num_expression());
+  p.pose[3 * kJawJoint] = args.jaw_deg * M_PI / 180;
+  for (const auto& e : args.expressions) {
+    const auto eq = e.find('=');
+    if (eq == std::string::npos) throw std::invalid_argument("--expression wants name=value, got '" + e + "'");
+    const std::string name = e.substr(0, eq);
+    const int idx = model.ExpressionIndex(name);
+    if (idx < 0) throw std::invalid_argument("model has no expression component '" + name + "' (see: headcast-headmodel summary)");
+    p.expression[idx] = std::stod(e.substr(eq + 1));
+  }
+  return p;
+}
+
+int Render(const RenderArgs& args) {
+  const HeadModel model = LoadHeadModelSpec(args.model);
+  const Framing framing = FrameModel(model, args.size);
+  const cv::Mat albedo = AlbedoTexture(model);
+  const HeadModelParams params = ParamsFromArgs(model, args);
+  if (!args.out.empty()) {
+    cv::Mat image;
+    if (args.view == "front") {
+      image = RenderOne(model, params, framing, args.yaw, args.pitch, albedo, args.landmarks);
+    } else if (args.view == "side") {
+      image = RenderOne(model, params, framing, 90 + args.yaw, args.pitch, albedo, args.landmarks);
+    } else if (args.view == "both") {
+      cv::hconcat(RenderOne(model, params, framing, args.yaw, args.pitch, albedo, args.landmarks),
+                  RenderOne(model, params, framing, 70, args.pitch, albedo, args.landmarks), image);
+    } else if (args.view == "grid") {
+      // Every expression component at +1 (and the jaw open), 6 per row, for review.
+      std::vector<cv::Mat> tiles;
+      Framing small = framing;
+      small.camera = framing.camera.Resized(256, 256);
+      auto tile = [&](const HeadModelParams& p, const std::string& label, double yaw) {
+        cv::Mat t = RenderOne(model, p, small, yaw, args.pitch, albedo, args.landmarks);
+        Label(&t, label);
+        tiles.push_back(t);
+      };
+      tile(params, "neutral", 0);
+      tile(params, "yaw 35", 35);
+      tile(params, "yaw -80", -80);
+      HeadModelParams jaw = params;
+      jaw.pose[3 * kJawJoint] = 0.3;
+      tile(jaw, "jaw 0.3 rad", 0);
+      tile(jaw, "jaw, yaw 40", 40);
+      for (int e = 0; e < model.num_expression(); ++e) {
+        HeadModelParams p = params;
+        p.expression[e] = 1.0;
+        tile(p, model.data().expression_names.empty() ? "expr " + std::to_string(e) : model.data().expression_names[e], 0);
+      }
+      for (int s = 0; s < std::min(model.num_shape(), 12); ++s) {
+        HeadModelParams p = params;
+        p.shape[s] = 2.0;
+        tile(p, (model.data().shape_names.empty() ? "shape " + std::to_string(s) : model.data().shape_names[s]) + " +2", 0);
+      }
+      const int cols = 6;
+      while (tiles.size() % cols) tiles.push_back(cv::Mat(256, 256, CV_8UC3, cv::Scalar(0, 0, 0)));
+      std::vector<cv::Mat> rows;
+      for (size_t i = 0; i < tiles.size(); i += cols) {
+        cv::Mat row;
+        cv::hconcat(std::vector<cv::Mat>(tiles.begin() + i, tiles.begin() + i + cols), row);
+        rows.push_back(row);
+      }
+      cv::vconcat(rows, image);
+    } else {
+      throw std::invalid_argument("--view must be front, side, both or grid");
+    }
+    WriteImage(args.out, image);
+    spdlog::info("wrote {}", args.out);
+  }
+  if (!args.video.empty()) {
+    // A sweep: the head turns, the jaw opens, then each expression in turn.
+    VideoWriter writer(args.video, 30);
+    const bool all = args.sweep == "all" || args.sweep.empty();
+    auto emit = [&](const HeadModelParams& p, double yaw, const std::string& label) {
+      cv::Mat f = RenderOne(model, p, framing, yaw, args.pitch, albedo, args.landmarks);
+      Label(&f, label);
+      writer.Write(f);
+    };
+    const int steps = 24;
+    if (all || args.sweep == "turn")
+      for (int i = 0; i < 2 * steps; ++i) emit(params, 45 * std::sin(2 * M_PI * i / (2 * steps)), "head turn");
+    if (all || args.sweep == "jaw")
+      for (int i = 0; i < steps; ++i) {
+        HeadModelParams p = params;
+        p.pose[3 * kJawJoint] = 0.35 * std::sin(M_PI * i / steps);
+        emit(p, 0, "jaw");
+      }
+    if (all || args.sweep == "expression")
+      for (int e = 0; e < model.num_expression(); ++e)
+        for (int i = 0; i < steps; ++i) {
+          HeadModelParams p = params;
+          p.expression[e] = std::sin(M_PI * i / steps);
+          emit(p, 15, model.data().expression_names.empty() ? "expression " + std::to_string(e) : model.data().expression_names[e]);
+        }
+    writer.Close();
+    spdlog::info("wrote {} ({} frames, 30 fps)", args.video, writer.frames_written());
+  }
+  return 0;
+}
+
+std::string FlameScript(const std::string& given) {
+  if (!given.empty()) return given;
+  const std::string beside = std::string(HEADCAST_SOURCE_DIR) + "/deploy/tools/flame_to_npz.py";
+  return beside;
+}
+
+std::string Quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+}  // namespace
+}  // namespace headcast
+
+int main(int argc, char** argv) {
+  using namespace headcast;
+  CLI::App app{"headcast-headmodel: convert, inspect and render head models (FLAME layout)"};
+  app.require_subcommand(1);
+  std::string log_level;
+  app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");
+
+  auto* convert = app.add_subcommand("convert", "convert a head-model source into headcast's .npz format");
+  convert->require_subcommand(1);
+  std::string out;
+  // FLAME
+  auto* flame = convert->add_subcommand("flame", "official FLAME generic_model.pkl (2020, 2023, 2023 Open) via deploy/tools/flame_to_npz.py");
+  std::string flame_pkl, flame_embedding, flame_texture, flame_script;
+  int flame_shape = 300, flame_expr = 100;
+  flame->add_option("--model", flame_pkl, "generic_model.pkl")->required()->check(CLI::ExistingFile);
+  flame->add_option("--embedding", flame_embedding, "landmark_embedding.npy (static + dynamic contour)")->required()->check(CLI::ExistingFile);
+  flame->add_option("--texture", flame_texture, "optional FLAME_texture.npz (albedo PCA + UVs)");
+  flame->add_option("--shape", flame_shape, "shape components to keep")->capture_default_str();
+  flame->add_option("--expression", flame_expr, "expression components to keep")->capture_default_str();
+  flame->add_option("--script", flame_script, "path of flame_to_npz.py (default: the source tree's)");
+  flame->add_option("--out", out, "output .npz")->required();
+  // ICT
+  auto* ict = convert->add_subcommand("ict", "ICT-FaceKit upstream folder (FaceXModel)");
+  IctConvertOptions ict_options;
+  std::string ict_parts;
+  ict->add_option("--folder", ict_options.folder, "ICT-FaceKit folder (contains FaceXModel/)")->required();
+  ict->add_option("--identity", ict_options.max_identity, "identity components to read")->capture_default_str();
+  ict->add_option("--parts", ict_parts, "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories (default all)");
+  ict->add_option("--out", out, "output .npz")->required();
+  // Built-in
+  auto* builtin = convert->add_subcommand("builtin", "write the built-in procedural head as .npz");
+  builtin->add_option("--out", out, "output .npz")->required();
+
+  auto* summary = app.add_subcommand("summary", "print a model's sizes, joints, landmarks and component names");
+  std::string summary_model;
+  summary->add_option("model", summary_model, "builtin or a model .npz")->required();
+
+  auto* render = app.add_subcommand("render", "render a model to PNG (views, grid) and/or an MP4 sweep");
+  RenderArgs r;
+  render->add_option("model", r.model, "builtin or a model .npz")->required();
+  render->add_option("--out", r.out, "PNG to write");
+  render->add_option("--video", r.video, "MP4 sweep to write");
+  render->add_option("--sweep", r.sweep, "what the video sweeps: all, turn, jaw, expression")->check(CLI::IsMember({"all", "turn", "jaw", "expression"}));
+  render->add_option("--view", r.view, "front, side, both, grid")->check(CLI::IsMember({"front", "side", "both", "grid"}));
+  render->add_option("--size", r.size, "image size, pixels")->check(CLI::Range(64, 4096));
+  render->add_option("--yaw", r.yaw, "head yaw, degrees");
+  render->add_option("--pitch", r.pitch, "head pitch, degrees");
+  render->add_option("--jaw", r.jaw_deg, "jaw opening, degrees");
+  render->add_option("--expression", r.expressions, "name=value, repeatable");
+  render->add_flag("--landmarks", r.landmarks, "draw the 68 landmarks");
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    InitLogging(log_level);
+    if (flame->parsed()) {
+      std::string cmd = "python3 " + Quote(FlameScript(flame_script)) + " --model " + Quote(flame_pkl) + " --embedding " +
+                        Quote(flame_embedding) + " --shape " + std::to_string(flame_shape) + " --expression " +
+                        std::to_string(flame_expr) + " --out " + Quote(out);
+      if (!flame_texture.empty()) cmd += " --texture " + Quote(flame_texture);
+      spdlog::info("running {}", cmd);
+      if (std::system(cmd.c_str()) != 0) {
+        spdlog::error("FLAME conversion failed (see the script's message above)");
+        return 1;
+      }
+      std::cout << LoadHeadModel(out).Summary();
+    } else if (ict->parsed()) {
+      std::stringstream ss(ict_parts);
+      for (std::string part; std::getline(ss, part, ',');)
+        if (!part.empty()) ict_options.parts.push_back(part);
+      const HeadModel model = ConvertIctFaceKit(ict_options);
+      SaveHeadModel(model, out);
+      std::cout << model.Summary() << "wrote " << out << "\n";
+    } else if (builtin->parsed()) {
+      const HeadModel model = MakeBuiltinHead();
+      SaveHeadModel(model, out);
+      std::cout << model.Summary() << "wrote " << out << "\n";
+    } else if (summary->parsed()) {
+      std::cout << LoadHeadModelSpec(summary_model).Summary();
+    } else if (render->parsed()) {
+      if (r.out.empty() && r.video.empty()) throw std::invalid_argument("render: give --out PNG and/or --video MP4");
+      return Render(r);
+    }
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+  return 0;
+}

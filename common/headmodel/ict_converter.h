@@ -1,0 +1,34 @@
+// Converts ICT-FaceKit's upstream folder (MIT licence) into a HeadModel.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "common/headmodel/head_model.h"
+
+namespace headcast {
+
+// Parts of the ICT mesh by vertex range (0-based, inclusive), as upstream documents them.
+struct IctPart {
+  const char* name;
+  int first, last;
+};
+const std::vector<IctPart>& IctParts();  // face, head, mouth, eyes, gums_tongue, teeth, eyeballs, eye_accessories
+
+struct IctConvertOptions {
+  std::string folder;            // the FaceXModel folder (or its parent)
+  int max_identity = 100;        // identity components to read (identity000.obj ...)
+  std::vector<std::string> parts;  // empty: every part; else names from IctParts()
+  void Check() const;
+};
+
+// Reads generic_neutral_mesh.obj, the expression OBJs listed in
+// vertex_indices.json and identityNNN.obj; converts centimetres to metres;
+// quads are split into triangles. No skeleton: all vertices are skinned to the
+// root joint only (jaw and gaze are blendshapes). Throws naming the file.
+HeadModel ConvertIctFaceKit(const IctConvertOptions& options);
+
+// The 68 iBUG landmark vertex ids of the full ICT mesh.
+const std::vector<int>& IctLandmarkVertices();
+
+}  // namespace headcast
