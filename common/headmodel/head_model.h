@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>  // cross products on mesh rows
 #include <array>
 #include <string>
 #include <vector>

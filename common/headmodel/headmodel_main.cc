@@ -239,7 +239,8 @@ int main(int argc, char** argv) {
   try {
     InitLogging(log_level);
     if (flame->parsed()) {
-      std::string cmd = "python3 " + Quote(FlameScript(flame_script)) + " --model " + Quote(flame_pkl) + " --embedding " +
+      const std::string python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
+      std::string cmd = python + " " + Quote(FlameScript(flame_script)) + " --model " + Quote(flame_pkl) + " --embedding " +
                         Quote(flame_embedding) + " --shape " + std::to_string(flame_shape) + " --expression " +
                         std::to_string(flame_expr) + " --out " + Quote(out);
       if (!flame_texture.empty()) cmd += " --texture " + Quote(flame_texture);

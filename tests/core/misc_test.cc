@@ -1,1 +1,120 @@
+// Bounded queue, statistics, options checks, image and video I/O.
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "common/core/bounded_queue.h"
+#include "common/core/image_io.h"
+#include "common/core/options.h"
+#include "common/core/timer.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+TEST(BoundedQueue, DropsTheOldestWhenFull) {
+  BoundedQueue<int> q(3);
+  EXPECT_FALSE(q.Push(1));
+  EXPECT_FALSE(q.Push(2));
+  EXPECT_FALSE(q.Push(3));
+  EXPECT_TRUE(q.Push(4));  // 1 is dropped
+  EXPECT_EQ(q.dropped(), 1u);
+  EXPECT_EQ(*q.TryPop(), 2);
+  EXPECT_EQ(*q.TryPop(), 3);
+  EXPECT_EQ(*q.TryPop(), 4);
+  EXPECT_FALSE(q.TryPop().has_value());
+}
+
+TEST(BoundedQueue, PopWaitsAndCloseWakes) {
+  BoundedQueue<int> q(2);
+  std::thread producer([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    q.Push(7);
+  });
+  auto v = q.Pop(std::chrono::seconds(5));
+  producer.join();
+  ASSERT_TRUE(v.has_value());
+  EXPECT_EQ(*v, 7);
+  std::thread closer([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    q.Close();
+  });
+  Stopwatch w;
+  EXPECT_FALSE(q.Pop(std::chrono::seconds(5)).has_value());
+  EXPECT_LT(w.ElapsedSeconds(), 4.0);
+  closer.join();
+  EXPECT_FALSE(q.Push(1));
+  EXPECT_EQ(q.size(), 0u);
+}
+
+TEST(SampleStats, Percentiles) {
+  SampleStats s;
+  EXPECT_TRUE(std::isnan(s.Median()));
+  for (int i = 1; i <= 101; ++i) s.Add(i);
+  EXPECT_DOUBLE_EQ(s.Median(), 51);
+  EXPECT_DOUBLE_EQ(s.Percentile(95), 96);
+  EXPECT_DOUBLE_EQ(s.Percentile(0), 1);
+  EXPECT_DOUBLE_EQ(s.Mean(), 51);
+}
+
+TEST(OptionsCheck, CollectsEveryError) {
+  OptionsCheck c("FooOptions");
+  c.Positive("rate", 0).InRange("q", 5, 0, 1).Finite("x", std::nan("")).NotEmpty("path", "").Positive("ok", 1);
+  EXPECT_EQ(c.errors().size(), 4u);
+  try {
+    c.ThrowIfErrors();
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("FooOptions: ", 0), 0u);
+    for (const char* field : {"rate", "q", "x", "path"}) EXPECT_NE(m.find(field), std::string::npos) << m;
+  }
+  EXPECT_NO_THROW(OptionsCheck("Ok").Positive("a", 2).ThrowIfErrors());
+}
+
+TEST(ImageIo, RoundTripsAndNamesBadFiles) {
+  const std::string dir = testing::TempDir("img");
+  cv::Mat image(32, 48, CV_8UC3, cv::Scalar(10, 20, 30));
+  WriteImage(dir + "/sub/a.png", image);
+  const cv::Mat back = ReadImage(dir + "/sub/a.png");
+  EXPECT_EQ(cv::norm(back, image, cv::NORM_INF), 0);
+  { std::ofstream(dir + "/bad.png") << "not a png"; }
+  for (const std::string name : {"bad.png", "missing.png"}) {
+    try {
+      ReadImage(dir + "/" + name);
+      ADD_FAILURE();
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos);
+    }
+  }
+}
+
+TEST(VideoIo, WritesAndReadsAnMp4) {
+  const std::string dir = testing::TempDir("video");
+  {
+    VideoWriter writer(dir + "/v.mp4", 25);
+    for (int i = 0; i < 10; ++i) writer.Write(cv::Mat(64, 80, CV_8UC3, cv::Scalar(i * 20, 100, 200)));
+    EXPECT_EQ(writer.frames_written(), 10);
+  }
+  VideoReader reader(dir + "/v.mp4");
+  EXPECT_EQ(reader.size(), cv::Size(80, 64));
+  EXPECT_NEAR(reader.fps(), 25, 0.1);
+  cv::Mat frame;
+  int n = 0;
+  while (reader.Read(&frame)) ++n;
+  EXPECT_EQ(n, 10);
+  EXPECT_THROW(VideoReader(dir + "/none.mp4"), std::runtime_error);
+  { std::ofstream(dir + "/junk.mp4") << "junk"; }
+  try {
+    VideoReader junk(dir + "/junk.mp4");
+    cv::Mat f;
+    EXPECT_FALSE(junk.Read(&f));  // opened or not, no frames and no crash
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("junk.mp4"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace headcast

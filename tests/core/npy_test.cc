@@ -1,1 +1,114 @@
+// npy/npz reading and writing: every dtype round-trips; bad files are refused by name.
 #include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "common/core/npy.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+template <typename T>
+void ExpectRoundTrip(const std::vector<T>& values, std::vector<int64_t> shape) {
+  const NpyArray a = NpyArray::From<T>(shape, values.data());
+  const NpyArray b = ParseNpy(SerializeNpy(a), "memory");
+  ASSERT_EQ(b.dtype(), a.dtype());
+  ASSERT_EQ(b.shape(), shape);
+  for (size_t i = 0; i < values.size(); ++i) EXPECT_EQ(b.data<T>()[i], values[i]);
+}
+
+TEST(Npy, EveryDtypeRoundTrips) {
+  ExpectRoundTrip<float>({1.5f, -2.f, 3.25f, 0.f, 1e-7f, 8.f}, {2, 3});
+  ExpectRoundTrip<double>({1.5, -2, 3.25}, {3});
+  ExpectRoundTrip<int32_t>({-1, 7, 1 << 30, 0}, {2, 2});
+  ExpectRoundTrip<int64_t>({-1, int64_t(1) << 40}, {2, 1});
+  ExpectRoundTrip<uint8_t>({0, 255, 17}, {3});
+  const bool flags[4] = {true, false, true, true};
+  const NpyArray b = ParseNpy(SerializeNpy(NpyArray::From<bool>({4}, flags)), "memory");
+  ASSERT_EQ(b.dtype(), DType::kBool);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(b.data<bool>()[i], flags[i]);
+  ExpectRoundTrip<float>({}, {0, 3});
+}
+
+TEST(Npy, ConvertsBetweenNumericTypes) {
+  const std::vector<int32_t> v = {1, -2, 3};
+  const NpyArray a = NpyArray::From<int32_t>({3}, v.data());
+  EXPECT_EQ(a.ToDoubles(), (std::vector<double>{1, -2, 3}));
+  EXPECT_THROW(a.data<float>(), std::runtime_error);
+}
+
+std::string Header(const std::string& dict) {
+  std::string h = dict;
+  while ((10 + h.size() + 1) % 64) h += ' ';
+  h += '\n';
+  std::string out("\x93NUMPY\x01\x00", 8);
+  out.push_back(static_cast<char>(h.size()));
+  out.push_back(0);
+  return out + h;
+}
+
+TEST(Npy, RefusesWhatItCannotRead) {
+  auto message = [](const std::string& bytes) {
+    try {
+      ParseNpy(bytes, "x.npy");
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message("garbage").find("bad magic"), std::string::npos);
+  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': True, 'shape': (2,), }") + std::string(8, '\0')).find("Fortran"),
+            std::string::npos);
+  EXPECT_NE(message(Header("{'descr': '>f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')).find("unsupported dtype"),
+            std::string::npos);
+  EXPECT_NE(message(Header("{'descr': '<c8', 'fortran_order': False, 'shape': (2,), }") + std::string(16, '\0')).find("unsupported dtype"),
+            std::string::npos);
+  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3), }") + std::string(8, '\0')).find("truncated data"),
+            std::string::npos);
+  EXPECT_EQ(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')), "no error");
+  EXPECT_NE(message("x.npy").find("x.npy"), std::string::npos);  // errors name the source
+}
+
+TEST(Npz, RoundTripAndStrings) {
+  const std::string dir = testing::TempDir("npz");
+  const std::string path = dir + "/a.npz";
+  NpzArchive a;
+  const std::vector<float> f = {1, 2, 3, 4, 5, 6};
+  a["floats"] = NpyArray::From<float>({2, 3}, f.data());
+  a["names"] = StringsToNpy({"smile", "jawOpen", ""});
+  const int64_t big = int64_t(1) << 50;
+  a["big"] = NpyArray::From<int64_t>({1}, &big);
+  WriteNpz(path, a);
+  const NpzArchive b = ReadNpz(path);
+  ASSERT_EQ(b.size(), 3u);
+  EXPECT_EQ(b.at("floats").shape(), (std::vector<int64_t>{2, 3}));
+  EXPECT_EQ(b.at("floats").ToFloats(), f);
+  EXPECT_EQ(NpyToStrings(b.at("names")), (std::vector<std::string>{"smile", "jawOpen", ""}));
+  EXPECT_EQ(b.at("big").data<int64_t>()[0], big);
+  EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
+}
+
+TEST(Npz, TruncatedMissingAndForeignFilesAreRefusedByName) {
+  const std::string dir = testing::TempDir("bad");
+  NpzArchive a;
+  std::vector<float> big(20000, 1.f);
+  a["x"] = NpyArray::From<float>({20000}, big.data());
+  WriteNpz(dir + "/good.npz", a, /*compress=*/false);
+  const auto size = std::filesystem::file_size(dir + "/good.npz");
+  std::filesystem::copy_file(dir + "/good.npz", dir + "/cut.npz");
+  std::filesystem::resize_file(dir + "/cut.npz", size / 2);
+  { std::ofstream(dir + "/foreign.npz") << "hello, not a zip"; }
+  for (const std::string name : {"cut.npz", "foreign.npz", "missing.npz"}) {
+    try {
+      ReadNpz(dir + "/" + name);
+      ADD_FAILURE() << name << " was accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace headcast

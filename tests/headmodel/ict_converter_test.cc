@@ -1,1 +1,91 @@
+// ICT-FaceKit conversion on the real model in ../shared/data (skipped without it).
 #include <gtest/gtest.h>
+
+#include "common/headmodel/head_model_io.h"
+#include "common/headmodel/ict_converter.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Ict() {
+  static const HeadModel model = [] {
+    IctConvertOptions o;
+    o.folder = testing::DataDir() + "/head-models/ict-facekit";
+    return ConvertIctFaceKit(o);
+  }();
+  return model;
+}
+
+Eigen::RowVector3f EyeCentre(const HeadModelOutput& out, int first) {
+  Eigen::RowVector3f s = Eigen::RowVector3f::Zero();
+  for (int i = first; i < first + 6; ++i) s += out.landmarks.row(i);
+  return s / 6;
+}
+
+TEST(IctConverter, ConvertsTheSharedSubset) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  const HeadModel& m = Ict();
+  EXPECT_EQ(m.num_vertices(), 26719);
+  EXPECT_EQ(m.num_expression(), 53);
+  EXPECT_EQ(m.num_shape(), 20);
+  EXPECT_GE(m.ExpressionIndex("jawOpen"), 0);
+  EXPECT_TRUE(m.JointIsArticulated(kRootJoint));
+  for (int j = 1; j < kNumHeadJoints; ++j) EXPECT_FALSE(m.JointIsArticulated(j));
+  const HeadModelOutput rest = m.Forward(HeadModelParams{});
+  // Metres: eye centres 5-8 cm apart, outer eye corners ~8.9 cm as upstream says.
+  const float iod = (EyeCentre(rest, 42) - EyeCentre(rest, 36)).norm();
+  EXPECT_GT(iod, 0.05f);
+  EXPECT_LT(iod, 0.08f);
+  EXPECT_NEAR((rest.landmarks.row(45) - rest.landmarks.row(36)).norm(), 0.089, 0.005);
+  // Landmarks on the face, in the project's head frame: left eye at +x, nose out at +z.
+  EXPECT_GT(EyeCentre(rest, 42).x(), EyeCentre(rest, 36).x());
+  EXPECT_GT(rest.landmarks(30, 2), rest.landmarks(36, 2));
+  EXPECT_GT(rest.landmarks(27, 1), rest.landmarks(8, 1));
+}
+
+TEST(IctConverter, JawOpenMovesTheChinDown) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  const HeadModel& m = Ict();
+  HeadModelParams p;
+  p.expression = Eigen::VectorXd::Zero(m.num_expression());
+  const HeadModelOutput rest = m.Forward(p);
+  p.expression[m.ExpressionIndex("jawOpen")] = 1;
+  const HeadModelOutput open = m.Forward(p);
+  EXPECT_LT(open.landmarks(8, 1), rest.landmarks(8, 1) - 0.015);  // ~2.8 cm down upstream
+  EXPECT_NEAR(open.landmarks(27, 1), rest.landmarks(27, 1), 0.002);
+}
+
+TEST(IctConverter, PartsRestrictionAndRoundTrip) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  IctConvertOptions o;
+  o.folder = testing::DataDir() + "/head-models/ict-facekit/FaceXModel";
+  o.parts = {"face", "head"};
+  o.max_identity = 5;
+  const HeadModel small = ConvertIctFaceKit(o);
+  EXPECT_EQ(small.num_vertices(), 11248);
+  EXPECT_EQ(small.num_shape(), 5);
+  const std::string path = testing::TempDir("ict") + "/ict_face.npz";
+  SaveHeadModel(small, path);
+  const HeadModel back = LoadHeadModel(path);
+  EXPECT_EQ(back.fingerprint(), small.fingerprint());
+  EXPECT_EQ(back.data().expression_names, small.data().expression_names);
+  // Landmarks survive the reindexing.
+  EXPECT_LT((back.Forward(HeadModelParams{}).landmarks - Ict().Forward(HeadModelParams{}).landmarks).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+TEST(IctConverter, RefusesBadFolders) {
+  IctConvertOptions o;
+  o.folder = testing::TempDir("empty");
+  try {
+    ConvertIctFaceKit(o);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("not an ICT-FaceKit folder"), std::string::npos);
+  }
+  o.parts = {"tentacles"};
+  EXPECT_THROW(ConvertIctFaceKit(o), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace headcast
