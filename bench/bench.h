@@ -10,9 +10,9 @@
 namespace headcast::bench {
 
 struct BenchOptions {
-  int repeats = 200;        // timed runs per measurement
-  int warmup = 20;          // untimed runs first
-  std::string json_path;    // where to write results ("" = stdout only)
+  int repeats = 200;      // timed runs per measurement
+  int warmup = 20;        // untimed runs first
+  std::string json_path;  // where to write results ("" = stdout only)
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.

@@ -8,7 +8,8 @@ namespace headcast::bench {
 nlohmann::json RunRasterSuite(const BenchOptions& options) {
   nlohmann::json out;
   out["suite"] = "raster";
-  out["what"] = "CPU rasteriser on the built-in head (z-buffer, face ids, perspective-correct barycentrics), milliseconds";
+  out["what"] =
+      "CPU rasteriser on the built-in head (z-buffer, face ids, perspective-correct barycentrics), milliseconds";
   const HeadModel model = MakeBuiltinHead();
   out["vertices"] = model.num_vertices();
   out["faces"] = model.num_faces();
@@ -18,17 +19,20 @@ nlohmann::json RunRasterSuite(const BenchOptions& options) {
   for (int size : {128, 256, 512}) {
     const PinholeCamera camera = PinholeCamera::FromFovY(size, size, 24);
     const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
-    const RasterVertices v_cam = (posed.vertices * R.transpose()).rowwise() + cam_from_head.translation.cast<float>().transpose();
+    const RasterVertices v_cam =
+        (posed.vertices * R.transpose()).rowwise() + cam_from_head.translation.cast<float>().transpose();
     RasterBuffers buffers;
     RasterOptions raster_options;
-    const SampleStats raster = TimeUs(options, [&] { Rasterize(v_cam, model.data().faces, camera, raster_options, &buffers); });
+    const SampleStats raster =
+        TimeUs(options, [&] { Rasterize(v_cam, model.data().faces, camera, raster_options, &buffers); });
     const std::string s = std::to_string(size);
     out["raster_ms_median_" + s] = raster.Median() / 1e3;
     out["raster_ms_p95_" + s] = raster.Percentile(95) / 1e3;
     out["covered_pixels_" + s] = buffers.CoveredPixels();
     BenchOptions fewer = options;
     fewer.repeats = std::max(1, options.repeats / 4);
-    const SampleStats shaded = TimeUs(fewer, [&] { (void)RenderHead(model, posed.vertices, cam_from_head, camera, albedo, {}, &buffers); });
+    const SampleStats shaded =
+        TimeUs(fewer, [&] { (void)RenderHead(model, posed.vertices, cam_from_head, camera, albedo, {}, &buffers); });
     out["render_shaded_ms_median_" + s] = shaded.Median() / 1e3;
   }
   return out;

@@ -15,10 +15,10 @@ namespace headcast {
 namespace {
 
 constexpr double kPi = M_PI;
-constexpr double kMouthY = -0.048;     // lip line height, m
+constexpr double kMouthY = -0.048;  // lip line height, m
 constexpr double kMouthHalfWidth = 0.025;
-constexpr double kPocketDepth = 0.026;  // how far the mouth interior reaches back, m
-constexpr double kLipGap = 0.0012;      // closed lips leave a hairline, m
+constexpr double kPocketDepth = 0.026;          // how far the mouth interior reaches back, m
+constexpr double kLipGap = 0.0012;              // closed lips leave a hairline, m
 constexpr double kEyeX = 0.032, kEyeY = 0.030;  // eye centres (±x), m
 constexpr double kEyeHalfWidth = 0.0145, kEyeUpper = 0.0062, kEyeLower = 0.0050;
 constexpr double kEyeballRadius = 0.0118;
@@ -43,8 +43,8 @@ struct ProfileKey {
   Section s;
 };
 const ProfileKey kProfile[] = {
-    {0.040, {0.0770, 0.0920, 0.1000, -0.012}}, {0.020, {0.0772, 0.0935, 0.1000, -0.014}},
-    {0.000, {0.0760, 0.0945, 0.0980, -0.016}}, {-0.020, {0.0735, 0.0940, 0.0940, -0.018}},
+    {0.040, {0.0770, 0.0920, 0.1000, -0.012}},  {0.020, {0.0772, 0.0935, 0.1000, -0.014}},
+    {0.000, {0.0760, 0.0945, 0.0980, -0.016}},  {-0.020, {0.0735, 0.0940, 0.0940, -0.018}},
     {-0.040, {0.0680, 0.0915, 0.0860, -0.020}}, {-0.060, {0.0610, 0.0880, 0.0760, -0.022}},
     {-0.075, {0.0540, 0.0850, 0.0680, -0.024}}, {-0.088, {0.0450, 0.0790, 0.0620, -0.026}},
     {-0.098, {0.0440, 0.0620, 0.0590, -0.028}}, {-0.108, {0.0500, 0.0500, 0.0570, -0.030}},
@@ -78,11 +78,11 @@ Section ProfileAt(double y) {
 // What a head-surface row is.
 enum class RowKind { kSkin, kUpperContact, kPocket, kLowerContact };
 struct Row {
-  double y;        // base height
-  double scale;    // cross-section scale (shrinks to the poles)
-  Section section; // before scaling
+  double y;         // base height
+  double scale;     // cross-section scale (shrinks to the poles)
+  Section section;  // before scaling
   RowKind kind;
-  double pocket_s; // 0 at the upper lip contact .. 1 at the lower one
+  double pocket_s;  // 0 at the upper lip contact .. 1 at the lower one
 };
 
 // Point on a cross-section at angle a (0 = front, +pi/2 = subject's left, +x).
@@ -150,8 +150,8 @@ struct PointContext {
   double a;           // angle around the head
   RowKind kind;
   double pocket_s;
-  bool eyeball;       // eyeball vertices move rigidly with their centre
-  double eye_side;    // +1 left, -1 right (eyeballs only)
+  bool eyeball;     // eyeball vertices move rigidly with their centre
+  double eye_side;  // +1 left, -1 right (eyeballs only)
 };
 using Field = std::function<Eigen::Vector3d(const PointContext&)>;
 
@@ -169,38 +169,62 @@ double InteriorScale(const PointContext& c, double inside) {
 }
 
 double HeadMask(double y) { return Smoothstep(-0.125, -0.095, y); }  // head, not neck
-double LowerFace(const PointContext& c) { return Smoothstep(-0.02, -0.05, c.p.y()) * HeadMask(c.p.y()) * Smoothstep(-0.2, 0.4, std::cos(c.a)); }
+double LowerFace(const PointContext& c) {
+  return Smoothstep(-0.02, -0.05, c.p.y()) * HeadMask(c.p.y()) * Smoothstep(-0.2, 0.4, std::cos(c.a));
+}
 
 std::vector<NamedField> ShapeFields() {
   return {
       {"head_width", [](const PointContext& c) { return Eigen::Vector3d(0.06 * c.p.x() * HeadMask(c.p.y()), 0, 0); }},
-      {"head_height", [](const PointContext& c) { return Eigen::Vector3d(0, 0.06 * std::max(0.0, c.p.y() + 0.02) , 0); }},
-      {"head_depth", [](const PointContext& c) { return Eigen::Vector3d(0, 0, 0.05 * (c.p.z() + 0.015) * HeadMask(c.p.y())); }},
-      {"face_length", [](const PointContext& c) {
-         return Eigen::Vector3d(0, 0.08 * std::min(0.0, c.p.y()) * HeadMask(c.p.y()) * Smoothstep(-0.3, 0.3, std::cos(c.a)), 0); }},
-      {"nose_length", [](const PointContext& c) {
+      {"head_height",
+       [](const PointContext& c) { return Eigen::Vector3d(0, 0.06 * std::max(0.0, c.p.y() + 0.02), 0); }},
+      {"head_depth",
+       [](const PointContext& c) { return Eigen::Vector3d(0, 0, 0.05 * (c.p.z() + 0.015) * HeadMask(c.p.y())); }},
+      {"face_length",
+       [](const PointContext& c) {
+         return Eigen::Vector3d(
+             0, 0.08 * std::min(0.0, c.p.y()) * HeadMask(c.p.y()) * Smoothstep(-0.3, 0.3, std::cos(c.a)), 0);
+       }},
+      {"nose_length",
+       [](const PointContext& c) {
          const double f = FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() + 0.012, 0.012, 0.02);
-         return Eigen::Vector3d(0, -0.002 * f, 0.006 * f); }},
-      {"nose_width", [](const PointContext& c) {
-         const double f = FrontMask(c.a) * Gauss2(0, c.p.y() + 0.02, 1, 0.014) * Smoothstep(0.03, 0.01, std::abs(c.p.x()));
-         return Eigen::Vector3d(0.15 * c.p.x() * f, 0, 0); }},
+         return Eigen::Vector3d(0, -0.002 * f, 0.006 * f);
+       }},
+      {"nose_width",
+       [](const PointContext& c) {
+         const double f =
+             FrontMask(c.a) * Gauss2(0, c.p.y() + 0.02, 1, 0.014) * Smoothstep(0.03, 0.01, std::abs(c.p.x()));
+         return Eigen::Vector3d(0.15 * c.p.x() * f, 0, 0);
+       }},
       {"jaw_width", [](const PointContext& c) { return Eigen::Vector3d(0.08 * c.p.x() * LowerFace(c), 0, 0); }},
-      {"chin_protrusion", [](const PointContext& c) {
-         return Eigen::Vector3d(0, 0, 0.006 * FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() + 0.082, 0.022, 0.014)); }},
-      {"eye_spacing", [](const PointContext& c) {
+      {"chin_protrusion",
+       [](const PointContext& c) {
+         return Eigen::Vector3d(0, 0, 0.006 * FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() + 0.082, 0.022, 0.014));
+       }},
+      {"eye_spacing",
+       [](const PointContext& c) {
          const double sx = c.eyeball ? c.eye_side : (c.p.x() < 0 ? -1 : 1);
-         const double f = c.eyeball ? 1.0 : FrontMask(c.a) * Gauss2(c.p.x() - sx * kEyeX, c.p.y() - kEyeY, 0.018, 0.014);
-         return Eigen::Vector3d(0.0025 * sx * f, 0, 0); }},
-      {"cheek_fullness", [](const PointContext& c) {
+         const double f =
+             c.eyeball ? 1.0 : FrontMask(c.a) * Gauss2(c.p.x() - sx * kEyeX, c.p.y() - kEyeY, 0.018, 0.014);
+         return Eigen::Vector3d(0.0025 * sx * f, 0, 0);
+       }},
+      {"cheek_fullness",
+       [](const PointContext& c) {
          double f = 0;
          for (double sx : {-1.0, 1.0}) f += Gauss2(c.p.x() - sx * 0.048, c.p.y() + 0.03, 0.02, 0.022);
          f *= Smoothstep(-0.3, 0.5, std::cos(c.a)) * InteriorScale(c, 0.3);
-         return Eigen::Vector3d(0.004 * f * (c.p.x() < 0 ? -1 : 1), 0, 0.003 * f); }},
-      {"brow_ridge", [](const PointContext& c) {
-         return Eigen::Vector3d(0, 0, 0.004 * FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() - 0.046, 0.045, 0.007)); }},
-      {"lip_fullness", [](const PointContext& c) {
-         const double f = FrontMask(c.a) * std::exp(-std::pow(std::abs(c.p.x()) / 0.024, 3.0)) * Gauss2(0, c.p.y() - kMouthY, 1, 0.009);
-         return Eigen::Vector3d(0, 0, 0.004 * f * InteriorScale(c, c.kind == RowKind::kPocket ? 0.0 : 1.0)); }},
+         return Eigen::Vector3d(0.004 * f * (c.p.x() < 0 ? -1 : 1), 0, 0.003 * f);
+       }},
+      {"brow_ridge",
+       [](const PointContext& c) {
+         return Eigen::Vector3d(0, 0, 0.004 * FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() - 0.046, 0.045, 0.007));
+       }},
+      {"lip_fullness",
+       [](const PointContext& c) {
+         const double f = FrontMask(c.a) * std::exp(-std::pow(std::abs(c.p.x()) / 0.024, 3.0)) *
+                          Gauss2(0, c.p.y() - kMouthY, 1, 0.009);
+         return Eigen::Vector3d(0, 0, 0.004 * f * InteriorScale(c, c.kind == RowKind::kPocket ? 0.0 : 1.0));
+       }},
   };
 }
 
@@ -216,7 +240,8 @@ double MouthRegion(const PointContext& c, double sigma_y) {
 
 std::vector<NamedField> ExpressionFields() {
   return {
-      {"smile", [](const PointContext& c) {
+      {"smile",
+       [](const PointContext& c) {
          Eigen::Vector3d d = Eigen::Vector3d::Zero();
          if (c.eyeball) return d;
          for (double sx : {-1.0, 1.0}) {
@@ -225,61 +250,92 @@ std::vector<NamedField> ExpressionFields() {
            const double cheek = FrontMask(c.a) * Gauss2(c.p.x() - sx * 0.04, c.p.y() + 0.02, 0.015, 0.013);
            d += cheek * Eigen::Vector3d(0, 0.003, 0.002);
          }
-         return d; }},
-      {"pucker", [](const PointContext& c) {
+         return d;
+       }},
+      {"pucker",
+       [](const PointContext& c) {
          const double g = c.eyeball ? 0 : FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() - kMouthY, 0.022, 0.012);
-         return Eigen::Vector3d(-0.35 * c.p.x() * g, 0, 0.009 * g * InteriorScale(c, c.kind == RowKind::kPocket ? 0.6 : 1.0)); }},
-      {"brow_raise", [](const PointContext& c) {
+         return Eigen::Vector3d(-0.35 * c.p.x() * g, 0,
+                                0.009 * g * InteriorScale(c, c.kind == RowKind::kPocket ? 0.6 : 1.0));
+       }},
+      {"brow_raise",
+       [](const PointContext& c) {
          const double g = c.eyeball ? 0 : FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() - 0.048, 0.05, 0.012);
-         return Eigen::Vector3d(0, 0.006 * g, 0); }},
-      {"brow_frown", [](const PointContext& c) {
+         return Eigen::Vector3d(0, 0.006 * g, 0);
+       }},
+      {"brow_frown",
+       [](const PointContext& c) {
          const double g = c.eyeball ? 0 : FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() - 0.044, 0.022, 0.01);
-         return Eigen::Vector3d(-0.15 * c.p.x() * g, -0.004 * g, 0.0015 * g); }},
-      {"blink_left", [](const PointContext& c) {
+         return Eigen::Vector3d(-0.15 * c.p.x() * g, -0.004 * g, 0.0015 * g);
+       }},
+      {"blink_left",
+       [](const PointContext& c) {
          const double m = LidMask(c, 1);
-         return Eigen::Vector3d(0, -0.0015 * m * (c.p.y() > kEyeY ? 1 : -0.5), (kSocketDepth + 0.0015) * m); }},
-      {"blink_right", [](const PointContext& c) {
+         return Eigen::Vector3d(0, -0.0015 * m * (c.p.y() > kEyeY ? 1 : -0.5), (kSocketDepth + 0.0015) * m);
+       }},
+      {"blink_right",
+       [](const PointContext& c) {
          const double m = LidMask(c, -1);
-         return Eigen::Vector3d(0, -0.0015 * m * (c.p.y() > kEyeY ? 1 : -0.5), (kSocketDepth + 0.0015) * m); }},
-      {"squint", [](const PointContext& c) {
+         return Eigen::Vector3d(0, -0.0015 * m * (c.p.y() > kEyeY ? 1 : -0.5), (kSocketDepth + 0.0015) * m);
+       }},
+      {"squint",
+       [](const PointContext& c) {
          const double m = (LidMask(c, 1) + LidMask(c, -1)) * (c.p.y() < kEyeY - 0.001 ? 1 : 0);
          double cheek = 0;
          for (double sx : {-1.0, 1.0}) cheek += Gauss2(c.p.x() - sx * kEyeX, c.p.y() - (kEyeY - 0.012), 0.014, 0.006);
          cheek *= c.eyeball ? 0 : FrontMask(c.a);
-         return Eigen::Vector3d(0, 0.002 * cheek, (kSocketDepth + 0.0015) * m + 0.001 * cheek); }},
-      {"cheek_puff", [](const PointContext& c) {
+         return Eigen::Vector3d(0, 0.002 * cheek, (kSocketDepth + 0.0015) * m + 0.001 * cheek);
+       }},
+      {"cheek_puff",
+       [](const PointContext& c) {
          double g = 0;
          for (double sx : {-1.0, 1.0}) g += Gauss2(c.p.x() - sx * 0.043, c.p.y() + 0.04, 0.016, 0.016);
-         g *= c.eyeball ? 0 : Smoothstep(-0.2, 0.5, std::cos(c.a)) * InteriorScale(c, c.kind == RowKind::kPocket ? 0.2 : 1.0);
-         return Eigen::Vector3d(0.008 * g * (c.p.x() < 0 ? -1 : 1), 0, 0.004 * g); }},
-      {"lips_part", [](const PointContext& c) {
+         g *= c.eyeball
+                  ? 0
+                  : Smoothstep(-0.2, 0.5, std::cos(c.a)) * InteriorScale(c, c.kind == RowKind::kPocket ? 0.2 : 1.0);
+         return Eigen::Vector3d(0.008 * g * (c.p.x() < 0 ? -1 : 1), 0, 0.004 * g);
+       }},
+      {"lips_part",
+       [](const PointContext& c) {
          // Opens the lips without the jaw: the upper lip up, the lower lip down.
          if (c.eyeball) return Eigen::Vector3d::Zero().eval();
          const double m = MouthMask(c.p.x()) * FrontMask(c.a);
          double dir = 0;
-         if (c.kind == RowKind::kPocket) dir = 1 - 2 * c.pocket_s;
-         else if (c.kind == RowKind::kUpperContact) dir = 1;
-         else if (c.kind == RowKind::kLowerContact) dir = -1;
-         else dir = (c.p.y() > kMouthY ? 1 : -1) * Gauss2(0, c.p.y() - kMouthY, 1, 0.008);
-         return Eigen::Vector3d(0, 0.004 * dir * m, 0); }},
-      {"mouth_left", [](const PointContext& c) {
-         return Eigen::Vector3d(c.eyeball ? 0 : 0.007 * MouthRegion(c, 0.012), 0, 0); }},
-      {"mouth_right", [](const PointContext& c) {
-         return Eigen::Vector3d(c.eyeball ? 0 : -0.007 * MouthRegion(c, 0.012), 0, 0); }},
-      {"nose_wrinkle", [](const PointContext& c) {
+         if (c.kind == RowKind::kPocket)
+           dir = 1 - 2 * c.pocket_s;
+         else if (c.kind == RowKind::kUpperContact)
+           dir = 1;
+         else if (c.kind == RowKind::kLowerContact)
+           dir = -1;
+         else
+           dir = (c.p.y() > kMouthY ? 1 : -1) * Gauss2(0, c.p.y() - kMouthY, 1, 0.008);
+         return Eigen::Vector3d(0, 0.004 * dir * m, 0);
+       }},
+      {"mouth_left",
+       [](const PointContext& c) { return Eigen::Vector3d(c.eyeball ? 0 : 0.007 * MouthRegion(c, 0.012), 0, 0); }},
+      {"mouth_right",
+       [](const PointContext& c) { return Eigen::Vector3d(c.eyeball ? 0 : -0.007 * MouthRegion(c, 0.012), 0, 0); }},
+      {"nose_wrinkle",
+       [](const PointContext& c) {
          const double g = c.eyeball ? 0 : FrontMask(c.a) * Gauss2(c.p.x(), c.p.y() + 0.022, 0.02, 0.012);
-         return Eigen::Vector3d(0, 0.003 * g, 0.001 * g); }},
-      {"lips_press", [](const PointContext& c) {
-         const double g = c.eyeball ? 0 : InteriorScale(c, c.kind == RowKind::kPocket ? 0.0 : 1.0) * FrontMask(c.a) * std::exp(-std::pow(std::abs(c.p.x()) / 0.024, 3.0)) * Gauss2(0, c.p.y() - kMouthY, 1, 0.008);
-         return Eigen::Vector3d(0, 0, -0.004 * g); }},
+         return Eigen::Vector3d(0, 0.003 * g, 0.001 * g);
+       }},
+      {"lips_press",
+       [](const PointContext& c) {
+         const double g = c.eyeball ? 0
+                                    : InteriorScale(c, c.kind == RowKind::kPocket ? 0.0 : 1.0) * FrontMask(c.a) *
+                                          std::exp(-std::pow(std::abs(c.p.x()) / 0.024, 3.0)) *
+                                          Gauss2(0, c.p.y() - kMouthY, 1, 0.008);
+         return Eigen::Vector3d(0, 0, -0.004 * g);
+       }},
   };
 }
 
 struct Builder {
   BuiltinHeadOptions options;
   std::vector<Row> rows;
-  std::vector<double> angles;  // per column
-  std::vector<PointContext> points;  // every vertex, base context
+  std::vector<double> angles;              // per column
+  std::vector<PointContext> points;        // every vertex, base context
   std::vector<Eigen::Vector2d> uv_points;  // one per uv vertex
   std::vector<Eigen::Vector3i> faces, uv_faces;
   int head_vertices = 0;
@@ -339,7 +395,8 @@ struct Builder {
       const double side_z = p.z();
       const double u = (side_z - ez) / 0.016, v = (p.y() - ey) / 0.031;
       const double r = std::sqrt(u * u + v * v);
-      const double flap = 0.017 * Smoothstep(1.0, 0.7, r) - 0.006 * Smoothstep(0.55, 0.15, r) + 0.004 * Smoothstep(0.2, 0.0, std::abs(r - 0.8));
+      const double flap = 0.017 * Smoothstep(1.0, 0.7, r) - 0.006 * Smoothstep(0.55, 0.15, r) +
+                          0.004 * Smoothstep(0.2, 0.0, std::abs(r - 0.8));
       p.x() += (s > 0 ? 1 : -1) * flap * Smoothstep(0.6, 0.9, std::abs(s)) * (u < 0 ? 1.0 : Smoothstep(1.0, 0.0, u));
     }
     return p;
@@ -411,7 +468,10 @@ struct Builder {
     if (sx < 0) std::swap(lo, hi);
     for (int it = 0; it < 50; ++it) {
       const double mid = 0.5 * (lo + hi);
-      if (SectionPoint(s, 1, mid, y).x() < x) lo = mid; else hi = mid;
+      if (SectionPoint(s, 1, mid, y).x() < x)
+        lo = mid;
+      else
+        hi = mid;
     }
     const double a = 0.5 * (lo + hi);
     const double skin_z = SectionPoint(s, 1, a, y).z() + FrontMask(a) * FaceRelief(x, y);
@@ -603,7 +663,8 @@ struct Builder {
       const double ax = std::abs(x) / 0.026;
       const double top = kMouthY + 0.011 * (1 - ax * ax) - 0.0015 * Gauss2(x, 0, 0.004, 1) + 0.0008;
       const double bottom = kMouthY - 0.0125 * (1 - ax * ax) - 0.0008;
-      if (ax < 1 && ca > 0.3) lip_w = Smoothstep(top + 0.0012, top - 0.0012, y) * Smoothstep(bottom - 0.0012, bottom + 0.0012, y);
+      if (ax < 1 && ca > 0.3)
+        lip_w = Smoothstep(top + 0.0012, top - 0.0012, y) * Smoothstep(bottom - 0.0012, bottom + 0.0012, y);
       // Brows along an arc above each eye.
       for (double sx : {-1.0, 1.0}) {
         const double u = (x - sx * 0.034) / 0.024;
@@ -613,7 +674,8 @@ struct Builder {
         }
       }
       // Hair: a short crop whose line is high at the front and low at the back.
-      const double line = 0.064 * Smoothstep(-0.2, 0.6, ca) + (-0.055) * Smoothstep(0.0, -0.8, ca) + 0.028 * (1 - Smoothstep(-0.2, 0.6, ca) - Smoothstep(0.0, -0.8, ca));
+      const double line = 0.064 * Smoothstep(-0.2, 0.6, ca) + (-0.055) * Smoothstep(0.0, -0.8, ca) +
+                          0.028 * (1 - Smoothstep(-0.2, 0.6, ca) - Smoothstep(0.0, -0.8, ca));
       const bool behind_ear = ca < 0.05;
       hair_w = Smoothstep(line - 0.003, line + 0.004, y) * (behind_ear || y > 0.02 ? 1 : Smoothstep(0.0, 0.02, y));
       base = skin;
@@ -630,11 +692,11 @@ struct Builder {
     double cheeks = 0;
     for (double sx : {-1.0, 1.0}) cheeks += Gauss2(x - sx * 0.045, y + 0.02, 0.018, 0.016) * (ca > 0.3);
     out->col(0) = base.cast<float>();
-    out->col(1) = (skin_w * Eigen::Vector3d(-0.22, -0.20, -0.17)).cast<float>();  // skin_tone: darker
+    out->col(1) = (skin_w * Eigen::Vector3d(-0.22, -0.20, -0.17)).cast<float>();          // skin_tone: darker
     out->col(2) = (skin_w * cheeks * Eigen::Vector3d(0.05, -0.04, -0.03)).cast<float>();  // skin_redness
     out->col(3) = (lip_w * Eigen::Vector3d(0.08, -0.08, -0.03)).cast<float>();            // lip_color
     out->col(4) = ((hair_w + brow_w) * Eigen::Vector3d(0.30, 0.22, 0.12)).cast<float>();  // hair_color: lighter
-    out->col(5).setZero();                                                               // eye_color
+    out->col(5).setZero();                                                                // eye_color
   }
 
   // Albedo of an eyeball at polar angle theta from its front pole.
@@ -710,7 +772,8 @@ struct Builder {
           for (auto [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
             const int nx = x + dx, ny = y + dy;
             if (nx < 0 || ny < 0 || nx >= size || ny >= size || !filled[static_cast<size_t>(ny) * size + nx]) continue;
-            std::copy_n(&tex[(static_cast<size_t>(ny) * size + nx) * channels], channels, &tex[(static_cast<size_t>(y) * size + x) * channels]);
+            std::copy_n(&tex[(static_cast<size_t>(ny) * size + nx) * channels], channels,
+                        &tex[(static_cast<size_t>(y) * size + x) * channels]);
             next[static_cast<size_t>(y) * size + x] = 1;
             break;
           }
@@ -826,7 +889,8 @@ HeadModel MakeBuiltinHead(const BuiltinHeadOptions& options) {
         const auto& face = b.faces[f];
         const int corner = face[0] == lmk[l] ? 0 : face[1] == lmk[l] ? 1 : face[2] == lmk[l] ? 2 : -1;
         if (corner < 0) continue;
-        const Eigen::Vector3d e1 = b.points[face[1]].p - b.points[face[0]].p, e2 = b.points[face[2]].p - b.points[face[0]].p;
+        const Eigen::Vector3d e1 = b.points[face[1]].p - b.points[face[0]].p,
+                              e2 = b.points[face[2]].p - b.points[face[0]].p;
         if (!allow_degenerate && e1.cross(e2).norm() < 1e-10) continue;
         d.lmk_faces[l] = f;
         d.lmk_bary(l, corner) = 1;

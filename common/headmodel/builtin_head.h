@@ -10,8 +10,8 @@
 namespace headcast {
 
 struct BuiltinHeadOptions {
-  int columns = 96;          // vertices around the head (denser at the face)
-  int texture_size = 256;    // albedo texture edge, texels
+  int columns = 96;        // vertices around the head (denser at the face)
+  int texture_size = 256;  // albedo texture edge, texels
   void Check() const;
 };
 

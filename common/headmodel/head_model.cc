@@ -90,37 +90,51 @@ void HeadModel::Validate() const {
   const Eigen::Index n = d.v_template.rows();
   if (n < 3) Invalid("v_template", "needs at least 3 vertices, has " + std::to_string(n));
   CheckFinite("v_template", d.v_template);
-  if (d.shapedirs.rows() != 3 * n) Invalid("shapedirs", "has " + Dims(d.shapedirs.rows() / 3, d.shapedirs.cols()) + " vertices x components, expected " + std::to_string(n) + " vertices");
-  if (d.expressiondirs.rows() != 3 * n) Invalid("expressiondirs", "expected " + std::to_string(n) + " vertices, got " + std::to_string(d.expressiondirs.rows() / 3));
+  if (d.shapedirs.rows() != 3 * n)
+    Invalid("shapedirs", "has " + Dims(d.shapedirs.rows() / 3, d.shapedirs.cols()) +
+                             " vertices x components, expected " + std::to_string(n) + " vertices");
+  if (d.expressiondirs.rows() != 3 * n)
+    Invalid("expressiondirs",
+            "expected " + std::to_string(n) + " vertices, got " + std::to_string(d.expressiondirs.rows() / 3));
   CheckFinite("shapedirs", d.shapedirs);
   CheckFinite("expressiondirs", d.expressiondirs);
   if (d.posedirs.size() > 0) {
     if (d.posedirs.rows() != 3 * n || d.posedirs.cols() != kNumPoseFeatures)
-      Invalid("posedirs", "shape " + Dims(d.posedirs.rows(), d.posedirs.cols()) + ", expected " + Dims(3 * n, kNumPoseFeatures));
+      Invalid("posedirs",
+              "shape " + Dims(d.posedirs.rows(), d.posedirs.cols()) + ", expected " + Dims(3 * n, kNumPoseFeatures));
     CheckFinite("posedirs", d.posedirs);
   }
   if (d.j_regressor.rows() != kNumHeadJoints || d.j_regressor.cols() != n)
-    Invalid("J_regressor", "shape " + Dims(d.j_regressor.rows(), d.j_regressor.cols()) + ", expected " + Dims(kNumHeadJoints, n));
+    Invalid("J_regressor",
+            "shape " + Dims(d.j_regressor.rows(), d.j_regressor.cols()) + ", expected " + Dims(kNumHeadJoints, n));
   CheckFinite("J_regressor", d.j_regressor);
-  if (d.weights.rows() != n) Invalid("weights", "has " + std::to_string(d.weights.rows()) + " rows, expected " + std::to_string(n));
+  if (d.weights.rows() != n)
+    Invalid("weights", "has " + std::to_string(d.weights.rows()) + " rows, expected " + std::to_string(n));
   CheckFinite("weights", d.weights);
   for (Eigen::Index i = 0; i < n; ++i) {
     const float s = d.weights.row(i).sum();
-    if (std::abs(s - 1.f) > 1e-3f) Invalid("weights", "row " + std::to_string(i) + " sums to " + std::to_string(s) + ", expected 1");
+    if (std::abs(s - 1.f) > 1e-3f)
+      Invalid("weights", "row " + std::to_string(i) + " sums to " + std::to_string(s) + ", expected 1");
   }
   if (d.parents[0] != -1) Invalid("kintree_table", "joint 0 must be the root (parent -1)");
   for (int j = 1; j < kNumHeadJoints; ++j)
-    if (d.parents[j] < 0 || d.parents[j] >= j) Invalid("kintree_table", "joint " + std::to_string(j) + " must have an earlier parent");
+    if (d.parents[j] < 0 || d.parents[j] >= j)
+      Invalid("kintree_table", "joint " + std::to_string(j) + " must have an earlier parent");
   if (d.faces.rows() < 1) Invalid("f", "no faces");
-  if (d.faces.minCoeff() < 0 || d.faces.maxCoeff() >= n) Invalid("f", "vertex index out of range [0, " + std::to_string(n) + ")");
+  if (d.faces.minCoeff() < 0 || d.faces.maxCoeff() >= n)
+    Invalid("f", "vertex index out of range [0, " + std::to_string(n) + ")");
   if (d.lmk_faces.size() != kNumLandmarks || d.lmk_bary.rows() != kNumLandmarks)
-    Invalid("lmk_faces_idx", "expected 68 landmark faces and 68x3 barycentrics, got " + std::to_string(d.lmk_faces.size()) + " and " + std::to_string(d.lmk_bary.rows()));
-  if (d.lmk_faces.minCoeff() < 0 || d.lmk_faces.maxCoeff() >= d.faces.rows()) Invalid("lmk_faces_idx", "face index out of range");
+    Invalid("lmk_faces_idx", "expected 68 landmark faces and 68x3 barycentrics, got " +
+                                 std::to_string(d.lmk_faces.size()) + " and " + std::to_string(d.lmk_bary.rows()));
+  if (d.lmk_faces.minCoeff() < 0 || d.lmk_faces.maxCoeff() >= d.faces.rows())
+    Invalid("lmk_faces_idx", "face index out of range");
   CheckFinite("lmk_bary_coords", d.lmk_bary);
   if (d.dyn_lmk_faces.size() > 0) {
-    if (d.dyn_lmk_faces.rows() != kNumYawBins || d.dyn_lmk_faces.cols() != kNumContourLandmarks || d.dyn_lmk_bary.rows() != kNumYawBins * kNumContourLandmarks || d.dyn_lmk_bary.cols() != 3)
+    if (d.dyn_lmk_faces.rows() != kNumYawBins || d.dyn_lmk_faces.cols() != kNumContourLandmarks ||
+        d.dyn_lmk_bary.rows() != kNumYawBins * kNumContourLandmarks || d.dyn_lmk_bary.cols() != 3)
       Invalid("dynamic_lmk_faces_idx", "expected 79x17 faces and 79x17x3 barycentrics");
-    if (d.dyn_lmk_faces.minCoeff() < 0 || d.dyn_lmk_faces.maxCoeff() >= d.faces.rows()) Invalid("dynamic_lmk_faces_idx", "face index out of range");
+    if (d.dyn_lmk_faces.minCoeff() < 0 || d.dyn_lmk_faces.maxCoeff() >= d.faces.rows())
+      Invalid("dynamic_lmk_faces_idx", "face index out of range");
     CheckFinite("dynamic_lmk_bary_coords", d.dyn_lmk_bary);
   }
   if (d.uvs.rows() > 0) {
@@ -130,14 +144,18 @@ void HeadModel::Validate() const {
   }
   if (!d.texture_mean.empty()) {
     const size_t texels = static_cast<size_t>(d.texture_height) * d.texture_width * 3;
-    if (d.texture_height <= 0 || d.texture_width <= 0 || d.texture_mean.size() != texels) Invalid("texture_mean", "size does not match its height x width x 3");
-    if (d.texture_basis.size() > 0 && static_cast<size_t>(d.texture_basis.rows()) != texels) Invalid("texture_basis", "rows do not match texture_mean");
+    if (d.texture_height <= 0 || d.texture_width <= 0 || d.texture_mean.size() != texels)
+      Invalid("texture_mean", "size does not match its height x width x 3");
+    if (d.texture_basis.size() > 0 && static_cast<size_t>(d.texture_basis.rows()) != texels)
+      Invalid("texture_basis", "rows do not match texture_mean");
     for (float v : d.texture_mean)
       if (!std::isfinite(v)) Invalid("texture_mean", "contains NaN or infinite values");
     CheckFinite("texture_basis", d.texture_basis);
   }
-  if (!d.shape_names.empty() && static_cast<Eigen::Index>(d.shape_names.size()) != d.shapedirs.cols()) Invalid("shape_names", "count differs from shapedirs components");
-  if (!d.expression_names.empty() && static_cast<Eigen::Index>(d.expression_names.size()) != d.expressiondirs.cols()) Invalid("expression_names", "count differs from expressiondirs components");
+  if (!d.shape_names.empty() && static_cast<Eigen::Index>(d.shape_names.size()) != d.shapedirs.cols())
+    Invalid("shape_names", "count differs from shapedirs components");
+  if (!d.expression_names.empty() && static_cast<Eigen::Index>(d.expression_names.size()) != d.expressiondirs.cols())
+    Invalid("expression_names", "count differs from expressiondirs components");
 }
 
 int HeadModel::ExpressionIndex(const std::string& name) const {
@@ -171,7 +189,8 @@ void HeadModel::Forward(const HeadIdentity& identity, const Eigen::VectorXd& exp
   out->vertices.resize(n, 3);
   Eigen::Map<Eigen::VectorXf> v(out->vertices.data(), 3 * n);
   v = identity.v_shaped;
-  Eigen::Matrix<float, kNumHeadJoints * 3, 1> jflat = Eigen::Map<const Eigen::Matrix<float, 15, 1>>(identity.joints.data());
+  Eigen::Matrix<float, kNumHeadJoints * 3, 1> jflat =
+      Eigen::Map<const Eigen::Matrix<float, 15, 1>>(identity.joints.data());
   if (e > 0) {
     const Eigen::VectorXf psi = expression.head(e).cast<float>();
     v.noalias() += data_.expressiondirs.leftCols(e) * psi;
@@ -290,8 +309,13 @@ std::string HeadModel::Summary() const {
   const char* names[] = {"root", "neck", "jaw", "left_eye", "right_eye"};
   for (int k = 0; k < kNumHeadJoints; ++k) s << names[k] << (articulated_[k] ? "" : "(static)") << " ";
   s << "\nlandmarks:   68" << (has_dynamic_contour() ? " (dynamic contour by yaw)" : " (fixed)") << "\n"
-    << "texture:     " << (has_texture() ? std::to_string(data_.texture_width) + "x" + std::to_string(data_.texture_height) + ", " + std::to_string(num_texture()) + " components" : "none") << "\n"
-    << "extent (m):  x " << lo[0] << ".." << hi[0] << "  y " << lo[1] << ".." << hi[1] << "  z " << lo[2] << ".." << hi[2] << "\n";
+    << "texture:     "
+    << (has_texture() ? std::to_string(data_.texture_width) + "x" + std::to_string(data_.texture_height) + ", " +
+                            std::to_string(num_texture()) + " components"
+                      : "none")
+    << "\n"
+    << "extent (m):  x " << lo[0] << ".." << hi[0] << "  y " << lo[1] << ".." << hi[1] << "  z " << lo[2] << ".."
+    << hi[2] << "\n";
   if (!data_.expression_names.empty()) {
     s << "expressions:";
     for (const auto& n : data_.expression_names) s << " " << n;

@@ -27,48 +27,48 @@ using PoseVector = Eigen::Matrix<double, kNumPoseParams, 1>;
 
 // Everything the on-disk format holds; see head_model_io.h for the key names.
 struct HeadModelData {
-  std::string name;                 // e.g. "FLAME 2020", "ICT-FaceKit", "builtin"
-  std::string description;          // free text: provenance, licence, caveats
-  RowMatrixX3f v_template;          // N x 3, metres, y up, z out of the face
-  Eigen::MatrixXf shapedirs;        // 3N x S (row 3i+c is vertex i coordinate c)
-  Eigen::MatrixXf expressiondirs;   // 3N x E
-  Eigen::MatrixXf posedirs;         // 3N x 36, offsets per (R - I) entry of joints 1..4
-  Eigen::MatrixXf j_regressor;      // 5 x N
+  std::string name;                // e.g. "FLAME 2020", "ICT-FaceKit", "builtin"
+  std::string description;         // free text: provenance, licence, caveats
+  RowMatrixX3f v_template;         // N x 3, metres, y up, z out of the face
+  Eigen::MatrixXf shapedirs;       // 3N x S (row 3i+c is vertex i coordinate c)
+  Eigen::MatrixXf expressiondirs;  // 3N x E
+  Eigen::MatrixXf posedirs;        // 3N x 36, offsets per (R - I) entry of joints 1..4
+  Eigen::MatrixXf j_regressor;     // 5 x N
   Eigen::Matrix<float, Eigen::Dynamic, kNumHeadJoints, Eigen::RowMajor> weights;  // N x 5
   std::array<int, kNumHeadJoints> parents = {-1, 0, 1, 1, 1};
-  RowMatrixX3i faces;               // F x 3, counter-clockwise seen from outside
+  RowMatrixX3i faces;  // F x 3, counter-clockwise seen from outside
   // 68 landmarks as barycentric points on faces (static embedding).
-  Eigen::VectorXi lmk_faces;        // 68
-  RowMatrixX3f lmk_bary;            // 68 x 3
+  Eigen::VectorXi lmk_faces;  // 68
+  RowMatrixX3f lmk_bary;      // 68 x 3
   // Optional FLAME dynamic contour: for each of 79 yaw bins, 17 contour points.
-  Eigen::MatrixXi dyn_lmk_faces;    // 79 x 17, or empty
-  Eigen::MatrixXf dyn_lmk_bary;     // (79*17) x 3, row = bin*17 + k, or empty
+  Eigen::MatrixXi dyn_lmk_faces;  // 79 x 17, or empty
+  Eigen::MatrixXf dyn_lmk_bary;   // (79*17) x 3, row = bin*17 + k, or empty
   // Optional UV layout and albedo (linear texture model, values in [0, 1]).
-  RowMatrixX2f uvs;                 // T x 2, (u right, v down) in [0, 1], or empty
-  RowMatrixX3i uv_faces;            // F x 3 indices into uvs, or empty
+  RowMatrixX2f uvs;       // T x 2, (u right, v down) in [0, 1], or empty
+  RowMatrixX3i uv_faces;  // F x 3 indices into uvs, or empty
   int texture_height = 0, texture_width = 0;
-  std::vector<float> texture_mean;  // H*W*3, RGB, row-major
-  Eigen::MatrixXf texture_basis;    // (H*W*3) x T, or empty
+  std::vector<float> texture_mean;            // H*W*3, RGB, row-major
+  Eigen::MatrixXf texture_basis;              // (H*W*3) x T, or empty
   std::vector<std::string> shape_names;       // S names, or empty
   std::vector<std::string> expression_names;  // E names, or empty
   std::vector<std::string> texture_names;     // T names, or empty
 };
 
 struct HeadModelParams {
-  Eigen::VectorXd shape;       // beta, S values (fewer are zero-padded)
-  Eigen::VectorXd expression;  // psi, E values (fewer are zero-padded)
+  Eigen::VectorXd shape;                 // beta, S values (fewer are zero-padded)
+  Eigen::VectorXd expression;            // psi, E values (fewer are zero-padded)
   PoseVector pose = PoseVector::Zero();  // root, neck, jaw, left eye, right eye (axis-angle, rad)
 };
 
 // The per-identity part of the forward pass, computed once per beta.
 struct HeadIdentity {
-  Eigen::VectorXf shape;            // the beta it was made from
-  Eigen::VectorXf v_shaped;         // 3N: template + shape offsets
+  Eigen::VectorXf shape;                                            // the beta it was made from
+  Eigen::VectorXf v_shaped;                                         // 3N: template + shape offsets
   Eigen::Matrix<float, kNumHeadJoints, 3, Eigen::RowMajor> joints;  // rest joints for beta
 };
 
 struct HeadModelOutput {
-  RowMatrixX3f vertices;            // N x 3, model frame (root joint's world)
+  RowMatrixX3f vertices;  // N x 3, model frame (root joint's world)
   Eigen::Matrix<float, kNumLandmarks, 3, Eigen::RowMajor> landmarks;
   Eigen::Matrix<float, kNumHeadJoints, 3, Eigen::RowMajor> joints;  // posed joint positions
 };

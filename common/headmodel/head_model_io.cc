@@ -22,30 +22,38 @@ class Reader {
   // The array under `key` with `dims` (-1 = any), checked for dtype and finiteness.
   const NpyArray& Get(const std::string& key, const std::vector<int64_t>& dims, bool integer) const {
     auto it = archive_.find(key);
-    if (it == archive_.end()) Fail(key, "missing (is this a headcast head model? convert sources with headcast-headmodel convert)");
+    if (it == archive_.end())
+      Fail(key, "missing (is this a headcast head model? convert sources with headcast-headmodel convert)");
     const NpyArray& a = it->second;
     bool shape_ok = a.ndim() == static_cast<int>(dims.size());
     for (size_t i = 0; shape_ok && i < dims.size(); ++i) shape_ok = dims[i] < 0 || a.dim(i) == dims[i];
     if (!shape_ok) {
       std::string want = "(";
-      for (size_t i = 0; i < dims.size(); ++i) want += (i ? ", " : "") + (dims[i] < 0 ? std::string("*") : std::to_string(dims[i]));
+      for (size_t i = 0; i < dims.size(); ++i)
+        want += (i ? ", " : "") + (dims[i] < 0 ? std::string("*") : std::to_string(dims[i]));
       Fail(key, "shape " + a.ShapeString() + ", expected " + want + ")");
     }
     const bool is_int = a.dtype() == DType::kInt32 || a.dtype() == DType::kInt64;
     const bool is_float = a.dtype() == DType::kFloat32 || a.dtype() == DType::kFloat64;
     if (integer && !is_int) Fail(key, std::string("dtype ") + DTypeName(a.dtype()) + ", expected int32 or int64");
-    if (!integer && !is_float) Fail(key, std::string("dtype ") + DTypeName(a.dtype()) + ", expected float32 or float64");
+    if (!integer && !is_float)
+      Fail(key, std::string("dtype ") + DTypeName(a.dtype()) + ", expected float32 or float64");
     if (!integer)
       for (float v : a.ToFloats())
         if (!std::isfinite(v)) Fail(key, "contains NaN or infinite values");
     return a;
   }
-  std::vector<float> Floats(const std::string& key, const std::vector<int64_t>& dims) const { return Get(key, dims, false).ToFloats(); }
-  std::vector<int64_t> Ints(const std::string& key, const std::vector<int64_t>& dims) const { return Get(key, dims, true).ToInt64s(); }
+  std::vector<float> Floats(const std::string& key, const std::vector<int64_t>& dims) const {
+    return Get(key, dims, false).ToFloats();
+  }
+  std::vector<int64_t> Ints(const std::string& key, const std::vector<int64_t>& dims) const {
+    return Get(key, dims, true).ToInt64s();
+  }
   std::vector<std::string> Strings(const std::string& key) const {
     auto it = archive_.find(key);
     if (it == archive_.end()) return {};
-    if (it->second.dtype() != DType::kUInt8 || it->second.ndim() != 1) Fail(key, "expected uint8 text (one name per line)");
+    if (it->second.dtype() != DType::kUInt8 || it->second.ndim() != 1)
+      Fail(key, "expected uint8 text (one name per line)");
     return NpyToStrings(it->second);
   }
   const NpyArray& Raw(const std::string& key) const { return archive_.at(key); }
@@ -69,32 +77,19 @@ std::vector<float> BasisToNK3(const Eigen::MatrixXf& m) {
   return v;
 }
 
-template <typename Matrix>
-Matrix RowMajorFrom(const std::vector<float>& v, int64_t rows, int64_t cols) {
+// numpy row-major data <-> Eigen matrices of any storage order and scalar.
+template <typename Matrix, typename T>
+Matrix RowMajorFrom(const std::vector<T>& v, int64_t rows, int64_t cols) {
   Matrix m(rows, cols);
   for (int64_t r = 0; r < rows; ++r)
-    for (int64_t c = 0; c < cols; ++c) m(r, c) = v[r * cols + c];
+    for (int64_t c = 0; c < cols; ++c) m(r, c) = static_cast<typename Matrix::Scalar>(v[r * cols + c]);
   return m;
 }
-template <typename Matrix>
-Matrix RowMajorFromInts(const std::vector<int64_t>& v, int64_t rows, int64_t cols) {
-  Matrix m(rows, cols);
-  for (int64_t r = 0; r < rows; ++r)
-    for (int64_t c = 0; c < cols; ++c) m(r, c) = static_cast<int>(v[r * cols + c]);
-  return m;
-}
-template <typename Matrix>
-std::vector<float> RowMajorFloats(const Matrix& m) {
-  std::vector<float> v(m.size());
+template <typename T, typename Matrix>
+std::vector<T> RowMajorValues(const Matrix& m) {
+  std::vector<T> v(m.size());
   for (int64_t r = 0; r < m.rows(); ++r)
-    for (int64_t c = 0; c < m.cols(); ++c) v[r * m.cols() + c] = static_cast<float>(m(r, c));
-  return v;
-}
-template <typename Matrix>
-std::vector<int32_t> RowMajorInts(const Matrix& m) {
-  std::vector<int32_t> v(m.size());
-  for (int64_t r = 0; r < m.rows(); ++r)
-    for (int64_t c = 0; c < m.cols(); ++c) v[r * m.cols() + c] = static_cast<int32_t>(m(r, c));
+    for (int64_t c = 0; c < m.cols(); ++c) v[r * m.cols() + c] = static_cast<T>(m(r, c));
   return v;
 }
 
@@ -105,7 +100,9 @@ HeadModel LoadHeadModel(const std::string& path) {
   if (in.Has("headcast_format")) {
     const auto version = in.Ints("headcast_format", {1});
     if (version[0] != kHeadModelFormatVersion)
-      in.Fail("headcast_format", "format version " + std::to_string(version[0]) + " is not supported (this build reads version " + std::to_string(kHeadModelFormatVersion) + ")");
+      in.Fail("headcast_format", "format version " + std::to_string(version[0]) +
+                                     " is not supported (this build reads version " +
+                                     std::to_string(kHeadModelFormatVersion) + ")");
   }
   HeadModelData d;
   const auto& vt = in.Get("v_template", {-1, 3}, false);
@@ -115,26 +112,30 @@ HeadModel LoadHeadModel(const std::string& path) {
   d.shapedirs = BasisFromNK3(sd.ToFloats(), n, sd.dim(2));
   const auto& ed = in.Get("expressiondirs", {n, 3, -1}, false);
   d.expressiondirs = BasisFromNK3(ed.ToFloats(), n, ed.dim(2));
-  if (in.Has("posedirs")) d.posedirs = BasisFromNK3(in.Floats("posedirs", {n, 3, kNumPoseFeatures}), n, kNumPoseFeatures);
+  if (in.Has("posedirs"))
+    d.posedirs = BasisFromNK3(in.Floats("posedirs", {n, 3, kNumPoseFeatures}), n, kNumPoseFeatures);
   d.j_regressor = RowMajorFrom<Eigen::MatrixXf>(in.Floats("J_regressor", {kNumHeadJoints, n}), kNumHeadJoints, n);
   d.weights = RowMajorFrom<decltype(d.weights)>(in.Floats("weights", {n, kNumHeadJoints}), n, kNumHeadJoints);
   const auto kintree = in.Ints("kintree_table", {2, kNumHeadJoints});
   d.parents[0] = -1;
   for (int j = 1; j < kNumHeadJoints; ++j) d.parents[j] = static_cast<int>(kintree[j]);
   const auto& f = in.Get("f", {-1, 3}, true);
-  d.faces = RowMajorFromInts<RowMatrixX3i>(f.ToInt64s(), f.dim(0), 3);
+  d.faces = RowMajorFrom<RowMatrixX3i>(f.ToInt64s(), f.dim(0), 3);
   const auto lf = in.Ints("lmk_faces_idx", {kNumLandmarks});
   d.lmk_faces.resize(kNumLandmarks);
   for (int i = 0; i < kNumLandmarks; ++i) d.lmk_faces[i] = static_cast<int>(lf[i]);
   d.lmk_bary = RowMajorFrom<RowMatrixX3f>(in.Floats("lmk_bary_coords", {kNumLandmarks, 3}), kNumLandmarks, 3);
   if (in.Has("dynamic_lmk_faces_idx") || in.Has("dynamic_lmk_bary_coords")) {
-    d.dyn_lmk_faces = RowMajorFromInts<Eigen::MatrixXi>(in.Ints("dynamic_lmk_faces_idx", {kNumYawBins, kNumContourLandmarks}), kNumYawBins, kNumContourLandmarks);
-    d.dyn_lmk_bary = RowMajorFrom<Eigen::MatrixXf>(in.Floats("dynamic_lmk_bary_coords", {kNumYawBins, kNumContourLandmarks, 3}), kNumYawBins * kNumContourLandmarks, 3);
+    d.dyn_lmk_faces = RowMajorFrom<Eigen::MatrixXi>(
+        in.Ints("dynamic_lmk_faces_idx", {kNumYawBins, kNumContourLandmarks}), kNumYawBins, kNumContourLandmarks);
+    d.dyn_lmk_bary =
+        RowMajorFrom<Eigen::MatrixXf>(in.Floats("dynamic_lmk_bary_coords", {kNumYawBins, kNumContourLandmarks, 3}),
+                                      kNumYawBins * kNumContourLandmarks, 3);
   }
   if (in.Has("vt") || in.Has("ft")) {
     const auto& uv = in.Get("vt", {-1, 2}, false);
     d.uvs = RowMajorFrom<RowMatrixX2f>(uv.ToFloats(), uv.dim(0), 2);
-    d.uv_faces = RowMajorFromInts<RowMatrixX3i>(in.Ints("ft", {d.faces.rows(), 3}), d.faces.rows(), 3);
+    d.uv_faces = RowMajorFrom<RowMatrixX3i>(in.Ints("ft", {d.faces.rows(), 3}), d.faces.rows(), 3);
   }
   if (in.Has("texture_mean")) {
     const auto& tm = in.Get("texture_mean", {-1, -1, 3}, false);
@@ -166,33 +167,37 @@ void SaveHeadModel(const HeadModel& model, const std::string& path) {
   NpzArchive a;
   const int32_t version = kHeadModelFormatVersion;
   a["headcast_format"] = NpyArray::From<int32_t>({1}, &version);
-  a["v_template"] = NpyArray::From<float>({n, 3}, RowMajorFloats(d.v_template).data());
+  a["v_template"] = NpyArray::From<float>({n, 3}, RowMajorValues<float>(d.v_template).data());
   a["shapedirs"] = NpyArray::From<float>({n, 3, model.num_shape()}, BasisToNK3(d.shapedirs).data());
   a["expressiondirs"] = NpyArray::From<float>({n, 3, model.num_expression()}, BasisToNK3(d.expressiondirs).data());
-  if (d.posedirs.size() > 0) a["posedirs"] = NpyArray::From<float>({n, 3, kNumPoseFeatures}, BasisToNK3(d.posedirs).data());
-  a["J_regressor"] = NpyArray::From<float>({kNumHeadJoints, n}, RowMajorFloats(d.j_regressor).data());
-  a["weights"] = NpyArray::From<float>({n, kNumHeadJoints}, RowMajorFloats(d.weights).data());
+  if (d.posedirs.size() > 0)
+    a["posedirs"] = NpyArray::From<float>({n, 3, kNumPoseFeatures}, BasisToNK3(d.posedirs).data());
+  a["J_regressor"] = NpyArray::From<float>({kNumHeadJoints, n}, RowMajorValues<float>(d.j_regressor).data());
+  a["weights"] = NpyArray::From<float>({n, kNumHeadJoints}, RowMajorValues<float>(d.weights).data());
   std::vector<int32_t> kintree(2 * kNumHeadJoints);
   for (int j = 0; j < kNumHeadJoints; ++j) {
     kintree[j] = d.parents[j];
     kintree[kNumHeadJoints + j] = j;
   }
   a["kintree_table"] = NpyArray::From<int32_t>({2, kNumHeadJoints}, kintree.data());
-  a["f"] = NpyArray::From<int32_t>({model.num_faces(), 3}, RowMajorInts(d.faces).data());
-  a["lmk_faces_idx"] = NpyArray::From<int32_t>({kNumLandmarks}, RowMajorInts(Eigen::MatrixXi(d.lmk_faces)).data());
-  a["lmk_bary_coords"] = NpyArray::From<float>({kNumLandmarks, 3}, RowMajorFloats(d.lmk_bary).data());
+  a["f"] = NpyArray::From<int32_t>({model.num_faces(), 3}, RowMajorValues<int32_t>(d.faces).data());
+  a["lmk_faces_idx"] = NpyArray::From<int32_t>({kNumLandmarks}, RowMajorValues<int32_t>(Eigen::MatrixXi(d.lmk_faces)).data());
+  a["lmk_bary_coords"] = NpyArray::From<float>({kNumLandmarks, 3}, RowMajorValues<float>(d.lmk_bary).data());
   if (d.dyn_lmk_faces.size() > 0) {
-    a["dynamic_lmk_faces_idx"] = NpyArray::From<int32_t>({kNumYawBins, kNumContourLandmarks}, RowMajorInts(d.dyn_lmk_faces).data());
-    a["dynamic_lmk_bary_coords"] = NpyArray::From<float>({kNumYawBins, kNumContourLandmarks, 3}, RowMajorFloats(d.dyn_lmk_bary).data());
+    a["dynamic_lmk_faces_idx"] =
+        NpyArray::From<int32_t>({kNumYawBins, kNumContourLandmarks}, RowMajorValues<int32_t>(d.dyn_lmk_faces).data());
+    a["dynamic_lmk_bary_coords"] =
+        NpyArray::From<float>({kNumYawBins, kNumContourLandmarks, 3}, RowMajorValues<float>(d.dyn_lmk_bary).data());
   }
   if (d.uvs.rows() > 0) {
-    a["vt"] = NpyArray::From<float>({d.uvs.rows(), 2}, RowMajorFloats(d.uvs).data());
-    a["ft"] = NpyArray::From<int32_t>({d.uv_faces.rows(), 3}, RowMajorInts(d.uv_faces).data());
+    a["vt"] = NpyArray::From<float>({d.uvs.rows(), 2}, RowMajorValues<float>(d.uvs).data());
+    a["ft"] = NpyArray::From<int32_t>({d.uv_faces.rows(), 3}, RowMajorValues<int32_t>(d.uv_faces).data());
   }
   if (!d.texture_mean.empty()) {
     a["texture_mean"] = NpyArray::From<float>({d.texture_height, d.texture_width, 3}, d.texture_mean.data());
     if (d.texture_basis.size() > 0)
-      a["texture_basis"] = NpyArray::From<float>({d.texture_height, d.texture_width, 3, d.texture_basis.cols()}, BasisToNK3(d.texture_basis).data());
+      a["texture_basis"] = NpyArray::From<float>({d.texture_height, d.texture_width, 3, d.texture_basis.cols()},
+                                                 BasisToNK3(d.texture_basis).data());
   }
   a["name"] = StringsToNpy({d.name});
   if (!d.description.empty()) a["description"] = StringsToNpy({d.description});

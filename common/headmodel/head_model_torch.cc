@@ -46,7 +46,8 @@ at::Tensor FromEigen(const float* data, std::vector<int64_t> sizes, at::ScalarTy
 }  // namespace
 
 HeadModelTorch::HeadModelTorch(const HeadModel& model, at::ScalarType dtype) : impl_(std::make_unique<Impl>()) {
-  if (dtype != at::kFloat && dtype != at::kDouble) throw std::invalid_argument("HeadModelTorch: dtype must be float or double");
+  if (dtype != at::kFloat && dtype != at::kDouble)
+    throw std::invalid_argument("HeadModelTorch: dtype must be float or double");
   const HeadModelData& d = model.data();
   Impl& m = *impl_;
   m.dtype = dtype;
@@ -66,9 +67,15 @@ HeadModelTorch::HeadModelTorch(const HeadModel& model, at::ScalarType dtype) : i
   m.lmk_bary = FromEigen(d.lmk_bary.data(), {kNumLandmarks, 3}, dtype);
   if (model.has_dynamic_contour()) {
     // dyn_lmk_faces is column-major 79 x 17.
-    m.dyn_faces = at::from_blob(const_cast<int*>(d.dyn_lmk_faces.data()), {kNumContourLandmarks, kNumYawBins}, at::kInt).t().to(at::kLong).contiguous();
+    m.dyn_faces = at::from_blob(const_cast<int*>(d.dyn_lmk_faces.data()), {kNumContourLandmarks, kNumYawBins}, at::kInt)
+                      .t()
+                      .to(at::kLong)
+                      .contiguous();
     // dyn_lmk_bary is column-major (79*17) x 3.
-    m.dyn_bary = FromEigen(d.dyn_lmk_bary.data(), {3, kNumYawBins * kNumContourLandmarks}, dtype).t().reshape({kNumYawBins, kNumContourLandmarks, 3}).contiguous();
+    m.dyn_bary = FromEigen(d.dyn_lmk_bary.data(), {3, kNumYawBins * kNumContourLandmarks}, dtype)
+                     .t()
+                     .reshape({kNumYawBins, kNumContourLandmarks, 3})
+                     .contiguous();
   }
 }
 
@@ -76,23 +83,30 @@ HeadModelTorch::~HeadModelTorch() = default;
 HeadModelTorch::HeadModelTorch(HeadModelTorch&&) noexcept = default;
 at::ScalarType HeadModelTorch::dtype() const { return impl_->dtype; }
 
-HeadModelTensors HeadModelTorch::Forward(const at::Tensor& shape, const at::Tensor& expression, const at::Tensor& pose) const {
+HeadModelTensors HeadModelTorch::Forward(const at::Tensor& shape, const at::Tensor& expression,
+                                         const at::Tensor& pose) const {
   const Impl& m = *impl_;
   const int64_t b = pose.size(0);
-  if (pose.dim() != 2 || pose.size(1) != kNumPoseParams) throw std::invalid_argument("HeadModelTorch: pose must be (B, 15)");
-  if (shape.dim() != 2 || shape.size(0) != b || shape.size(1) > m.s) throw std::invalid_argument("HeadModelTorch: shape must be (B, <=S)");
-  if (expression.dim() != 2 || expression.size(0) != b || expression.size(1) > m.e) throw std::invalid_argument("HeadModelTorch: expression must be (B, <=E)");
+  if (pose.dim() != 2 || pose.size(1) != kNumPoseParams)
+    throw std::invalid_argument("HeadModelTorch: pose must be (B, 15)");
+  if (shape.dim() != 2 || shape.size(0) != b || shape.size(1) > m.s)
+    throw std::invalid_argument("HeadModelTorch: shape must be (B, <=S)");
+  if (expression.dim() != 2 || expression.size(0) != b || expression.size(1) > m.e)
+    throw std::invalid_argument("HeadModelTorch: expression must be (B, <=E)");
 
   at::Tensor v = m.v_template.unsqueeze(0).expand({b, m.n * 3});
   if (shape.size(1) > 0) v = v + at::matmul(shape.to(m.dtype), m.shapedirs.narrow(1, 0, shape.size(1)).t());
-  if (expression.size(1) > 0) v = v + at::matmul(expression.to(m.dtype), m.expressiondirs.narrow(1, 0, expression.size(1)).t());
+  if (expression.size(1) > 0)
+    v = v + at::matmul(expression.to(m.dtype), m.expressiondirs.narrow(1, 0, expression.size(1)).t());
   const at::Tensor v_shaped = v.view({b, m.n, 3});
   const at::Tensor J = at::matmul(m.j_regressor, v_shaped);  // (B, 5, 3)
 
-  const at::Tensor R = AxisAngleToMatrixTorch(pose.to(m.dtype).reshape({b * kNumHeadJoints, 3})).view({b, kNumHeadJoints, 3, 3});
+  const at::Tensor R =
+      AxisAngleToMatrixTorch(pose.to(m.dtype).reshape({b * kNumHeadJoints, 3})).view({b, kNumHeadJoints, 3, 3});
   at::Tensor v_posed = v_shaped;
   if (m.posedirs.defined()) {
-    const at::Tensor feature = (R.narrow(1, 1, kNumHeadJoints - 1) - at::eye(3, R.options())).reshape({b, kNumPoseFeatures});
+    const at::Tensor feature =
+        (R.narrow(1, 1, kNumHeadJoints - 1) - at::eye(3, R.options())).reshape({b, kNumPoseFeatures});
     v_posed = v_posed + at::matmul(feature, m.posedirs).view({b, m.n, 3});
   }
   // Kinematic chain.
@@ -114,7 +128,7 @@ HeadModelTensors HeadModelTorch::Forward(const at::Tensor& shape, const at::Tens
     const at::Tensor t = Gt[k] - at::bmm(GR[k], J.select(1, k).unsqueeze(2));
     A.push_back(at::cat({GR[k], t}, 2).view({b, 12}));
   }
-  const at::Tensor A_all = at::stack(A, 1);                  // (B, 5, 12)
+  const at::Tensor A_all = at::stack(A, 1);                                // (B, 5, 12)
   const at::Tensor T = at::matmul(m.weights, A_all).view({b, m.n, 3, 4});  // (B, N, 3, 4)
   const at::Tensor verts = at::matmul(T.narrow(3, 0, 3), v_posed.unsqueeze(3)).squeeze(3) + T.select(3, 3);
 
@@ -134,7 +148,8 @@ HeadModelTensors HeadModelTorch::Forward(const at::Tensor& shape, const at::Tens
     lmk_bary.narrow(1, 0, kNumContourLandmarks).copy_(m.dyn_bary.index_select(0, bin_t));
   }
   const at::Tensor corner_ids = m.faces.index_select(0, lmk_faces.reshape(-1)).view({b, kNumLandmarks * 3});
-  const at::Tensor corners = at::gather(verts, 1, corner_ids.unsqueeze(2).expand({b, kNumLandmarks * 3, 3})).view({b, kNumLandmarks, 3, 3});
+  const at::Tensor corners =
+      at::gather(verts, 1, corner_ids.unsqueeze(2).expand({b, kNumLandmarks * 3, 3})).view({b, kNumLandmarks, 3, 3});
   const at::Tensor landmarks = (corners * lmk_bary.unsqueeze(3)).sum(2);
 
   std::vector<at::Tensor> joints;

@@ -46,6 +46,7 @@ HeadRender RenderHead(const HeadModel& model, const RowMatrixX3f& vertices, cons
                       RasterBuffers* buffers = nullptr);
 
 // Draws 2D points (e.g. projected landmarks) onto an image.
-void DrawPoints(cv::Mat* image_bgr, const std::vector<Eigen::Vector2d>& points, const cv::Scalar& color, int radius = 2);
+void DrawPoints(cv::Mat* image_bgr, const std::vector<Eigen::Vector2d>& points, const cv::Scalar& color,
+                int radius = 2);
 
 }  // namespace headcast

@@ -46,8 +46,8 @@ Framing FrameModel(const HeadModel& model, int size) {
   return f;
 }
 
-cv::Mat RenderOne(const HeadModel& model, const HeadModelParams& params, const Framing& framing, double yaw, double pitch,
-                  const cv::Mat& albedo, bool landmarks) {
+cv::Mat RenderOne(const HeadModel& model, const HeadModelParams& params, const Framing& framing, double yaw,
+                  double pitch, const cv::Mat& albedo, bool landmarks) {
   const HeadModelOutput out = model.Forward(params);
   const RigidTransform cam_from_head = FrontalCamFromHead(framing.distance, yaw, pitch, framing.target);
   HeadRender r = RenderHead(model, out.vertices, cam_from_head, framing.camera, albedo);
@@ -62,8 +62,8 @@ cv::Mat RenderOne(const HeadModel& model, const HeadModelParams& params, const F
 
 void Label(cv::Mat* image, const std::string& text) {
   const double scale = image->cols / 512.0 * 0.6;
-  cv::putText(*image, text, {8, static_cast<int>(24 * scale / 0.6)}, cv::FONT_HERSHEY_SIMPLEX, scale, cv::Scalar(255, 255, 255), 1,
-              cv::LINE_AA);
+  cv::putText(*image, text, {8, static_cast<int>(24 * scale / 0.6)}, cv::FONT_HERSHEY_SIMPLEX, scale,
+              cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
 }
 
 HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
@@ -76,7 +76,8 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
     if (eq == std::string::npos) throw std::invalid_argument("--expression wants name=value, got '" + e + "'");
     const std::string name = e.substr(0, eq);
     const int idx = model.ExpressionIndex(name);
-    if (idx < 0) throw std::invalid_argument("model has no expression component '" + name + "' (see: headcast-headmodel summary)");
+    if (idx < 0)
+      throw std::invalid_argument("model has no expression component '" + name + "' (see: headcast-headmodel summary)");
     p.expression[idx] = std::stod(e.substr(eq + 1));
   }
   return p;
@@ -116,12 +117,14 @@ int Render(const RenderArgs& args) {
       for (int e = 0; e < model.num_expression(); ++e) {
         HeadModelParams p = params;
         p.expression[e] = 1.0;
-        tile(p, model.data().expression_names.empty() ? "expr " + std::to_string(e) : model.data().expression_names[e], 0);
+        tile(p, model.data().expression_names.empty() ? "expr " + std::to_string(e) : model.data().expression_names[e],
+             0);
       }
       for (int s = 0; s < std::min(model.num_shape(), 12); ++s) {
         HeadModelParams p = params;
         p.shape[s] = 2.0;
-        tile(p, (model.data().shape_names.empty() ? "shape " + std::to_string(s) : model.data().shape_names[s]) + " +2", 0);
+        tile(p, (model.data().shape_names.empty() ? "shape " + std::to_string(s) : model.data().shape_names[s]) + " +2",
+             0);
       }
       const int cols = 6;
       while (tiles.size() % cols) tiles.push_back(cv::Mat(256, 256, CV_8UC3, cv::Scalar(0, 0, 0)));
@@ -161,7 +164,9 @@ int Render(const RenderArgs& args) {
         for (int i = 0; i < steps; ++i) {
           HeadModelParams p = params;
           p.expression[e] = std::sin(M_PI * i / steps);
-          emit(p, 15, model.data().expression_names.empty() ? "expression " + std::to_string(e) : model.data().expression_names[e]);
+          emit(p, 15,
+               model.data().expression_names.empty() ? "expression " + std::to_string(e)
+                                                     : model.data().expression_names[e]);
         }
     writer.Close();
     spdlog::info("wrote {} ({} frames, 30 fps)", args.video, writer.frames_written());
@@ -195,11 +200,14 @@ int main(int argc, char** argv) {
   convert->require_subcommand(1);
   std::string out;
   // FLAME
-  auto* flame = convert->add_subcommand("flame", "official FLAME generic_model.pkl (2020, 2023, 2023 Open) via deploy/tools/flame_to_npz.py");
+  auto* flame = convert->add_subcommand(
+      "flame", "official FLAME generic_model.pkl (2020, 2023, 2023 Open) via deploy/tools/flame_to_npz.py");
   std::string flame_pkl, flame_embedding, flame_texture, flame_script;
   int flame_shape = 300, flame_expr = 100;
   flame->add_option("--model", flame_pkl, "generic_model.pkl")->required()->check(CLI::ExistingFile);
-  flame->add_option("--embedding", flame_embedding, "landmark_embedding.npy (static + dynamic contour)")->required()->check(CLI::ExistingFile);
+  flame->add_option("--embedding", flame_embedding, "landmark_embedding.npy (static + dynamic contour)")
+      ->required()
+      ->check(CLI::ExistingFile);
   flame->add_option("--texture", flame_texture, "optional FLAME_texture.npz (albedo PCA + UVs)");
   flame->add_option("--shape", flame_shape, "shape components to keep")->capture_default_str();
   flame->add_option("--expression", flame_expr, "expression components to keep")->capture_default_str();
@@ -211,7 +219,9 @@ int main(int argc, char** argv) {
   std::string ict_parts;
   ict->add_option("--folder", ict_options.folder, "ICT-FaceKit folder (contains FaceXModel/)")->required();
   ict->add_option("--identity", ict_options.max_identity, "identity components to read")->capture_default_str();
-  ict->add_option("--parts", ict_parts, "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories (default all)");
+  ict->add_option(
+      "--parts", ict_parts,
+      "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories (default all)");
   ict->add_option("--out", out, "output .npz")->required();
   // Built-in
   auto* builtin = convert->add_subcommand("builtin", "write the built-in procedural head as .npz");
@@ -226,8 +236,10 @@ int main(int argc, char** argv) {
   render->add_option("model", r.model, "builtin or a model .npz")->required();
   render->add_option("--out", r.out, "PNG to write");
   render->add_option("--video", r.video, "MP4 sweep to write");
-  render->add_option("--sweep", r.sweep, "what the video sweeps: all, turn, jaw, expression")->check(CLI::IsMember({"all", "turn", "jaw", "expression"}));
-  render->add_option("--view", r.view, "front, side, both, grid")->check(CLI::IsMember({"front", "side", "both", "grid"}));
+  render->add_option("--sweep", r.sweep, "what the video sweeps: all, turn, jaw, expression")
+      ->check(CLI::IsMember({"all", "turn", "jaw", "expression"}));
+  render->add_option("--view", r.view, "front, side, both, grid")
+      ->check(CLI::IsMember({"front", "side", "both", "grid"}));
   render->add_option("--size", r.size, "image size, pixels")->check(CLI::Range(64, 4096));
   render->add_option("--yaw", r.yaw, "head yaw, degrees");
   render->add_option("--pitch", r.pitch, "head pitch, degrees");
@@ -240,9 +252,9 @@ int main(int argc, char** argv) {
     InitLogging(log_level);
     if (flame->parsed()) {
       const std::string python = std::filesystem::exists("/usr/bin/python3") ? "/usr/bin/python3" : "python3";
-      std::string cmd = python + " " + Quote(FlameScript(flame_script)) + " --model " + Quote(flame_pkl) + " --embedding " +
-                        Quote(flame_embedding) + " --shape " + std::to_string(flame_shape) + " --expression " +
-                        std::to_string(flame_expr) + " --out " + Quote(out);
+      std::string cmd = python + " " + Quote(FlameScript(flame_script)) + " --model " + Quote(flame_pkl) +
+                        " --embedding " + Quote(flame_embedding) + " --shape " + std::to_string(flame_shape) +
+                        " --expression " + std::to_string(flame_expr) + " --out " + Quote(out);
       if (!flame_texture.empty()) cmd += " --texture " + Quote(flame_texture);
       spdlog::info("running {}", cmd);
       if (std::system(cmd.c_str()) != 0) {

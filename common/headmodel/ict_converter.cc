@@ -14,20 +14,23 @@ namespace headcast {
 namespace fs = std::filesystem;
 
 const std::vector<IctPart>& IctParts() {
-  static const std::vector<IctPart> parts = {
-      {"face", 0, 9408},          {"head", 9409, 11247},       {"mouth", 11248, 13293},
-      {"eyes", 13294, 14061},     {"gums_tongue", 14062, 17038}, {"teeth", 17039, 21450},
-      {"eyeballs", 21451, 24590}, {"eye_accessories", 24591, 26718}};
+  static const std::vector<IctPart> parts = {{"face", 0, 9408},
+                                             {"head", 9409, 11247},
+                                             {"mouth", 11248, 13293},
+                                             {"eyes", 13294, 14061},
+                                             {"gums_tongue", 14062, 17038},
+                                             {"teeth", 17039, 21450},
+                                             {"eyeballs", 21451, 24590},
+                                             {"eye_accessories", 24591, 26718}};
   return parts;
 }
 
 const std::vector<int>& IctLandmarkVertices() {
   static const std::vector<int> ids = {
       1225, 1888, 1052, 367,  1719, 1722, 2199, 1447, 966,  3661, 4390, 3927, 3924, 2608, 3272, 4088, 3443,
-      268,  493,  1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978,  4527, 4942, 4857, 1140, 2075,
-      1147, 4269, 3360, 1507, 1542, 1537, 1528, 1518, 1511, 3742, 3751, 3756, 3721, 3725, 3732, 5708,
-      5695, 2081, 0,    4275, 6200, 6213, 6346, 6461, 5518, 5957, 5841, 5702, 5711, 5533, 6216, 6207,
-      6470, 5517, 5966};
+      268,  493,  1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978,  4527, 4942, 4857, 1140, 2075, 1147,
+      4269, 3360, 1507, 1542, 1537, 1528, 1518, 1511, 3742, 3751, 3756, 3721, 3725, 3732, 5708, 5695, 2081,
+      0,    4275, 6200, 6213, 6346, 6461, 5518, 5957, 5841, 5702, 5711, 5533, 6216, 6207, 6470, 5517, 5966};
   return ids;
 }
 
@@ -45,8 +48,8 @@ void IctConvertOptions::Check() const {
 namespace {
 
 struct ObjMesh {
-  std::vector<float> v;      // 3 per vertex
-  std::vector<float> vt;     // 2 per uv
+  std::vector<float> v;                   // 3 per vertex
+  std::vector<float> vt;                  // 2 per uv
   std::vector<std::array<int, 3>> f, ft;  // triangles (0-based)
 };
 
@@ -57,7 +60,9 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
   ObjMesh m;
   std::string line;
   int line_no = 0;
-  auto fail = [&](const std::string& why) { throw std::runtime_error(path.string() + ":" + std::to_string(line_no) + ": " + why); };
+  auto fail = [&](const std::string& why) {
+    throw std::runtime_error(path.string() + ":" + std::to_string(line_no) + ": " + why);
+  };
   std::vector<int> poly_v, poly_t;
   while (std::getline(in, line)) {
     ++line_no;
@@ -81,7 +86,8 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
         const auto slash = tok.find('/');
         try {
           vi = std::stoi(tok.substr(0, slash));
-          if (slash != std::string::npos && slash + 1 < tok.size() && tok[slash + 1] != '/') ti = std::stoi(tok.substr(slash + 1));
+          if (slash != std::string::npos && slash + 1 < tok.size() && tok[slash + 1] != '/')
+            ti = std::stoi(tok.substr(slash + 1));
         } catch (const std::exception&) {
           fail("malformed face");
         }
@@ -103,7 +109,8 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
 HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   options.Check();
   fs::path dir = options.folder;
-  if (!fs::exists(dir / "generic_neutral_mesh.obj") && fs::exists(dir / "FaceXModel" / "generic_neutral_mesh.obj")) dir /= "FaceXModel";
+  if (!fs::exists(dir / "generic_neutral_mesh.obj") && fs::exists(dir / "FaceXModel" / "generic_neutral_mesh.obj"))
+    dir /= "FaceXModel";
   if (!fs::exists(dir / "generic_neutral_mesh.obj"))
     throw std::runtime_error(options.folder + ": not an ICT-FaceKit folder (no generic_neutral_mesh.obj)");
   const fs::path json_path = dir / "vertex_indices.json";
@@ -123,7 +130,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   const int n_all = static_cast<int>(neutral.v.size() / 3);
   const int n_expected = IctParts().back().last + 1;
   if (n_all != n_expected)
-    throw std::runtime_error((dir / "generic_neutral_mesh.obj").string() + ": " + std::to_string(n_all) + " vertices, expected " + std::to_string(n_expected) + " (ICT-FaceKit Light topology)");
+    throw std::runtime_error((dir / "generic_neutral_mesh.obj").string() + ": " + std::to_string(n_all) +
+                             " vertices, expected " + std::to_string(n_expected) + " (ICT-FaceKit Light topology)");
 
   // Which vertices to keep, and their new indices.
   std::vector<int> remap(n_all, -1);
@@ -136,13 +144,16 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
     if (keep) remap[i] = n++;
   }
   for (int id : IctLandmarkVertices())
-    if (remap[id] < 0) throw std::runtime_error("ICT conversion: the selected parts drop landmark vertex " + std::to_string(id) + "; include 'face'");
+    if (remap[id] < 0)
+      throw std::runtime_error("ICT conversion: the selected parts drop landmark vertex " + std::to_string(id) +
+                               "; include 'face'");
 
   constexpr float kMetresPerCm = 0.01f;
   HeadModelData d;
   d.name = "ICT-FaceKit";
-  d.description = "ICT-FaceKit Light (MIT licence), converted by headcast: centimetres to metres; expression "
-                  "components are ARKit-style blendshapes (coefficients 0..1), not orthonormal PCA; no skeleton.";
+  d.description =
+      "ICT-FaceKit Light (MIT licence), converted by headcast: centimetres to metres; expression "
+      "components are ARKit-style blendshapes (coefficients 0..1), not orthonormal PCA; no skeleton.";
   d.v_template.resize(n, 3);
   for (int i = 0; i < n_all; ++i)
     if (remap[i] >= 0)
@@ -154,10 +165,12 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
       const fs::path p = dir / (names[k] + ".obj");
       const ObjMesh m = ReadObj(p, false);
       if (m.v.size() != neutral.v.size())
-        throw std::runtime_error(p.string() + ": " + std::to_string(m.v.size() / 3) + " vertices, expected " + std::to_string(n_all));
+        throw std::runtime_error(p.string() + ": " + std::to_string(m.v.size() / 3) + " vertices, expected " +
+                                 std::to_string(n_all));
       for (int i = 0; i < n_all; ++i)
         if (remap[i] >= 0)
-          for (int c = 0; c < 3; ++c) (*basis)(3 * remap[i] + c, k) = (m.v[3 * i + c] - neutral.v[3 * i + c]) * kMetresPerCm;
+          for (int c = 0; c < 3; ++c)
+            (*basis)(3 * remap[i] + c, k) = (m.v[3 * i + c] - neutral.v[3 * i + c]) * kMetresPerCm;
     }
   };
   read_basis(expr_names, &d.expressiondirs);
@@ -177,7 +190,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   for (size_t f = 0; f < neutral.f.size(); ++f) {
     const auto& t = neutral.f[f];
     if (t[0] < 0 || t[1] < 0 || t[2] < 0 || t[0] >= n_all || t[1] >= n_all || t[2] >= n_all)
-      throw std::runtime_error("generic_neutral_mesh.obj: face " + std::to_string(f) + " has a vertex index out of range");
+      throw std::runtime_error("generic_neutral_mesh.obj: face " + std::to_string(f) +
+                               " has a vertex index out of range");
     if (remap[t[0]] < 0 || remap[t[1]] < 0 || remap[t[2]] < 0) continue;
     faces.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
     uv_faces.push_back(neutral.ft[f]);
@@ -219,7 +233,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
           d.lmk_bary(l, c) = 1;
           break;
         }
-    if (d.lmk_faces[l] < 0) throw std::runtime_error("ICT conversion: landmark vertex " + std::to_string(v) + " is on no face");
+    if (d.lmk_faces[l] < 0)
+      throw std::runtime_error("ICT conversion: landmark vertex " + std::to_string(v) + " is on no face");
   }
   return HeadModel(std::move(d));
 }

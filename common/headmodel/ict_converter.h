@@ -16,8 +16,8 @@ struct IctPart {
 const std::vector<IctPart>& IctParts();  // face, head, mouth, eyes, gums_tongue, teeth, eyeballs, eye_accessories
 
 struct IctConvertOptions {
-  std::string folder;            // the FaceXModel folder (or its parent)
-  int max_identity = 100;        // identity components to read (identity000.obj ...)
+  std::string folder;              // the FaceXModel folder (or its parent)
+  int max_identity = 100;          // identity components to read (identity000.obj ...)
   std::vector<std::string> parts;  // empty: every part; else names from IctParts()
   void Check() const;
 };

@@ -10,9 +10,15 @@ namespace headcast {
 std::array<float, 9> ShBasis(const Eigen::Vector3f& n) {
   const float x = n.x(), y = n.y(), z = n.z();
   // Real spherical harmonics, bands 0..2 (standard normalisation).
-  return {0.282095f,          0.488603f * y,          0.488603f * z,
-          0.488603f * x,      1.092548f * x * y,      1.092548f * y * z,
-          0.315392f * (3 * z * z - 1), 1.092548f * x * z, 0.546274f * (x * x - y * y)};
+  return {0.282095f,
+          0.488603f * y,
+          0.488603f * z,
+          0.488603f * x,
+          1.092548f * x * y,
+          1.092548f * y * z,
+          0.315392f * (3 * z * z - 1),
+          1.092548f * x * z,
+          0.546274f * (x * x - y * y)};
 }
 
 ShLighting DefaultLighting() {
@@ -20,10 +26,10 @@ ShLighting DefaultLighting() {
   // and one facing up has n_y < 0.
   ShLighting l{};
   for (int c = 0; c < 3; ++c) {
-    l[9 * c + 0] = 2.9f;   // ambient: 2.9 * 0.282 = 0.82
-    l[9 * c + 1] = -0.30f; // brighter facing up
-    l[9 * c + 2] = -0.55f; // brighter facing the camera
-    l[9 * c + 3] = 0.12f;  // a little from the image's right
+    l[9 * c + 0] = 2.9f;    // ambient: 2.9 * 0.282 = 0.82
+    l[9 * c + 1] = -0.30f;  // brighter facing up
+    l[9 * c + 2] = -0.55f;  // brighter facing the camera
+    l[9 * c + 3] = 0.12f;   // a little from the image's right
     l[9 * c + 6] = -0.10f;
   }
   return l;

@@ -1,10 +1,11 @@
 // npy/npz reading and writing: every dtype round-trips; bad files are refused by name.
+#include "common/core/npy.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 
-#include "common/core/npy.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -59,15 +60,20 @@ TEST(Npy, RefusesWhatItCannotRead) {
     return std::string("no error");
   };
   EXPECT_NE(message("garbage").find("bad magic"), std::string::npos);
-  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': True, 'shape': (2,), }") + std::string(8, '\0')).find("Fortran"),
+  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': True, 'shape': (2,), }") + std::string(8, '\0'))
+                .find("Fortran"),
             std::string::npos);
-  EXPECT_NE(message(Header("{'descr': '>f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')).find("unsupported dtype"),
+  EXPECT_NE(message(Header("{'descr': '>f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0'))
+                .find("unsupported dtype"),
             std::string::npos);
-  EXPECT_NE(message(Header("{'descr': '<c8', 'fortran_order': False, 'shape': (2,), }") + std::string(16, '\0')).find("unsupported dtype"),
+  EXPECT_NE(message(Header("{'descr': '<c8', 'fortran_order': False, 'shape': (2,), }") + std::string(16, '\0'))
+                .find("unsupported dtype"),
             std::string::npos);
-  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3), }") + std::string(8, '\0')).find("truncated data"),
+  EXPECT_NE(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 3), }") + std::string(8, '\0'))
+                .find("truncated data"),
             std::string::npos);
-  EXPECT_EQ(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')), "no error");
+  EXPECT_EQ(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')),
+            "no error");
   EXPECT_NE(message("x.npy").find("x.npy"), std::string::npos);  // errors name the source
 }
 

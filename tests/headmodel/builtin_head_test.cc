@@ -42,7 +42,8 @@ TEST(BuiltinHead, IsClosedAndOutwardFacing) {
   const auto& w = m.data().weights;
   for (Eigen::Index i = 0; i < f.rows(); ++i) {
     const int c = w(f(i, 0), kLeftEyeJoint) > 0 ? 1 : w(f(i, 0), kRightEyeJoint) > 0 ? 2 : 0;
-    volume[c] += v.row(f(i, 0)).cast<double>().dot(v.row(f(i, 1)).cast<double>().cross(v.row(f(i, 2)).cast<double>())) / 6;
+    volume[c] +=
+        v.row(f(i, 0)).cast<double>().dot(v.row(f(i, 1)).cast<double>().cross(v.row(f(i, 2)).cast<double>())) / 6;
   }
   EXPECT_GT(volume[0], 0.003);  // a head and neck: litres
   EXPECT_LT(volume[0], 0.008);
@@ -58,8 +59,8 @@ TEST(BuiltinHead, LandmarksAreWhereAFaceHasThem) {
     for (int i = a; i <= b; ++i) s += l.row(i);
     return Eigen::RowVector3f(s / (b - a + 1));
   };
-  const Eigen::RowVector3f right_eye = mean(36, 41), left_eye = mean(42, 47), nose_tip = l.row(30), mouth = mean(48, 59),
-                           chin = l.row(8);
+  const Eigen::RowVector3f right_eye = mean(36, 41), left_eye = mean(42, 47), nose_tip = l.row(30),
+                           mouth = mean(48, 59), chin = l.row(8);
   EXPECT_GT(left_eye.x(), 0);  // the subject's left is +x
   EXPECT_LT(right_eye.x(), 0);
   const float iod = (left_eye - right_eye).norm();
@@ -92,9 +93,9 @@ TEST(BuiltinHead, BlinkCoversTheEyeAndJawOpensTheMouth) {
   HeadModelParams jaw;
   jaw.pose[3 * kJawJoint] = 0.3;
   const auto opened = m.Forward(jaw);
-  EXPECT_LT(opened.landmarks(8, 1), open.landmarks(8, 1) - 0.01);          // chin down by > 1 cm
-  EXPECT_LT(opened.landmarks(66, 1), opened.landmarks(62, 1) - 0.01);      // inner lips apart
-  EXPECT_NEAR(opened.landmarks(27, 1), open.landmarks(27, 1), 1e-6);       // nose bridge still
+  EXPECT_LT(opened.landmarks(8, 1), open.landmarks(8, 1) - 0.01);      // chin down by > 1 cm
+  EXPECT_LT(opened.landmarks(66, 1), opened.landmarks(62, 1) - 0.01);  // inner lips apart
+  EXPECT_NEAR(opened.landmarks(27, 1), open.landmarks(27, 1), 1e-6);   // nose bridge still
   EXPECT_GT(eye_front, 0);
 }
 

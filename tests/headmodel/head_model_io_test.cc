@@ -1,11 +1,12 @@
 // The head-model .npz format: round trip, and clear refusals of bad files.
+#include "common/headmodel/head_model_io.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 
 #include "common/core/npy.h"
-#include "common/headmodel/head_model_io.h"
 #include "tests/headmodel/test_models.h"
 #include "tests/testing/test_data.h"
 
@@ -16,11 +17,13 @@ using testing::Builtin;
 
 class HeadModelIo : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = testing::TempDir("io");
-    path_ = dir_ + "/builtin.npz";
+  // The model is saved once for the suite; each test edits a copy.
+  static void SetUpTestSuite() {
+    path_ = (std::filesystem::temp_directory_path() / "headcast_tests" / "head_model_io_builtin.npz").string();
+    std::filesystem::create_directories(std::filesystem::path(path_).parent_path());
     SaveHeadModel(Builtin(), path_);
   }
+  void SetUp() override { dir_ = testing::TempDir("io"); }
   // Loads `path` expecting failure; returns the message.
   std::string LoadError(const std::string& path) {
     try {
@@ -35,11 +38,13 @@ class HeadModelIo : public ::testing::Test {
     NpzArchive a = ReadNpz(path_);
     edit(&a);
     const std::string out = dir_ + "/" + name + ".npz";
-    WriteNpz(out, a);
+    WriteNpz(out, a, /*compress=*/false);
     return out;
   }
-  std::string dir_, path_;
+  std::string dir_;
+  static std::string path_;
 };
+std::string HeadModelIo::path_;
 
 TEST_F(HeadModelIo, RoundTripsExactly) {
   const HeadModel loaded = LoadHeadModel(path_);
@@ -70,7 +75,8 @@ TEST_F(HeadModelIo, WrongShape) {
 }
 
 TEST_F(HeadModelIo, NaNValues) {
-  const std::string p = Edited("nan", [](NpzArchive* a) { (*a)["v_template"].mutable_data<float>()[7] = std::nanf(""); });
+  const std::string p =
+      Edited("nan", [](NpzArchive* a) { (*a)["v_template"].mutable_data<float>()[7] = std::nanf(""); });
   const std::string e = LoadError(p);
   EXPECT_NE(e.find("'v_template'"), std::string::npos) << e;
   EXPECT_NE(e.find("NaN"), std::string::npos) << e;

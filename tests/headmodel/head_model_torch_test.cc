@@ -1,8 +1,9 @@
 // The libtorch head-model path: agrees with the Eigen path; gradients are right.
+#include "common/headmodel/head_model_torch.h"
+
 #include <ATen/ATen.h>
 #include <gtest/gtest.h>
 
-#include "common/headmodel/head_model_torch.h"
 #include "tests/headmodel/test_models.h"
 
 namespace headcast {
@@ -10,7 +11,9 @@ namespace {
 
 using testing::Builtin;
 
-at::Tensor ToTensor(const Eigen::VectorXd& v) { return at::from_blob(const_cast<double*>(v.data()), {1, v.size()}, at::kDouble).clone(); }
+at::Tensor ToTensor(const Eigen::VectorXd& v) {
+  return at::from_blob(const_cast<double*>(v.data()), {1, v.size()}, at::kDouble).clone();
+}
 
 // A model with a dynamic contour table, to test FLAME's yaw-dependent landmarks.
 HeadModel WithDynamicContour() {
@@ -93,7 +96,8 @@ TEST(HeadModelTorch, GradientsMatchFiniteDifferences) {
       plus[0][i] += h;
       minus[0][i] -= h;
       auto eval = [&](const at::Tensor& x) {
-        return loss_of(param == &shape ? x : shape.detach(), param == &expr ? x : expr.detach(), param == &pose ? x : pose.detach())
+        return loss_of(param == &shape ? x : shape.detach(), param == &expr ? x : expr.detach(),
+                       param == &pose ? x : pose.detach())
             .item<double>();
       };
       const double numeric = (eval(plus) - eval(minus)) / (2 * h);

@@ -1,8 +1,9 @@
 // ICT-FaceKit conversion on the real model in ../shared/data (skipped without it).
+#include "common/headmodel/ict_converter.h"
+
 #include <gtest/gtest.h>
 
 #include "common/headmodel/head_model_io.h"
-#include "common/headmodel/ict_converter.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -71,7 +72,9 @@ TEST(IctConverter, PartsRestrictionAndRoundTrip) {
   EXPECT_EQ(back.fingerprint(), small.fingerprint());
   EXPECT_EQ(back.data().expression_names, small.data().expression_names);
   // Landmarks survive the reindexing.
-  EXPECT_LT((back.Forward(HeadModelParams{}).landmarks - Ict().Forward(HeadModelParams{}).landmarks).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT(
+      (back.Forward(HeadModelParams{}).landmarks - Ict().Forward(HeadModelParams{}).landmarks).cwiseAbs().maxCoeff(),
+      1e-6);
 }
 
 TEST(IctConverter, RefusesBadFolders) {

@@ -1,9 +1,10 @@
 // The CPU rasteriser: coverage, perspective-correct interpolation, z-buffer, culling, shading.
+#include "common/raster/rasterizer.h"
+
 #include <gtest/gtest.h>
 
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
-#include "common/raster/rasterizer.h"
 #include "common/raster/shading.h"
 
 namespace headcast {

@@ -19,8 +19,9 @@ std::string DataDir() {
 std::string TempDir(const std::string& name) {
   namespace fs = std::filesystem;
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  fs::path dir = fs::temp_directory_path() / "headcast_tests" /
-                 (std::string(info ? info->test_suite_name() : "suite") + "." + (info ? info->name() : "test") + "." + name);
+  fs::path dir =
+      fs::temp_directory_path() / "headcast_tests" /
+      (std::string(info ? info->test_suite_name() : "suite") + "." + (info ? info->name() : "test") + "." + name);
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir.string();

@@ -15,9 +15,9 @@ std::string TempDir(const std::string& name);
 }  // namespace headcast::testing
 
 // Skips the current test with a clear message when the shared data is absent.
-#define HEADCAST_REQUIRE_DATA(relative)                                                          \
-  do {                                                                                          \
-    if (::headcast::testing::DataDir().empty())                                                 \
-      GTEST_SKIP() << "shared data not found: set HEADCAST_DATA or put ../shared/data beside "  \
-                      "the checkout (needs " relative ")";                                      \
+#define HEADCAST_REQUIRE_DATA(relative)                                                        \
+  do {                                                                                         \
+    if (::headcast::testing::DataDir().empty())                                                \
+      GTEST_SKIP() << "shared data not found: set HEADCAST_DATA or put ../shared/data beside " \
+                      "the checkout (needs " relative ")";                                     \
   } while (0)

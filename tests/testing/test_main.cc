@@ -1,6 +1,6 @@
 // The one main of every headcast test binary: seeds all random generators so runs repeat.
-#include <gtest/gtest.h>
 #include <ATen/Context.h>
+#include <gtest/gtest.h>
 
 #include <cstdlib>
 #include <opencv2/core.hpp>
