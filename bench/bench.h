@@ -10,9 +10,12 @@
 namespace headcast::bench {
 
 struct BenchOptions {
-  int repeats = 200;      // timed runs per measurement
-  int warmup = 20;        // untimed runs first
-  std::string json_path;  // where to write results ("" = stdout only)
+  int repeats = 200;              // timed runs per measurement
+  int warmup = 20;                // untimed runs first
+  std::string json_path;          // where to write results ("" = stdout only)
+  int resolution = 256;           // render: output size
+  int threads = 2;                // render: libtorch threads
+  bool compare_headnerf = false;  // render: also run the HeadNeRF-sized configuration
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.
@@ -23,5 +26,6 @@ void AddStats(nlohmann::json* out, const std::string& prefix, const SampleStats&
 
 nlohmann::json RunHeadModelSuite(const BenchOptions& options);
 nlohmann::json RunRasterSuite(const BenchOptions& options);
+nlohmann::json RunRenderSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -41,12 +41,22 @@ int main(int argc, char** argv) {
   };
   auto* headmodel = app.add_subcommand("headmodel", "head-model forward pass (Eigen, one frame)");
   auto* raster = app.add_subcommand("raster", "CPU rasteriser on a head mesh");
+  auto* render = app.add_subcommand("render", "avatar synthesis (random-initialised default avatar)");
   add_common(headmodel);
   add_common(raster);
+  add_common(render);
+  render->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
+  render->add_option("--threads", options.threads, "libtorch threads")->check(CLI::Range(1, 64));
+  render->add_flag("--compare-headnerf", options.compare_headnerf,
+                   "also time a HeadNeRF-sized configuration (256 only)");
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging("warn");
-    nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options) : bench::RunRasterSuite(options);
+    if (render->parsed() && options.compare_headnerf && options.resolution != 256)
+      throw std::invalid_argument("--compare-headnerf is defined at --resolution 256 (HeadNeRF's 32x32 feature map)");
+    nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options)
+                            : raster->parsed()  ? bench::RunRasterSuite(options)
+                                                : bench::RunRenderSuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];
     result["command"] = cmd;

@@ -1,14 +1,14 @@
 // NumPy .npy/.npz reading and writing (npz through libzip).
 #include "common/core/npy.h"
 
-#include <zip.h>
-
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
+
+#include "common/core/zip_archive.h"
 
 namespace headcast {
 namespace {
@@ -52,14 +52,6 @@ std::string HeaderField(const std::string& header, const std::string& key, const
   std::string value = header.substr(pos, end - pos);
   while (!value.empty() && value.back() == ' ') value.pop_back();
   return value;
-}
-
-std::string ReadFileBytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) Fail(path, "cannot open file (does it exist and is it readable?)");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 }  // namespace
@@ -211,80 +203,22 @@ std::string SerializeNpy(const NpyArray& array) {
 
 NpyArray ReadNpy(const std::string& path) { return ParseNpy(ReadFileBytes(path), path); }
 
-static void WriteAtomically(const std::string& path, const std::string& bytes) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) Fail(path, "cannot open for writing");
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    if (!out) Fail(path, "write failed");
-  }
-  std::filesystem::rename(tmp, path);
-}
-
-void WriteNpy(const std::string& path, const NpyArray& array) { WriteAtomically(path, SerializeNpy(array)); }
+void WriteNpy(const std::string& path, const NpyArray& array) { WriteFileAtomically(path, SerializeNpy(array)); }
 
 NpzArchive ReadNpz(const std::string& path) {
-  if (!std::filesystem::exists(path)) Fail(path, "no such file");
-  int error = 0;
-  zip_t* za = zip_open(path.c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &error);
-  if (!za) {
-    zip_error_t ze;
-    zip_error_init_with_code(&ze, error);
-    std::string why = zip_error_strerror(&ze);
-    zip_error_fini(&ze);
-    Fail(path, "not a readable .npz archive (" + why + "; truncated or not an npz file?)");
-  }
-  std::unique_ptr<zip_t, int (*)(zip_t*)> closer(za, zip_close);
   NpzArchive archive;
-  const zip_int64_t n = zip_get_num_entries(za, 0);
-  for (zip_int64_t i = 0; i < n; ++i) {
-    zip_stat_t st;
-    if (zip_stat_index(za, i, 0, &st) != 0) Fail(path, "cannot stat entry " + std::to_string(i));
-    std::string name = st.name;
+  for (const auto& [name, bytes] : ReadZip(path)) {
     const std::string key =
         name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0 ? name.substr(0, name.size() - 4) : name;
-    zip_file_t* zf = zip_fopen_index(za, i, 0);
-    if (!zf) Fail(path + ":" + key, std::string("cannot open entry: ") + zip_strerror(za));
-    std::string bytes(st.size, '\0');
-    zip_int64_t got = zip_fread(zf, bytes.data(), st.size);
-    zip_fclose(zf);
-    if (got < 0 || static_cast<zip_uint64_t>(got) != st.size) Fail(path + ":" + key, "truncated or corrupt entry");
     archive[key] = ParseNpy(bytes, path + ":" + key);
   }
   return archive;
 }
 
 void WriteNpz(const std::string& path, const NpzArchive& archive, bool compress) {
-  const std::string tmp = path + ".tmp";
-  std::filesystem::remove(tmp);
-  int error = 0;
-  zip_t* za = zip_open(tmp.c_str(), ZIP_CREATE | ZIP_TRUNCATE, &error);
-  if (!za) Fail(path, "cannot create archive");
-  std::vector<std::string> buffers;  // must outlive zip_close
-  buffers.reserve(archive.size());
-  for (const auto& [key, array] : archive) {
-    buffers.push_back(SerializeNpy(array));
-    zip_source_t* src = zip_source_buffer(za, buffers.back().data(), buffers.back().size(), 0);
-    if (!src) {
-      zip_discard(za);
-      Fail(path, "cannot add " + key);
-    }
-    zip_int64_t idx = zip_file_add(za, (key + ".npy").c_str(), src, ZIP_FL_OVERWRITE);
-    if (idx < 0) {
-      zip_source_free(src);
-      zip_discard(za);
-      Fail(path, "cannot add " + key);
-    }
-    // Level 1: most of the size gain of deflate at a fraction of its time.
-    zip_set_file_compression(za, idx, compress ? ZIP_CM_DEFLATE : ZIP_CM_STORE, compress ? 1 : 0);
-  }
-  if (zip_close(za) != 0) {
-    std::string why = zip_strerror(za);
-    zip_discard(za);
-    Fail(path, "writing failed: " + why);
-  }
-  std::filesystem::rename(tmp, path);
+  ZipEntries entries;
+  for (const auto& [key, array] : archive) entries[key + ".npy"] = SerializeNpy(array);
+  WriteZip(path, entries, compress);
 }
 
 NpyArray StringsToNpy(const std::vector<std::string>& items) {

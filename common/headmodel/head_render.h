@@ -5,18 +5,13 @@
 #include <opencv2/core.hpp>
 
 #include "common/core/camera.h"
+#include "common/core/rigid_transform.h"
 #include "common/headmodel/head_model.h"
 #include "common/raster/rasterizer.h"
 #include "common/raster/shading.h"
 
 namespace headcast {
 
-// cam_from_head as a rotation and translation (metres).
-struct RigidTransform {
-  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
-  Eigen::Vector3d Apply(const Eigen::Vector3d& p) const { return rotation * p + translation; }
-};
 
 // A camera `distance` metres in front of the face looking at `target` (head
 // frame), the head turned by `yaw_deg` (positive: toward the subject's left)

@@ -1,0 +1,94 @@
+// Benchmark suite "render": the receiver's avatar synthesis on the CPU.
+#include <sys/resource.h>
+
+#include <cmath>
+
+#include "bench/bench.h"
+#include "common/avatar/avatar_renderer.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+
+namespace headcast::bench {
+namespace {
+
+double PeakRssMb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_maxrss / 1024.0;
+}
+long MinorFaults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+// A talking, slightly moving head in front of the camera: frame i of a loop.
+FrameParams MovingHead(const HeadModel& model, int i) {
+  FrameParams p;
+  p.expression = Eigen::VectorXf::Zero(model.num_expression());
+  for (int e = 0; e < model.num_expression(); ++e) p.expression[e] = 0.5f * std::sin(0.1f * i + e);
+  p.jaw = Eigen::Vector3f(0.15f * (1 + std::sin(0.3f * i)), 0, 0);
+  p.SetCamFromHead(FrontalCamFromHead(0.62, 15 * std::sin(0.05 * i), 5 * std::sin(0.07 * i)));
+  return p;
+}
+
+nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& config, int frames) {
+  auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
+  Avatar avatar = Avatar::CreateRandom(config, *model, DefaultSubject(*model, config.output_size), 1);
+  AvatarRendererOptions renderer_options;
+  renderer_options.threads = options.threads;
+  AvatarRenderer renderer(model, std::move(avatar), renderer_options);
+  cv::Mat image;
+  AvatarTimings t;
+  for (int i = 0; i < std::min(options.warmup, 5); ++i) renderer.Render(MovingHead(*model, i), &image, &t);
+  SampleStats total, head, sample, mlp, composite, upsample, convert, rays, samples;
+  const long faults_before = MinorFaults();
+  for (int i = 0; i < frames; ++i) {
+    if (!renderer.Render(MovingHead(*model, i), &image, &t)) throw std::runtime_error("render refused its parameters");
+    total.Add(t.total_ms);
+    head.Add(t.head_model_ms);
+    sample.Add(t.sample_ms);
+    mlp.Add(t.mlp_ms);
+    composite.Add(t.composite_ms);
+    upsample.Add(t.upsample_ms);
+    convert.Add(t.convert_ms);
+    rays.Add(t.rays);
+    samples.Add(t.samples);
+  }
+  nlohmann::json out;
+  out["config"] = config.ToJson();
+  out["frames"] = frames;
+  out["threads"] = options.threads;
+  out["ms_median"] = total.Median();
+  out["ms_p95"] = total.Percentile(95);
+  out["fps_median"] = 1000.0 / total.Median();
+  out["stage_ms_median"] = {{"head_model", head.Median()},   {"sample", sample.Median()},
+                            {"mlp", mlp.Median()},           {"composite", composite.Median()},
+                            {"upsample", upsample.Median()}, {"convert", convert.Median()}};
+  out["rays_median"] = rays.Median();
+  out["samples_median"] = samples.Median();
+  out["minor_page_faults_per_frame"] = static_cast<double>(MinorFaults() - faults_before) / frames;
+  out["peak_rss_mb"] = PeakRssMb();
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json RunRenderSuite(const BenchOptions& options) {
+  nlohmann::json out;
+  out["suite"] = "render";
+  out["what"] = "AvatarRenderer::Render on a random-initialised avatar (built-in head), one frame end to end, ms";
+  out["resolution"] = options.resolution;
+  const int frames = std::max(1, std::min(options.repeats, 1000));
+  const nlohmann::json ours = MeasureConfig(options, AvatarConfig::Default(options.resolution), frames);
+  for (auto& [k, v] : ours.items()) out[k] = v;
+  if (options.compare_headnerf) {
+    // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
+    out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));
+    out["speedup_vs_headnerf_sized"] =
+        out["headnerf_sized"]["ms_median"].get<double>() / ours["ms_median"].get<double>();
+  }
+  return out;
+}
+
+}  // namespace headcast::bench

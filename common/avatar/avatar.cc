@@ -1,0 +1,205 @@
+// Avatar creation, saving and loading.
+#include "common/avatar/avatar.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+
+#include "common/avatar/avatar_model.h"
+#include "common/core/zip_archive.h"
+#include "common/raster/shading.h"
+
+namespace headcast {
+
+struct Avatar::Impl {
+  explicit Impl(const AvatarConfig& c) : config(c), modules(c) {}
+  AvatarConfig config;
+  SubjectParams subject;
+  std::string fingerprint;
+  nlohmann::json training_summary = nlohmann::json::object();
+  AvatarModules modules;
+};
+
+Avatar::Avatar() = default;
+Avatar::Avatar(Avatar&&) noexcept = default;
+Avatar& Avatar::operator=(Avatar&&) noexcept = default;
+Avatar::~Avatar() = default;
+const AvatarConfig& Avatar::config() const { return impl_->config; }
+const SubjectParams& Avatar::subject() const { return impl_->subject; }
+SubjectParams& Avatar::mutable_subject() { return impl_->subject; }
+const std::string& Avatar::head_model_fingerprint() const { return impl_->fingerprint; }
+nlohmann::json& Avatar::training_summary() { return impl_->training_summary; }
+const nlohmann::json& Avatar::training_summary() const { return impl_->training_summary; }
+AvatarModules& Avatar::modules() { return impl_->modules; }
+const AvatarModules& Avatar::modules() const { return impl_->modules; }
+
+SubjectParams DefaultSubject(const HeadModel& model, int output_size) {
+  SubjectParams s;
+  s.shape = Eigen::VectorXf::Zero(model.num_shape());
+  s.texture = Eigen::VectorXf::Zero(model.num_texture());
+  s.light = DefaultLighting();
+  s.intrinsics = PinholeCamera::FromFovY(output_size, output_size, 24);
+  return s;
+}
+
+namespace {
+
+void CheckSubjectMatches(const AvatarConfig& c, const SubjectParams& s, const HeadModel& model) {
+  if (c.num_shape > model.num_shape() || c.num_expression > model.num_expression() ||
+      c.num_texture > std::max(model.num_texture(), 0))
+    throw std::invalid_argument("avatar config uses more shape/expression/texture components than the head model '" +
+                                model.data().name + "' has (" + std::to_string(model.num_shape()) + "/" +
+                                std::to_string(model.num_expression()) + "/" + std::to_string(model.num_texture()) +
+                                ")");
+  s.intrinsics.Check();
+  if (s.intrinsics.width != c.output_size || s.intrinsics.height != c.output_size)
+    throw std::invalid_argument("subject intrinsics are " + std::to_string(s.intrinsics.width) + "x" +
+                                std::to_string(s.intrinsics.height) + ", the avatar renders " +
+                                std::to_string(c.output_size) + "x" + std::to_string(c.output_size));
+  if (!s.shape.allFinite() || !s.texture.allFinite()) throw std::invalid_argument("subject parameters are not finite");
+}
+
+std::vector<float> ToVector(const Eigen::VectorXf& v) { return std::vector<float>(v.data(), v.data() + v.size()); }
+Eigen::VectorXf FromVector(const std::vector<float>& v) {
+  return Eigen::Map<const Eigen::VectorXf>(v.data(), static_cast<Eigen::Index>(v.size()));
+}
+
+}  // namespace
+
+Avatar Avatar::CreateRandom(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
+                            uint64_t seed) {
+  config.Check();
+  CheckSubjectMatches(config, subject, model);
+  torch::manual_seed(seed);
+  Avatar a;
+  a.impl_ = std::make_unique<Impl>(config);
+  a.impl_->subject = subject;
+  a.impl_->fingerprint = model.fingerprint();
+  a.impl_->training_summary = {{"trained", false},
+                               {"note", "randomly initialised (seed " + std::to_string(seed) + ")"}};
+  return a;
+}
+
+void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
+  const Impl& m = *impl_;
+  const auto& s = m.subject;
+  nlohmann::json manifest = {{"format", "headcast-avatar"},
+                             {"format_version", kAvatarFormatVersion},
+                             {"config", m.config.ToJson()},
+                             {"output_resolution", m.config.output_size},
+                             {"head_model", {{"fingerprint", m.fingerprint}}},
+                             {"training_summary", m.training_summary},
+                             {"subject",
+                              {{"shape", ToVector(s.shape)},
+                               {"texture", ToVector(s.texture)},
+                               {"light", std::vector<float>(s.light.begin(), s.light.end())},
+                               {"intrinsics",
+                                {{"fx", s.intrinsics.fx},
+                                 {"fy", s.intrinsics.fy},
+                                 {"cx", s.intrinsics.cx},
+                                 {"cy", s.intrinsics.cy},
+                                 {"width", s.intrinsics.width},
+                                 {"height", s.intrinsics.height}}}}}};
+  torch::serialize::OutputArchive root, cnerf, renderer;
+  m.modules.cnerf->save(cnerf);
+  m.modules.renderer->save(renderer);
+  root.write("cnerf", cnerf);
+  root.write("renderer", renderer);
+  std::ostringstream weights;
+  root.save_to(weights);
+  ZipEntries entries = {{"manifest.json", manifest.dump(2)}, {"weights.pt", weights.str()}};
+  if (!preview.empty()) {
+    std::vector<uchar> png;
+    cv::imencode(".png", preview, png);
+    entries["preview.png"] = std::string(png.begin(), png.end());
+  }
+  WriteZip(path, entries, /*compress=*/false);  // weights do not compress; saving stays fast
+}
+
+nlohmann::json Avatar::ReadManifest(const std::string& path) {
+  const ZipEntries entries = ReadZip(path);
+  auto it = entries.find("manifest.json");
+  if (it == entries.end()) throw std::runtime_error(path + ": not a headcast avatar (no manifest.json)");
+  nlohmann::json manifest;
+  try {
+    manifest = nlohmann::json::parse(it->second);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": manifest.json is not valid JSON: " + e.what());
+  }
+  if (manifest.value("format", "") != "headcast-avatar")
+    throw std::runtime_error(path + ": not a headcast avatar file");
+  return manifest;
+}
+
+Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
+  const ZipEntries entries = ReadZip(path);
+  const nlohmann::json manifest = ReadManifest(path);
+  const int version = manifest.value("format_version", -1);
+  if (version != kAvatarFormatVersion)
+    throw std::runtime_error(path + ": avatar format version " + std::to_string(version) +
+                             ", this build reads version " + std::to_string(kAvatarFormatVersion) +
+                             (version > kAvatarFormatVersion ? " (update headcast)" : " (re-export the avatar)"));
+  const std::string fingerprint = manifest.value("/head_model/fingerprint"_json_pointer, std::string());
+  if (fingerprint != model.fingerprint())
+    throw std::runtime_error(path + ": made for head model " + fingerprint + ", but the loaded head model '" +
+                             model.data().name + "' is " + model.fingerprint() +
+                             "; load the head model the avatar was trained with");
+  Avatar a;
+  try {
+    const AvatarConfig config = AvatarConfig::FromJson(manifest.at("config"));
+    a.impl_ = std::make_unique<Impl>(config);
+    const auto& subj = manifest.at("subject");
+    SubjectParams& s = a.impl_->subject;
+    s.shape = FromVector(subj.at("shape").get<std::vector<float>>());
+    s.texture = FromVector(subj.at("texture").get<std::vector<float>>());
+    const auto light = subj.at("light").get<std::vector<float>>();
+    if (light.size() != 27) throw std::invalid_argument("light needs 27 values");
+    std::copy(light.begin(), light.end(), s.light.begin());
+    const auto& k = subj.at("intrinsics");
+    s.intrinsics.fx = k.at("fx");
+    s.intrinsics.fy = k.at("fy");
+    s.intrinsics.cx = k.at("cx");
+    s.intrinsics.cy = k.at("cy");
+    s.intrinsics.width = k.at("width");
+    s.intrinsics.height = k.at("height");
+    CheckSubjectMatches(config, s, model);
+    a.impl_->fingerprint = fingerprint;
+    a.impl_->training_summary = manifest.value("training_summary", nlohmann::json::object());
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": bad manifest: " + e.what());
+  }
+  auto w = entries.find("weights.pt");
+  if (w == entries.end()) throw std::runtime_error(path + ": no weights.pt in the avatar");
+  try {
+    std::istringstream in(w->second);
+    torch::serialize::InputArchive root, cnerf, renderer;
+    root.load_from(in);
+    root.read("cnerf", cnerf);
+    root.read("renderer", renderer);
+    // libtorch's load replaces tensors whole (shape included), so a file whose
+    // weights disagree with its config would load "fine": compare shapes.
+    auto load_checked = [&](torch::nn::Module& module, torch::serialize::InputArchive& archive,
+                            const std::string& name) {
+      std::map<std::string, std::vector<int64_t>> expected;
+      for (const auto& p : module.named_parameters()) expected[p.key()] = p.value().sizes().vec();
+      for (const auto& b : module.named_buffers()) expected[b.key()] = b.value().sizes().vec();
+      module.load(archive);
+      auto check = [&](const std::string& key, const torch::Tensor& t) {
+        if (t.sizes().vec() != expected[key])
+          throw std::runtime_error(name + "." + key + " has shape " + c10::str(t.sizes()) + ", the config needs " +
+                                   c10::str(c10::IntArrayRef(expected[key])));
+      };
+      for (const auto& p : module.named_parameters()) check(p.key(), p.value());
+      for (const auto& b : module.named_buffers()) check(b.key(), b.value());
+    };
+    load_checked(*a.impl_->modules.cnerf, cnerf, "cnerf");
+    load_checked(*a.impl_->modules.renderer, renderer, "renderer");
+  } catch (const c10::Error& e) {
+    throw std::runtime_error(
+        path + ": weights do not match the avatar's config or are corrupt: " + e.what_without_backtrace());
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": weights do not match the avatar's config or are corrupt: " + e.what());
+  }
+  return a;
+}
+
+}  // namespace headcast

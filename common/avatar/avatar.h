@@ -1,0 +1,58 @@
+// Avatar: one person's neural avatar (config, subject parameters, network
+// weights) and its file, `.hcavatar` (DESIGN "Contracts"): a zip holding
+// manifest.json (format version, network config, output resolution, head-model
+// fingerprint, training summary, subject parameters), weights.pt and preview.png.
+#pragma once
+
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "common/avatar/avatar_config.h"
+#include "common/headmodel/head_model.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+constexpr int kAvatarFormatVersion = 1;
+struct AvatarModules;  // the libtorch networks, common/avatar/avatar_model.h
+
+// Subject parameters for a model when nothing better is known: neutral shape
+// and texture, the default light, a 24-degree camera at the output size.
+SubjectParams DefaultSubject(const HeadModel& model, int output_size);
+
+class Avatar {
+ public:
+  // Randomly initialised networks (tests, benchmarks); deterministic for a seed.
+  static Avatar CreateRandom(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
+                             uint64_t seed = 1);
+  // Refuses, with a message naming the file, anything that is not an avatar of
+  // this format version for this head model: missing, truncated or foreign
+  // files, other versions, another head model's fingerprint, mismatched weights.
+  static Avatar Load(const std::string& path, const HeadModel& model);
+  // Atomic (temporary file + rename). `preview_bgr` may be empty.
+  void Save(const std::string& path, const cv::Mat& preview_bgr = cv::Mat()) const;
+  // The manifest of a file without loading the weights (for `info`).
+  static nlohmann::json ReadManifest(const std::string& path);
+
+  Avatar(Avatar&&) noexcept;
+  Avatar& operator=(Avatar&&) noexcept;
+  ~Avatar();
+
+  const AvatarConfig& config() const;
+  const SubjectParams& subject() const;
+  SubjectParams& mutable_subject();
+  const std::string& head_model_fingerprint() const;
+  nlohmann::json& training_summary();
+  const nlohmann::json& training_summary() const;
+  AvatarModules& modules();
+  const AvatarModules& modules() const;
+
+ private:
+  Avatar();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace headcast

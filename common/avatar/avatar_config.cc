@@ -1,0 +1,108 @@
+// AvatarConfig checks and JSON.
+#include "common/avatar/avatar_config.h"
+
+#include <stdexcept>
+
+#include "common/core/options.h"
+
+namespace headcast {
+
+void AvatarConfig::Check() const {
+  OptionsCheck c("AvatarConfig");
+  c.That(output_size == 128 || output_size == 256 || output_size == 512,
+         "output_size must be 128, 256 or 512 (got " + std::to_string(output_size) + ")");
+  c.InRange("feature_channels", feature_channels, 3, 1024);
+  c.InRange("num_shape", num_shape, 0, 400).InRange("num_expression", num_expression, 0, 400);
+  c.InRange("num_texture", num_texture, 0, 400).InRange("pe_frequencies", pe_frequencies, 0, 16);
+  c.Positive("pe_scale", pe_scale).InRange("mlp_width", mlp_width, 8, 2048).InRange("mlp_layers", mlp_layers, 1, 16);
+  c.That(skip_layer == -1 || (skip_layer >= 1 && skip_layer < mlp_layers),
+         "skip_layer must be -1 or in [1, mlp_layers)");
+  c.InRange("samples_per_ray", samples_per_ray, 1, 512);
+  c.NonNegative("shell_front", shell_front).NonNegative("shell_back", shell_back);
+  c.That(shell_front + shell_back > 0, "shell_front + shell_back must be > 0");
+  c.InRange("hair_margin_px", hair_margin_px, 0, 64);
+  c.Positive("uniform_near", uniform_near).Positive("uniform_far", uniform_far);
+  c.That(renderer_channels.size() == 4, "renderer_channels needs 4 entries (into levels 1-3 and out of level 3)");
+  for (int ch : renderer_channels) c.InRange("renderer_channels[i]", ch, 1, 1024);
+  c.That(renderer_channels.empty() || renderer_channels[0] == feature_channels,
+         "renderer_channels[0] must equal feature_channels");
+  c.ThrowIfErrors();
+}
+
+nlohmann::json AvatarConfig::ToJson() const {
+  return {{"output_size", output_size},
+          {"feature_channels", feature_channels},
+          {"num_shape", num_shape},
+          {"num_expression", num_expression},
+          {"num_texture", num_texture},
+          {"pe_frequencies", pe_frequencies},
+          {"pe_scale", pe_scale},
+          {"mlp_width", mlp_width},
+          {"mlp_layers", mlp_layers},
+          {"skip_layer", skip_layer},
+          {"sampling", sampling == SamplingMode::kMeshGuided ? "mesh_guided" : "uniform"},
+          {"samples_per_ray", samples_per_ray},
+          {"shell_front", shell_front},
+          {"shell_back", shell_back},
+          {"hair_margin_px", hair_margin_px},
+          {"uniform_near", uniform_near},
+          {"uniform_far", uniform_far},
+          {"precompute_conditioning", precompute_conditioning},
+          {"renderer_channels", renderer_channels}};
+}
+
+AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
+  AvatarConfig c;
+  try {
+    c.output_size = j.at("output_size");
+    c.feature_channels = j.at("feature_channels");
+    c.num_shape = j.at("num_shape");
+    c.num_expression = j.at("num_expression");
+    c.num_texture = j.at("num_texture");
+    c.pe_frequencies = j.at("pe_frequencies");
+    c.pe_scale = j.at("pe_scale");
+    c.mlp_width = j.at("mlp_width");
+    c.mlp_layers = j.at("mlp_layers");
+    c.skip_layer = j.at("skip_layer");
+    const std::string sampling = j.at("sampling");
+    if (sampling != "mesh_guided" && sampling != "uniform")
+      throw std::invalid_argument("unknown sampling '" + sampling + "'");
+    c.sampling = sampling == "uniform" ? SamplingMode::kUniform : SamplingMode::kMeshGuided;
+    c.samples_per_ray = j.at("samples_per_ray");
+    c.shell_front = j.at("shell_front");
+    c.shell_back = j.at("shell_back");
+    c.hair_margin_px = j.at("hair_margin_px");
+    c.uniform_near = j.at("uniform_near");
+    c.uniform_far = j.at("uniform_far");
+    c.precompute_conditioning = j.at("precompute_conditioning");
+    c.renderer_channels = j.at("renderer_channels").get<std::vector<int>>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
+  }
+  c.Check();
+  return c;
+}
+
+AvatarConfig AvatarConfig::Default(int output_size) {
+  AvatarConfig c;
+  c.output_size = output_size;
+  if (output_size == 512) c.renderer_channels = {48, 24, 12, 8};
+  return c;
+}
+
+AvatarConfig AvatarConfig::HeadNeRFSized() {
+  AvatarConfig c;
+  c.output_size = 256;
+  c.feature_channels = 256;
+  c.mlp_width = 384;
+  c.mlp_layers = 8;
+  c.skip_layer = 4;
+  c.pe_frequencies = 10;
+  c.sampling = SamplingMode::kUniform;
+  c.samples_per_ray = 64;
+  c.precompute_conditioning = false;
+  c.renderer_channels = {256, 128, 64, 32};
+  return c;
+}
+
+}  // namespace headcast

@@ -1,0 +1,59 @@
+// AvatarConfig: every size and switch of the neural avatar in one checked struct.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace headcast {
+
+enum class SamplingMode {
+  kMeshGuided,  // samples in a shell around the rasterised head; rays that miss are skipped
+  kUniform,     // NeRF/HeadNeRF style: every ray, samples spread over a depth range
+};
+
+struct AvatarConfig {
+  // Output and feature map.
+  int output_size = 256;      // output image edge, pixels: 128, 256 or 512
+  int feature_channels = 48;  // channels of the CNeRF feature vector / feature map
+  // Conditioning sizes (must match the head model / subject).
+  int num_shape = 12;       // beta components used
+  int num_expression = 13;  // psi components used
+  int num_texture = 5;      // tau components used
+  // CNeRF.
+  int pe_frequencies = 6;  // positional-encoding octaves of xyz
+  double pe_scale = 0.25;  // metres mapped to 1 before encoding (the head fits in +-1)
+  int mlp_width = 96;      // hidden width
+  int mlp_layers = 4;      // layers before the density head
+  int skip_layer = -1;     // layer whose input also gets the encoded input again (-1: none)
+  // Sampling.
+  SamplingMode sampling = SamplingMode::kMeshGuided;
+  int samples_per_ray = 8;
+  double shell_front = 0.035;  // metres in front of the mesh (hair, lips, glasses)
+  double shell_back = 0.02;    // metres behind the mesh
+  int hair_margin_px = 2;      // feature-map pixels around the silhouette that still get rays
+  double uniform_near = 0.25;  // uniform mode: metres before the head centre
+  double uniform_far = 0.25;   // uniform mode: metres after the head centre
+  // Speed switches (results identical up to float rounding when on).
+  bool precompute_conditioning = true;  // first-layer conditioning term once per frame
+  // 2D neural renderer: channels entering each of the three x2 levels and leaving the last.
+  std::vector<int> renderer_channels = {48, 24, 12, 8};
+
+  int feature_size() const { return output_size / 8; }
+  int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi
+  int appearance_dim() const { return 27 + num_texture; }                   // lambda, tau
+  int encoding_dim() const { return 3 + 6 * pe_frequencies; }
+
+  // Throws std::invalid_argument naming each bad field.
+  void Check() const;
+  nlohmann::json ToJson() const;
+  static AvatarConfig FromJson(const nlohmann::json& j);  // checks
+
+  // The shipped default at a resolution, sized for the built-in head model.
+  static AvatarConfig Default(int output_size = 256);
+  // A configuration the size of HeadNeRF, built from our modules, for side-by-side
+  // figures: 32x32x256 feature map, 64 uniform samples, MLP 8 x 384 with a skip at 4.
+  static AvatarConfig HeadNeRFSized();
+};
+
+}  // namespace headcast

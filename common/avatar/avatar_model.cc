@@ -1,0 +1,184 @@
+// The neural avatar's networks.
+#include "common/avatar/avatar_model.h"
+
+#include <cmath>
+
+namespace headcast {
+namespace F = torch::nn::functional;
+
+torch::Tensor PositionalEncoding(const torch::Tensor& xyz, int frequencies, double scale) {
+  const torch::Tensor x = xyz / scale;
+  if (frequencies == 0) return x;
+  // (N, 3, L): x * 2^k * pi
+  const torch::Tensor bands = torch::pow(2.0, torch::arange(frequencies, xyz.options())) * M_PI;
+  const torch::Tensor scaled = (x.unsqueeze(2) * bands).flatten(1);  // (N, 3L)
+  return torch::cat({x, scaled.sin(), scaled.cos()}, 1);
+}
+
+CNeRFImpl::CNeRFImpl(const AvatarConfig& config) : config_(config) {
+  config.Check();
+  const int enc = config.encoding_dim(), cond = config.conditioning_dim(), w = config.mlp_width;
+  layers_ = register_module("layers", torch::nn::ModuleList());
+  for (int k = 0; k < config.mlp_layers; ++k) {
+    int in = k == 0 ? enc + cond : w;
+    if (k == config.skip_layer) in += enc + cond;
+    layers_->push_back(torch::nn::Linear(in, w));
+  }
+  density_ = register_module("density", torch::nn::Linear(w, 1));
+  feature_ = register_module("feature", torch::nn::Linear(w, w));
+  appearance_ = register_module("appearance", torch::nn::Linear(w + config.appearance_dim(), w / 2));
+  out_ = register_module("out", torch::nn::Linear(w / 2, config.feature_channels));
+}
+
+torch::Tensor CNeRFImpl::ConditionedLinear(torch::nn::Linear layer, const torch::Tensor& h, const torch::Tensor& enc,
+                                           const torch::Tensor& cond) {
+  const int64_t n = enc.size(0);
+  const int64_t h_dim = h.defined() ? h.size(1) : 0, e_dim = enc.size(1), c_dim = cond.size(1);
+  if (!config_.precompute_conditioning) {
+    std::vector<torch::Tensor> parts;
+    if (h.defined()) parts.push_back(h);
+    parts.push_back(enc);
+    parts.push_back(cond.expand({n, c_dim}));
+    return layer->forward(torch::cat(parts, 1));
+  }
+  // The conditioning is the same for every sample of a frame: its product with
+  // the weights is a per-frame bias (one row), not N rows.
+  const torch::Tensor& weight = layer->weight;  // (out, h + e + c)
+  const torch::Tensor bias = torch::addmm(layer->bias.unsqueeze(0), cond, weight.narrow(1, h_dim + e_dim, c_dim).t());
+  torch::Tensor y = torch::addmm(bias, enc, weight.narrow(1, h_dim, e_dim).t());
+  if (h.defined()) y = y.addmm(h, weight.narrow(1, 0, h_dim).t());
+  return y;
+}
+
+std::pair<torch::Tensor, torch::Tensor> CNeRFImpl::forward(const torch::Tensor& points,
+                                                           const AvatarConditioning& cond) {
+  const torch::Tensor enc = PositionalEncoding(points, config_.pe_frequencies, config_.pe_scale);
+  torch::Tensor h;
+  for (int k = 0; k < config_.mlp_layers; ++k) {
+    const auto& layer = layers_->ptr<torch::nn::LinearImpl>(k);
+    torch::nn::Linear linear(layer);
+    if (k == 0) {
+      h = ConditionedLinear(linear, torch::Tensor(), enc, cond.geometry);
+    } else if (k == config_.skip_layer) {
+      h = ConditionedLinear(linear, h, enc, cond.geometry);
+    } else {
+      h = linear->forward(h);
+    }
+    h = torch::relu(h);
+  }
+  const torch::Tensor density = F::softplus(density_->forward(h).squeeze(1) - 1.0);
+  const torch::Tensor feat = feature_->forward(h);
+  // Appearance (light, texture) joins after the density, as in NeRF's view branch.
+  const torch::Tensor a = torch::relu(ConditionedLinear(appearance_, torch::Tensor(), feat, cond.appearance));
+  return {density, out_->forward(a)};
+}
+
+void CNeRFImpl::FreezeFirstLayers(int n) {
+  for (int k = 0; k < std::min<int>(n, config_.mlp_layers); ++k)
+    for (auto& p : layers_[k]->parameters()) p.set_requires_grad(false);
+}
+
+VolumeRenderResult VolumeRender(const torch::Tensor& density, const torch::Tensor& features, const torch::Tensor& z,
+                                const torch::Tensor& ray_length) {
+  const int64_t s = z.size(1);
+  torch::Tensor delta;
+  if (s > 1) {
+    delta = z.narrow(1, 1, s - 1) - z.narrow(1, 0, s - 1);
+    delta = torch::cat({delta, delta.narrow(1, s - 2, 1)}, 1);  // the last interval as long as the one before
+  } else {
+    delta = torch::ones_like(z) * 0.01;
+  }
+  delta = delta * ray_length.unsqueeze(1);
+  const torch::Tensor alpha = 1 - torch::exp(-density * delta);
+  // Transmittance before each sample: exclusive cumulative product of (1 - alpha).
+  const torch::Tensor keep = torch::cat({torch::ones_like(alpha.narrow(1, 0, 1)), 1 - alpha + 1e-10}, 1);
+  const torch::Tensor transmittance = torch::cumprod(keep, 1).narrow(1, 0, s);
+  const torch::Tensor weights = alpha * transmittance;  // (R, S)
+  VolumeRenderResult r;
+  r.features = torch::bmm(weights.unsqueeze(1), features).squeeze(1);
+  r.opacity = weights.sum(1);
+  r.depth = (weights * z).sum(1);
+  return r;
+}
+
+SqueezeExcitationImpl::SqueezeExcitationImpl(int channels, int reduction) {
+  const int hidden = std::max(1, channels / reduction);
+  down_ = register_module("down", torch::nn::Linear(channels, hidden));
+  up_ = register_module("up", torch::nn::Linear(hidden, channels));
+}
+
+torch::Tensor SqueezeExcitationImpl::forward(const torch::Tensor& x) {
+  const torch::Tensor squeezed = x.mean({2, 3});  // (B, C)
+  const torch::Tensor scale = torch::sigmoid(up_->forward(torch::relu(down_->forward(squeezed))));
+  return x * scale.unsqueeze(2).unsqueeze(3);
+}
+
+UpsamplingBlockImpl::UpsamplingBlockImpl(int in_channels, int out_channels) {
+  global_se_ = register_module("global_se", SqueezeExcitation(in_channels));
+  local_se_ = register_module("local_se", SqueezeExcitation(in_channels));
+  global_ = register_module(
+      "global_branch",
+      torch::nn::Conv2d(torch::nn::Conv2dOptions(in_channels, 4 * out_channels, 3).padding(2).dilation(2)));
+  local_ =
+      register_module("local_branch", torch::nn::Conv2d(torch::nn::Conv2dOptions(in_channels, 4 * out_channels, 1)));
+  shuffle_ = register_module("shuffle", torch::nn::PixelShuffle(2));
+  const torch::Tensor k1 = torch::tensor({1.f, 2.f, 1.f});
+  const torch::Tensor k2 = torch::outer(k1, k1) / 16.f;
+  blur_ = register_buffer("blur", k2.view({1, 1, 3, 3}).repeat({out_channels, 1, 1, 1}));
+}
+
+torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x) {
+  const torch::Tensor g =
+      F::leaky_relu(global_->forward(global_se_->forward(x)), F::LeakyReLUFuncOptions().negative_slope(0.2));
+  const torch::Tensor l =
+      F::leaky_relu(local_->forward(local_se_->forward(x)), F::LeakyReLUFuncOptions().negative_slope(0.2));
+  const torch::Tensor up = shuffle_->forward(g + l);
+  // Anti-aliasing blur (depthwise binomial) against PixelShuffle's checkerboard.
+  const torch::Tensor padded = F::pad(up, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate));
+  return F::conv2d(padded, blur_, F::Conv2dFuncOptions().groups(up.size(1)));
+}
+
+NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
+  config.Check();
+  const auto& ch = config.renderer_channels;
+  input_rgb_ = register_module("input_rgb", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 3, 1)));
+  blocks_ = register_module("blocks", torch::nn::ModuleList());
+  post_ = register_module("post", torch::nn::ModuleList());
+  to_rgb_ = register_module("to_rgb", torch::nn::ModuleList());
+  for (int k = 0; k < 3; ++k) {
+    blocks_->push_back(UpsamplingBlock(ch[k], ch[k + 1]));
+    post_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], ch[k + 1], 1)));
+    to_rgb_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 3, 1)));
+  }
+}
+
+torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map) {
+  torch::Tensor rgb = input_rgb_->forward(feature_map);
+  torch::Tensor x = feature_map;
+  for (int k = 0; k < 3; ++k) {
+    rgb = F::interpolate(rgb, F::InterpolateFuncOptions()
+                                  .scale_factor(std::vector<double>{2.0, 2.0})
+                                  .mode(torch::kBilinear)
+                                  .align_corners(false));
+    x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x);
+    x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
+    rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
+  }
+  return torch::sigmoid(rgb);
+}
+
+std::vector<torch::Tensor> AvatarModules::parameters() const {
+  std::vector<torch::Tensor> p = cnerf->parameters();
+  for (auto& t : renderer->parameters()) p.push_back(t);
+  return p;
+}
+void AvatarModules::eval() {
+  cnerf->eval();
+  renderer->eval();
+}
+void AvatarModules::train() {
+  cnerf->train();
+  renderer->train();
+}
+
+}  // namespace headcast

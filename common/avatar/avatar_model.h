@@ -1,0 +1,102 @@
+// The neural avatar's networks in libtorch: CNeRF (conditional radiance field
+// that outputs density and a feature vector), volume rendering into a feature
+// map, and the 2D neural renderer that upsamples it x8 to RGB. METHOD §4.
+// Shared by the receiver (inference) and the trainer.
+#pragma once
+
+#include <torch/torch.h>
+
+#include "common/avatar/avatar_config.h"
+
+namespace headcast {
+
+// Per-frame conditioning, each (1, D).
+struct AvatarConditioning {
+  torch::Tensor geometry;    // beta, neck (3), jaw (3), eyes (6), psi: conditioning_dim
+  torch::Tensor appearance;  // lambda (27), tau: appearance_dim
+};
+
+// xyz (N, 3) -> (N, 3 + 6L): [x, sin(2^k pi x), cos(2^k pi x) for k < L], x = xyz / scale.
+torch::Tensor PositionalEncoding(const torch::Tensor& xyz, int frequencies, double scale);
+
+class CNeRFImpl : public torch::nn::Module {
+ public:
+  explicit CNeRFImpl(const AvatarConfig& config);
+  // points (N, 3) in the head frame -> density (N), features (N, F).
+  std::pair<torch::Tensor, torch::Tensor> forward(const torch::Tensor& points, const AvatarConditioning& cond);
+  // Stops gradients into the first n MLP layers (subject fine-tuning freezes 4).
+  void FreezeFirstLayers(int n);
+  const AvatarConfig& config() const { return config_; }
+
+ private:
+  // y = [h, enc, cond] W^T + b, with the cond term either concatenated per
+  // sample or (precompute) folded into the bias once per call.
+  torch::Tensor ConditionedLinear(torch::nn::Linear layer, const torch::Tensor& h, const torch::Tensor& enc,
+                                  const torch::Tensor& cond);
+
+  AvatarConfig config_;
+  torch::nn::ModuleList layers_;
+  torch::nn::Linear density_{nullptr}, feature_{nullptr}, appearance_{nullptr}, out_{nullptr};
+};
+TORCH_MODULE(CNeRF);
+
+struct VolumeRenderResult {
+  torch::Tensor features;  // (R, F)
+  torch::Tensor opacity;   // (R)
+  torch::Tensor depth;     // (R), expected z
+};
+// METHOD eq. 7, discretised: density (R, S), features (R, S, F), z (R, S)
+// sample depths along rays whose directions have length `ray_length` (R) per unit z.
+VolumeRenderResult VolumeRender(const torch::Tensor& density, const torch::Tensor& features, const torch::Tensor& z,
+                                const torch::Tensor& ray_length);
+
+class SqueezeExcitationImpl : public torch::nn::Module {
+ public:
+  SqueezeExcitationImpl(int channels, int reduction = 4);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  torch::nn::Linear down_{nullptr}, up_{nullptr};
+};
+TORCH_MODULE(SqueezeExcitation);
+
+// Two SE blocks feed a global (dilated 3x3) and a local (1x1) branch; their sum
+// goes through PixelShuffle (x2 resolution, /4 channels) and a fixed blur.
+class UpsamplingBlockImpl : public torch::nn::Module {
+ public:
+  UpsamplingBlockImpl(int in_channels, int out_channels);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  SqueezeExcitation global_se_{nullptr}, local_se_{nullptr};
+  torch::nn::Conv2d global_{nullptr}, local_{nullptr};
+  torch::nn::PixelShuffle shuffle_{nullptr};
+  torch::Tensor blur_;  // (C, 1, 3, 3) binomial, a buffer
+};
+TORCH_MODULE(UpsamplingBlock);
+
+// Three x2 levels; at each, RGB from the previous level bilinearly upsampled
+// plus RGB from the upsampled features; 1x1 convs and LeakyReLU elsewhere.
+class NeuralRendererImpl : public torch::nn::Module {
+ public:
+  explicit NeuralRendererImpl(const AvatarConfig& config);
+  // (B, C0, h, w) -> (B, 3, 8h, 8w), RGB in [0, 1].
+  torch::Tensor forward(const torch::Tensor& feature_map);
+
+ private:
+  torch::nn::Conv2d input_rgb_{nullptr};
+  torch::nn::ModuleList blocks_, post_, to_rgb_;
+};
+TORCH_MODULE(NeuralRenderer);
+
+// Both networks of one avatar.
+struct AvatarModules {
+  explicit AvatarModules(const AvatarConfig& config) : cnerf(config), renderer(config) {}
+  CNeRF cnerf;
+  NeuralRenderer renderer;
+  std::vector<torch::Tensor> parameters() const;
+  void eval();
+  void train();
+};
+
+}  // namespace headcast

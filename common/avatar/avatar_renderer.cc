@@ -1,0 +1,145 @@
+// The avatar pipeline and the real-time renderer.
+#include "common/avatar/avatar_renderer.h"
+
+#include <malloc.h>
+
+#include "common/avatar/avatar_pipeline.h"
+#include "common/core/options.h"
+#include "common/core/timer.h"
+
+namespace headcast {
+
+AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& subject, const FrameParams& frame) {
+  std::vector<float> g(c.conditioning_dim(), 0.f), a(c.appearance_dim(), 0.f);
+  for (int i = 0; i < std::min<int>(c.num_shape, subject.shape.size()); ++i) g[i] = subject.shape[i];
+  const Eigen::Vector3f* pose[] = {&frame.neck, &frame.jaw, &frame.left_eye, &frame.right_eye};
+  for (int j = 0; j < 4; ++j)
+    for (int k = 0; k < 3; ++k) g[c.num_shape + 3 * j + k] = (*pose[j])[k];
+  for (int i = 0; i < std::min<int>(c.num_expression, frame.expression.size()); ++i)
+    g[c.num_shape + 12 + i] = frame.expression[i];
+  for (int i = 0; i < 27; ++i) a[i] = subject.light[i];
+  for (int i = 0; i < std::min<int>(c.num_texture, subject.texture.size()); ++i) a[27 + i] = subject.texture[i];
+  return {torch::tensor(g).view({1, -1}), torch::tensor(a).view({1, -1})};
+}
+
+AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
+                       const AvatarConditioning& conditioning, AvatarTimings* timings) {
+  Stopwatch watch;
+  const int64_t r = rays.num_rays(), s = rays.samples_per_ray;
+  const int channels = modules.cnerf->config().feature_channels;
+  torch::Tensor feature_rows = torch::zeros({static_cast<int64_t>(rays.width) * rays.height, channels});
+  torch::Tensor opacity_rows = torch::zeros({static_cast<int64_t>(rays.width) * rays.height});
+  if (r > 0) {
+    const torch::Tensor dirs = torch::from_blob(const_cast<float*>(rays.directions.data()), {r, 3}, torch::kFloat);
+    const torch::Tensor z = torch::from_blob(const_cast<float*>(rays.depths.data()), {r, s}, torch::kFloat);
+    // Camera-frame samples to the head frame: p_head = R^T (p_cam - t).
+    const torch::Tensor R =
+        torch::tensor(std::vector<float>(cam_from_head.rotation.data(), cam_from_head.rotation.data() + 9))
+            .view({3, 3})
+            .t();  // Eigen is column-major: this is R (row-major)
+    const torch::Tensor t = torch::tensor({static_cast<float>(cam_from_head.translation.x()),
+                                           static_cast<float>(cam_from_head.translation.y()),
+                                           static_cast<float>(cam_from_head.translation.z())});
+    const torch::Tensor p_cam = (z.unsqueeze(2) * dirs.unsqueeze(1)).view({r * s, 3});
+    const torch::Tensor p_head = torch::matmul(p_cam - t, R);  // (p - t) R == (R^T (p - t))^T
+    auto [density, features] = modules.cnerf->forward(p_head, conditioning);
+    if (timings) timings->mlp_ms += watch.ElapsedMs();
+    watch.Restart();
+    const VolumeRenderResult vr =
+        VolumeRender(density.view({r, s}), features.view({r, s, channels}), z, dirs.norm(2, 1));
+    const torch::Tensor index =
+        torch::from_blob(const_cast<int32_t*>(rays.pixel.data()), {r}, torch::kInt).to(torch::kLong);
+    feature_rows = feature_rows.index_copy(0, index, vr.features);
+    opacity_rows = opacity_rows.index_copy(0, index, vr.opacity);
+  }
+  AvatarOutput out;
+  out.feature_map = feature_rows.t().reshape({1, channels, rays.height, rays.width});
+  out.opacity = opacity_rows.view({1, 1, rays.height, rays.width});
+  if (timings) {
+    timings->composite_ms += watch.ElapsedMs();
+    timings->rays = static_cast<int>(r);
+    timings->samples = static_cast<int>(r * s);
+  }
+  watch.Restart();
+  out.image = modules.renderer->forward(out.feature_map);
+  if (timings) timings->upsample_ms += watch.ElapsedMs();
+  return out;
+}
+
+void AvatarRendererOptions::Check() const {
+  OptionsCheck c("AvatarRendererOptions");
+  c.InRange("threads", threads, 1, 256);
+  c.ThrowIfErrors();
+}
+
+struct AvatarRenderer::Impl {
+  Impl(std::shared_ptr<const HeadModel> m, Avatar a)
+      : model(std::move(m)), avatar(std::move(a)), sampler(avatar.config()) {}
+  std::shared_ptr<const HeadModel> model;
+  Avatar avatar;
+  RaySampler sampler;
+  HeadIdentity identity;
+  HeadModelOutput posed;
+  RasterVertices v_cam;
+  RayBatch rays;
+  PinholeCamera feature_camera;
+};
+
+AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar avatar,
+                               const AvatarRendererOptions& options) {
+  options.Check();
+  if (!model) throw std::invalid_argument("AvatarRenderer: no head model");
+  if (avatar.head_model_fingerprint() != model->fingerprint())
+    throw std::invalid_argument("AvatarRenderer: the avatar was made for head model " +
+                                avatar.head_model_fingerprint() + ", not " + model->fingerprint() + " ('" +
+                                model->data().name + "')");
+  // Per-frame tensors are a few MB: keep them in the heap, reused, instead of
+  // fresh mmap'd pages the kernel must zero every frame (DESIGN: performance).
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  torch::set_num_threads(options.threads);
+  impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
+  impl_->avatar.modules().eval();
+  Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
+  impl_->identity = impl_->model->MakeIdentity(beta);
+  const int f = impl_->avatar.config().feature_size();
+  impl_->feature_camera = impl_->avatar.subject().intrinsics.Resized(f, f);
+}
+
+AvatarRenderer::~AvatarRenderer() = default;
+const Avatar& AvatarRenderer::avatar() const { return impl_->avatar; }
+const HeadModel& AvatarRenderer::head_model() const { return *impl_->model; }
+
+bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTimings* timings, std::string* why) {
+  if (!params.IsValid(why)) return false;
+  Impl& m = *impl_;
+  AvatarTimings local;
+  AvatarTimings& t = timings ? *timings : local;
+  t = AvatarTimings();
+  Stopwatch total, watch;
+  torch::InferenceMode inference;
+  const RigidTransform cam_from_head = params.CamFromHead();
+  Eigen::VectorXd psi = params.expression.cast<double>();
+  m.model->Forward(m.identity, psi, params.HeadPose(), &m.posed);
+  const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
+  m.v_cam.noalias() = m.posed.vertices * R.transpose();
+  m.v_cam.rowwise() += cam_from_head.translation.cast<float>().transpose();
+  t.head_model_ms = watch.ElapsedMs();
+  watch.Restart();
+  m.sampler.Sample(m.v_cam, m.model->data().faces, m.feature_camera, cam_from_head, nullptr, &m.rays);
+  t.sample_ms = watch.ElapsedMs();
+  const AvatarConditioning cond = MakeConditioning(m.avatar.config(), m.avatar.subject(), params);
+  const AvatarOutput out = RunAvatar(m.avatar.modules(), m.rays, cam_from_head, cond, &t);
+  watch.Restart();
+  // (1, 3, H, W) RGB float -> H x W BGR bytes.
+  const torch::Tensor bytes =
+      out.image.squeeze(0).flip({0}).permute({1, 2, 0}).mul(255.f).round().clamp(0, 255).to(torch::kUInt8).contiguous();
+  const int size = static_cast<int>(bytes.size(0));
+  image->create(size, size, CV_8UC3);
+  std::memcpy(image->data, bytes.data_ptr<uint8_t>(), static_cast<size_t>(size) * size * 3);
+  t.convert_ms = watch.ElapsedMs();
+  t.total_ms = total.ElapsedMs();
+  return true;
+}
+
+}  // namespace headcast

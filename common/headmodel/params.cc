@@ -1,0 +1,53 @@
+// FrameParams helpers.
+#include "common/headmodel/params.h"
+
+#include <cmath>
+
+#include "common/core/rotation.h"
+
+namespace headcast {
+
+PoseVector FrameParams::HeadPose() const {
+  PoseVector p = PoseVector::Zero();
+  p.segment<3>(3 * kNeckJoint) = neck.cast<double>();
+  p.segment<3>(3 * kJawJoint) = jaw.cast<double>();
+  p.segment<3>(3 * kLeftEyeJoint) = left_eye.cast<double>();
+  p.segment<3>(3 * kRightEyeJoint) = right_eye.cast<double>();
+  return p;
+}
+
+RigidTransform FrameParams::CamFromHead() const {
+  return {AxisAngleToMatrix(cam_rotation.cast<double>()), cam_translation.cast<double>()};
+}
+
+void FrameParams::SetCamFromHead(const RigidTransform& t) {
+  cam_rotation = MatrixToAxisAngle(t.rotation).cast<float>();
+  cam_translation = t.translation.cast<float>();
+}
+
+bool FrameParams::IsValid(std::string* why, float max_abs_expression) const {
+  auto fail = [&](const std::string& w) {
+    if (why) *why = w;
+    return false;
+  };
+  if (!expression.allFinite()) return fail("expression has NaN or infinite values");
+  if (expression.size() > 0 && expression.cwiseAbs().maxCoeff() > max_abs_expression)
+    return fail("expression out of range (|value| > " + std::to_string(max_abs_expression) + ")");
+  const std::pair<const char*, const Eigen::Vector3f*> rotations[] = {{"jaw", &jaw},
+                                                                      {"neck", &neck},
+                                                                      {"left_eye", &left_eye},
+                                                                      {"right_eye", &right_eye},
+                                                                      {"cam_rotation", &cam_rotation}};
+  for (const auto& [name, r] : rotations) {
+    if (!r->allFinite()) return fail(std::string(name) + " has NaN or infinite values");
+    if (r->norm() > M_PI + 1e-3) return fail(std::string(name) + " rotation angle exceeds pi");
+  }
+  if (!cam_translation.allFinite()) return fail("cam_translation has NaN or infinite values");
+  if (!(cam_translation.z() > 0.05f && cam_translation.z() < 20.f))
+    return fail("head not 0.05..20 m in front of the camera");
+  if (!std::isfinite(capture_time_s)) return fail("capture time is not finite");
+  if (!(confidence >= 0 && confidence <= 1)) return fail("confidence outside 0..1");
+  return true;
+}
+
+}  // namespace headcast

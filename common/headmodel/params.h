@@ -1,0 +1,47 @@
+// The parameters that travel per frame (FrameParams) and once per subject (SubjectParams).
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include "common/core/camera.h"
+#include "common/core/rigid_transform.h"
+#include "common/headmodel/head_model.h"
+
+namespace headcast {
+
+// What the sender streams for each frame. Rotations are axis-angle (radians),
+// translations metres, in the head model's frame (y up, z out of the face) and
+// OpenCV's camera frame.
+struct FrameParams {
+  Eigen::VectorXf expression;  // psi, E values
+  Eigen::Vector3f jaw = Eigen::Vector3f::Zero();
+  Eigen::Vector3f neck = Eigen::Vector3f::Zero();
+  Eigen::Vector3f left_eye = Eigen::Vector3f::Zero();
+  Eigen::Vector3f right_eye = Eigen::Vector3f::Zero();
+  Eigen::Vector3f cam_rotation = Eigen::Vector3f::Zero();     // cam_from_head, axis-angle
+  Eigen::Vector3f cam_translation = Eigen::Vector3f::Zero();  // cam_from_head, metres
+  double capture_time_s = 0;                                  // capture timestamp, seconds (sender's steady clock)
+  uint64_t sequence = 0;                                      // frame number at the sender
+  float confidence = 1;                                       // tracking confidence, 0..1
+
+  // The model pose vector: root zero (the head's placement is cam_from_head), then neck, jaw, eyes.
+  PoseVector HeadPose() const;
+  RigidTransform CamFromHead() const;
+  void SetCamFromHead(const RigidTransform& cam_from_head);
+  // Finite values, |rotations| <= pi, |expression| <= max_abs_expression,
+  // the head in front of the camera (0.05 .. 20 m). `why` names the first problem.
+  bool IsValid(std::string* why, float max_abs_expression = 5.f) const;
+};
+
+// Per-person constants, sent once or baked into the avatar.
+struct SubjectParams {
+  Eigen::VectorXf shape;          // beta
+  Eigen::VectorXf texture;        // tau
+  std::array<float, 27> light{};  // lambda: 2nd-order SH, 9 per RGB channel
+  PinholeCamera intrinsics;       // of the output image
+};
+
+}  // namespace headcast

@@ -1,0 +1,294 @@
+// The neural avatar on tiny configurations: shapes, equivalences, gradients,
+// a few optimisation steps, sampling, the avatar file and the renderer.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgproc.hpp>
+
+#include "common/avatar/avatar_pipeline.h"
+#include "common/core/zip_archive.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+AvatarConfig Tiny() {
+  AvatarConfig c;
+  c.output_size = 128;
+  c.feature_channels = 8;
+  c.mlp_width = 16;
+  c.mlp_layers = 3;
+  c.skip_layer = 2;
+  c.pe_frequencies = 2;
+  c.samples_per_ray = 4;
+  c.renderer_channels = {8, 8, 4, 4};
+  return c;
+}
+
+std::shared_ptr<const HeadModel> Builtin() {
+  static auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
+  return model;
+}
+
+FrameParams Frontal(float jaw = 0.f) {
+  FrameParams p;
+  p.expression = Eigen::VectorXf::Zero(Builtin()->num_expression());
+  p.jaw = Eigen::Vector3f(jaw, 0, 0);
+  p.SetCamFromHead(FrontalCamFromHead(0.62));
+  return p;
+}
+
+TEST(PositionalEncoding, ShapeAndValues) {
+  const torch::Tensor x = torch::tensor({0.25f, -0.5f, 0.f}).view({1, 3});
+  const torch::Tensor e = PositionalEncoding(x, 2, 0.25);
+  ASSERT_EQ(e.sizes(), (std::vector<int64_t>{1, 3 + 12}));
+  EXPECT_NEAR(e[0][0].item<float>(), 1.0f, 1e-6);                              // x / scale
+  EXPECT_NEAR(e[0][3].item<float>(), std::sin(M_PI * 1.0), 1e-5);              // sin(pi * x0)
+  EXPECT_NEAR(e[0][3 + 6 + 1].item<float>(), std::cos(2 * M_PI * 1.0), 1e-5);  // cos(2 pi x0)
+}
+
+TEST(CNeRF, ShapesAndPrecomputedConditioningMatchesConcatenation) {
+  AvatarConfig c = Tiny();
+  torch::manual_seed(3);
+  CNeRF fast(c);
+  c.precompute_conditioning = false;
+  CNeRF slow(c);
+  // Same weights in both.
+  auto src = fast->named_parameters();
+  for (auto& p : slow->named_parameters()) p.value().data().copy_(src[p.key()].data());
+  const torch::Tensor points = torch::randn({50, 3}) * 0.1;
+  const AvatarConditioning cond{torch::randn({1, c.conditioning_dim()}), torch::randn({1, c.appearance_dim()})};
+  auto [d1, f1] = fast->forward(points, cond);
+  auto [d2, f2] = slow->forward(points, cond);
+  ASSERT_EQ(d1.sizes(), (std::vector<int64_t>{50}));
+  ASSERT_EQ(f1.sizes(), (std::vector<int64_t>{50, c.feature_channels}));
+  EXPECT_LT((d1 - d2).abs().max().item<float>(), 1e-5);
+  EXPECT_LT((f1 - f2).abs().max().item<float>(), 1e-5);
+  EXPECT_GE(d1.min().item<float>(), 0.f);  // densities are non-negative
+}
+
+TEST(CNeRF, FreezingStopsGradients) {
+  CNeRF net(Tiny());
+  net->FreezeFirstLayers(2);
+  const AvatarConditioning cond{torch::randn({1, Tiny().conditioning_dim()}),
+                                torch::randn({1, Tiny().appearance_dim()})};
+  auto [d, f] = net->forward(torch::randn({10, 3}) * 0.1, cond);
+  (d.sum() + f.sum()).backward();
+  int frozen = 0, trained = 0;
+  for (auto& p : net->named_parameters()) {
+    if (p.key().rfind("layers.0", 0) == 0 || p.key().rfind("layers.1", 0) == 0) {
+      EXPECT_FALSE(p.value().grad().defined()) << p.key();
+      ++frozen;
+    } else {
+      EXPECT_TRUE(p.value().grad().defined()) << p.key();
+      ++trained;
+    }
+  }
+  EXPECT_EQ(frozen, 4);
+  EXPECT_GT(trained, 4);
+}
+
+TEST(VolumeRender, OpaqueSampleWinsAndEmptySpaceIsTransparent) {
+  const torch::Tensor z = torch::tensor({1.0f, 1.1f, 1.2f, 1.3f}).view({1, 4});
+  const torch::Tensor feats = torch::arange(4, torch::kFloat).view({1, 4, 1});
+  const torch::Tensor len = torch::ones({1});
+  torch::Tensor density = torch::zeros({1, 4});
+  auto r = VolumeRender(density, feats, z, len);
+  EXPECT_NEAR(r.opacity.item<float>(), 0.f, 1e-6);
+  density = torch::tensor({0.f, 1e4f, 1e4f, 0.f}).view({1, 4});
+  r = VolumeRender(density, feats, z, len);
+  EXPECT_NEAR(r.opacity.item<float>(), 1.f, 1e-4);
+  EXPECT_NEAR(r.features.item<float>(), 1.f, 1e-3);  // the first opaque sample's feature
+  EXPECT_NEAR(r.depth.item<float>(), 1.1f, 1e-3);
+  // Constant density: weights follow 1 - exp(-sigma delta) per step.
+  density = torch::full({1, 4}, 2.f);
+  r = VolumeRender(density, torch::ones({1, 4, 1}), z, len);
+  EXPECT_NEAR(r.opacity.item<float>(), 1 - std::exp(-2.f * 0.4f), 1e-5);
+}
+
+TEST(NeuralRenderer, UpsamplesEightTimesAndEveryParameterLearns) {
+  NeuralRenderer net(Tiny());
+  const torch::Tensor x = torch::randn({2, 8, 16, 16});
+  const torch::Tensor y = net->forward(x);
+  ASSERT_EQ(y.sizes(), (std::vector<int64_t>{2, 3, 128, 128}));
+  EXPECT_GE(y.min().item<float>(), 0.f);
+  EXPECT_LE(y.max().item<float>(), 1.f);
+  y.mean().backward();
+  for (auto& p : net->named_parameters()) {
+    ASSERT_TRUE(p.value().grad().defined()) << p.key();
+    EXPECT_TRUE(torch::isfinite(p.value().grad()).all().item<bool>()) << p.key();
+    EXPECT_GT(p.value().grad().abs().sum().item<float>(), 0.f) << p.key();
+  }
+  for (const auto& b : net->named_buffers()) EXPECT_FALSE(b.value().requires_grad());
+}
+
+TEST(RaySampler, MeshGuidedRaysCoverTheHeadAndSkipTheRest) {
+  AvatarConfig c = Tiny();
+  const HeadModel& m = *Builtin();
+  const FrameParams p = Frontal();
+  const RigidTransform cam_from_head = p.CamFromHead();
+  const HeadModelOutput posed = m.Forward(HeadModelParams{});
+  RasterVertices v = (posed.vertices * cam_from_head.rotation.cast<float>().transpose()).rowwise() +
+                     cam_from_head.translation.cast<float>().transpose();
+  const PinholeCamera cam = DefaultSubject(m, c.output_size).intrinsics.Resized(16, 16);
+  RayBatch guided, uniform;
+  RaySampler(c).Sample(v, m.data().faces, cam, cam_from_head, nullptr, &guided);
+  c.sampling = SamplingMode::kUniform;
+  RaySampler(c).Sample(v, m.data().faces, cam, cam_from_head, nullptr, &uniform);
+  EXPECT_EQ(uniform.num_rays(), 256);
+  EXPECT_GT(guided.num_rays(), 40);
+  EXPECT_LT(guided.num_rays(), 256);
+  RasterBuffers buf;
+  Rasterize(v, m.data().faces, cam, RasterOptions{}, &buf);
+  // Every pixel the head covers has a ray whose samples bracket its depth.
+  int covered = 0;
+  for (int i = 0; i < guided.num_rays(); ++i) {
+    const int px = guided.pixel[i];
+    if (buf.face[px] < 0) continue;
+    ++covered;
+    const float d = buf.depth[px];
+    EXPECT_LT(guided.depths[i * 4], d);
+    EXPECT_GT(guided.depths[i * 4 + 3], d);
+  }
+  EXPECT_EQ(covered, buf.CoveredPixels());
+  // Depths increase along each ray; jitter stays in the shell.
+  std::mt19937 rng(1);
+  c.sampling = SamplingMode::kMeshGuided;
+  RaySampler(c).Sample(v, m.data().faces, cam, cam_from_head, &rng, &guided);
+  for (int i = 0; i < guided.num_rays(); ++i)
+    for (int k = 1; k < 4; ++k) EXPECT_GT(guided.depths[i * 4 + k], guided.depths[i * 4 + k - 1]);
+}
+
+TEST(AvatarPipeline, AFewStepsReduceTheLossOnAFixedTarget) {
+  const AvatarConfig c = Tiny();
+  const HeadModel& m = *Builtin();
+  Avatar avatar = Avatar::CreateRandom(c, m, DefaultSubject(m, c.output_size), 5);
+  const FrameParams p = Frontal(0.1f);
+  const RigidTransform cam_from_head = p.CamFromHead();
+  const HeadModelOutput posed = m.Forward(HeadModelParams{});
+  RasterVertices v = (posed.vertices * cam_from_head.rotation.cast<float>().transpose()).rowwise() +
+                     cam_from_head.translation.cast<float>().transpose();
+  RayBatch rays;
+  RaySampler(c).Sample(v, m.data().faces, avatar.subject().intrinsics.Resized(16, 16), cam_from_head, nullptr, &rays);
+  // Target: the head model's own render (what the general model learns from).
+  const HeadRender target_render =
+      RenderHead(m, posed.vertices, cam_from_head, avatar.subject().intrinsics, AlbedoTexture(m));
+  cv::Mat rgb;
+  cv::cvtColor(target_render.image_bgr, rgb, cv::COLOR_BGR2RGB);
+  const torch::Tensor target =
+      torch::from_blob(rgb.data, {128, 128, 3}, torch::kUInt8).permute({2, 0, 1}).unsqueeze(0).to(torch::kFloat) /
+      255.f;
+  const AvatarConditioning cond = MakeConditioning(c, avatar.subject(), p);
+  torch::optim::Adam adam(avatar.modules().parameters(), torch::optim::AdamOptions(5e-3));
+  std::vector<float> losses;
+  for (int step = 0; step < 25; ++step) {
+    adam.zero_grad();
+    const AvatarOutput out = RunAvatar(avatar.modules(), rays, cam_from_head, cond);
+    const torch::Tensor loss = torch::mse_loss(out.image, target);
+    loss.backward();
+    adam.step();
+    losses.push_back(loss.item<float>());
+  }
+
+  EXPECT_LT(losses.back(), 0.8f * losses.front()) << "first " << losses.front() << " last " << losses.back();
+}
+
+class AvatarFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = testing::TempDir("avatar");
+    path_ = dir_ + "/a.hcavatar";
+    Avatar a = Avatar::CreateRandom(Tiny(), *Builtin(), DefaultSubject(*Builtin(), 128), 9);
+    a.training_summary()["note"] = "test";
+    a.Save(path_, cv::Mat(8, 8, CV_8UC3, cv::Scalar(1, 2, 3)));
+  }
+  std::string LoadError(const std::string& path, const HeadModel& model) {
+    try {
+      Avatar::Load(path, model);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "loaded";
+  }
+  std::string WithManifest(const std::string& name, const std::function<void(nlohmann::json*)>& edit) {
+    ZipEntries entries = ReadZip(path_);
+    nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+    edit(&manifest);
+    entries["manifest.json"] = manifest.dump();
+    const std::string out = dir_ + "/" + name + ".hcavatar";
+    WriteZip(out, entries);
+    return out;
+  }
+  std::string dir_, path_;
+};
+
+TEST_F(AvatarFileTest, RoundTripRendersIdentically) {
+  Avatar a = Avatar::Load(path_, *Builtin());
+  EXPECT_EQ(a.training_summary()["note"], "test");
+  EXPECT_EQ(a.config().ToJson(), Tiny().ToJson());
+  Avatar b = Avatar::CreateRandom(Tiny(), *Builtin(), DefaultSubject(*Builtin(), 128), 9);
+  AvatarRenderer ra(Builtin(), std::move(a)), rb(Builtin(), std::move(b));
+  cv::Mat ia, ib;
+  ASSERT_TRUE(ra.Render(Frontal(), &ia));
+  ASSERT_TRUE(rb.Render(Frontal(), &ib));
+  EXPECT_EQ(cv::norm(ia, ib, cv::NORM_INF), 0);
+  EXPECT_EQ(Avatar::ReadManifest(path_)["output_resolution"], 128);
+  EXPECT_TRUE(ReadZip(path_).count("preview.png"));
+}
+
+TEST_F(AvatarFileTest, RefusesOtherVersionsHeadModelsAndBrokenFiles) {
+  std::string e = LoadError(WithManifest("v2", [](nlohmann::json* m) { (*m)["format_version"] = 2; }), *Builtin());
+  EXPECT_NE(e.find("format version 2"), std::string::npos) << e;
+  BuiltinHeadOptions other;
+  other.columns = 64;
+  e = LoadError(path_, MakeBuiltinHead(other));
+  EXPECT_NE(e.find("made for head model"), std::string::npos) << e;
+  e = LoadError(WithManifest("wider", [](nlohmann::json* m) { (*m)["config"]["mlp_width"] = 32; }), *Builtin());
+  EXPECT_NE(e.find("weights do not match"), std::string::npos) << e;
+  e = LoadError(WithManifest("badcfg", [](nlohmann::json* m) { (*m)["config"]["output_size"] = 300; }), *Builtin());
+  EXPECT_NE(e.find("output_size"), std::string::npos) << e;
+  const std::string cut = dir_ + "/cut.hcavatar";
+  std::filesystem::copy_file(path_, cut);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(path_) / 2);
+  e = LoadError(cut, *Builtin());
+  EXPECT_NE(e.find("cut.hcavatar"), std::string::npos) << e;
+  WriteZip(dir_ + "/foreign.hcavatar", {{"hello.txt", "hi"}});
+  e = LoadError(dir_ + "/foreign.hcavatar", *Builtin());
+  EXPECT_NE(e.find("not a headcast avatar"), std::string::npos) << e;
+  e = LoadError(dir_ + "/none.hcavatar", *Builtin());
+  EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+}
+
+TEST(AvatarRenderer, RendersAndRefusesBadParameters) {
+  AvatarRenderer r(Builtin(), Avatar::CreateRandom(Tiny(), *Builtin(), DefaultSubject(*Builtin(), 128)));
+  cv::Mat image;
+  AvatarTimings t;
+  ASSERT_TRUE(r.Render(Frontal(), &image, &t));
+  EXPECT_EQ(image.size(), cv::Size(128, 128));
+  EXPECT_EQ(image.type(), CV_8UC3);
+  EXPECT_GT(t.rays, 0);
+  EXPECT_EQ(t.samples, 4 * t.rays);
+  EXPECT_GT(t.total_ms, 0);
+  FrameParams bad = Frontal();
+  bad.expression[2] = std::nanf("");
+  std::string why;
+  cv::Mat untouched = image.clone();
+  EXPECT_FALSE(r.Render(bad, &image, nullptr, &why));
+  EXPECT_NE(why.find("expression"), std::string::npos);
+  EXPECT_EQ(cv::norm(image, untouched, cv::NORM_INF), 0);
+  bad = Frontal();
+  bad.cam_translation.z() = -1;
+  EXPECT_FALSE(r.Render(bad, &image, nullptr, &why));
+  // Another head model is refused at construction.
+  BuiltinHeadOptions other;
+  other.columns = 64;
+  auto other_model = std::make_shared<const HeadModel>(MakeBuiltinHead(other));
+  EXPECT_THROW(AvatarRenderer(other_model, Avatar::CreateRandom(Tiny(), *Builtin(), DefaultSubject(*Builtin(), 128))),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace headcast
