@@ -1,0 +1,90 @@
+// Conversions between headcast types and proto messages.
+#include "proto/convert.h"
+
+namespace headcast {
+namespace {
+
+template <typename Field>
+void PutVector3(const Eigen::Vector3f& v, Field* f) {
+  f->Clear();
+  for (int i = 0; i < 3; ++i) f->Add(v[i]);
+}
+
+template <typename Field>
+bool GetVector3(const Field& f, const char* name, Eigen::Vector3f* v, std::string* why) {
+  if (f.size() == 0) {
+    v->setZero();  // absent = zero rotation, as proto3 leaves empty fields out
+    return true;
+  }
+  if (f.size() != 3) {
+    if (why) *why = std::string(name) + " needs 3 values, got " + std::to_string(f.size());
+    return false;
+  }
+  *v = Eigen::Vector3f(f[0], f[1], f[2]);
+  return true;
+}
+
+}  // namespace
+
+void ToProto(const FrameParams& in, v1::FrameParams* out) {
+  out->Clear();
+  for (int i = 0; i < in.expression.size(); ++i) out->add_expression(in.expression[i]);
+  PutVector3(in.jaw, out->mutable_jaw());
+  PutVector3(in.neck, out->mutable_neck());
+  PutVector3(in.left_eye, out->mutable_left_eye());
+  PutVector3(in.right_eye, out->mutable_right_eye());
+  PutVector3(in.cam_rotation, out->mutable_cam_rotation());
+  PutVector3(in.cam_translation, out->mutable_cam_translation());
+  out->set_capture_time_s(in.capture_time_s);
+  out->set_sequence(in.sequence);
+  out->set_confidence(in.confidence);
+}
+
+bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why) {
+  out->expression = Eigen::Map<const Eigen::VectorXf>(in.expression().data(), in.expression_size());
+  if (!GetVector3(in.jaw(), "jaw", &out->jaw, why) || !GetVector3(in.neck(), "neck", &out->neck, why) ||
+      !GetVector3(in.left_eye(), "left_eye", &out->left_eye, why) ||
+      !GetVector3(in.right_eye(), "right_eye", &out->right_eye, why) ||
+      !GetVector3(in.cam_rotation(), "cam_rotation", &out->cam_rotation, why) ||
+      !GetVector3(in.cam_translation(), "cam_translation", &out->cam_translation, why))
+    return false;
+  out->capture_time_s = in.capture_time_s();
+  out->sequence = in.sequence();
+  out->confidence = in.confidence();
+  return true;
+}
+
+void ToProto(const SubjectParams& in, v1::SubjectParams* out) {
+  out->Clear();
+  for (int i = 0; i < in.shape.size(); ++i) out->add_shape(in.shape[i]);
+  for (int i = 0; i < in.texture.size(); ++i) out->add_texture(in.texture[i]);
+  for (float v : in.light) out->add_light(v);
+  auto* k = out->mutable_intrinsics();
+  k->set_fx(in.intrinsics.fx);
+  k->set_fy(in.intrinsics.fy);
+  k->set_cx(in.intrinsics.cx);
+  k->set_cy(in.intrinsics.cy);
+  k->set_width(in.intrinsics.width);
+  k->set_height(in.intrinsics.height);
+}
+
+bool FromProto(const v1::SubjectParams& in, SubjectParams* out, std::string* why) {
+  out->shape = Eigen::Map<const Eigen::VectorXf>(in.shape().data(), in.shape_size());
+  out->texture = Eigen::Map<const Eigen::VectorXf>(in.texture().data(), in.texture_size());
+  if (in.light_size() != 0 && in.light_size() != 27) {
+    if (why) *why = "light needs 27 values, got " + std::to_string(in.light_size());
+    return false;
+  }
+  out->light.fill(0.f);
+  for (int i = 0; i < in.light_size(); ++i) out->light[i] = in.light(i);
+  const auto& k = in.intrinsics();
+  out->intrinsics.fx = k.fx();
+  out->intrinsics.fy = k.fy();
+  out->intrinsics.cx = k.cx();
+  out->intrinsics.cy = k.cy();
+  out->intrinsics.width = static_cast<int>(k.width());
+  out->intrinsics.height = static_cast<int>(k.height());
+  return true;
+}
+
+}  // namespace headcast

@@ -1,0 +1,16 @@
+// The one place that converts between headcast's types and its proto messages.
+#pragma once
+
+#include "common/headmodel/params.h"
+#include "proto/headcast.pb.h"
+
+namespace headcast {
+
+void ToProto(const FrameParams& in, v1::FrameParams* out);
+// Fails (false, `why`) on wrong vector lengths; values are checked by FrameParams::IsValid.
+bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why = nullptr);
+
+void ToProto(const SubjectParams& in, v1::SubjectParams* out);
+bool FromProto(const v1::SubjectParams& in, SubjectParams* out, std::string* why = nullptr);
+
+}  // namespace headcast

@@ -1,0 +1,61 @@
+// The receiver's render loop: takes the newest parameters, renders at the target
+// rate, skips ticks rather than lag behind, shows frames and keeps statistics.
+#pragma once
+
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "common/avatar/avatar_renderer.h"
+#include "common/core/timer.h"
+#include "receiver/display/display.h"
+
+namespace headcast {
+
+// Where parameters come from (a session, a recording, a synthetic sequence).
+class FrameParamsSource {
+ public:
+  virtual ~FrameParamsSource() = default;
+  // The newest parameters available `now_s` seconds after the loop started, or
+  // nothing new. Sets *finished once no more will ever come.
+  virtual std::optional<FrameParams> Next(double now_s, bool* finished) = 0;
+};
+
+// Replays frames by their capture timestamps (paced) or one per call (unpaced,
+// for offline export where every frame must be rendered).
+class SequenceSource : public FrameParamsSource {
+ public:
+  SequenceSource(std::vector<FrameParams> frames, bool paced);
+  std::optional<FrameParams> Next(double now_s, bool* finished) override;
+
+ private:
+  std::vector<FrameParams> frames_;
+  bool paced_;
+  size_t next_ = 0;
+};
+
+struct RenderLoopOptions {
+  double target_fps = 30;  // ticks per second when paced
+  bool paced = true;       // false: render as fast as the source gives frames
+  double max_seconds = 0;  // stop after this long (0: when the source finishes)
+  void Check() const;
+};
+
+struct RenderLoopStats {
+  int rendered = 0;      // frames rendered and shown
+  int missed_ticks = 0;  // ticks skipped because rendering ran late
+  int idle_ticks = 0;    // ticks with no new parameters
+  int refused = 0;       // parameter sets the renderer refused (NaN, out of range)
+  double seconds = 0;    // wall time of the loop
+  SampleStats frame_ms;  // render + show per frame
+  SampleStats render_ms, head_model_ms, sample_ms, mlp_ms, composite_ms, upsample_ms, show_ms;
+  double fps() const { return seconds > 0 ? rendered / seconds : 0; }
+};
+
+// Runs until the source finishes, the display asks to quit, or max_seconds.
+// `overlay` (optional) supplies extra overlay figures (latency, kbit/s).
+RenderLoopStats RunRenderLoop(AvatarRenderer& renderer, FrameParamsSource& source, Display& display,
+                              const RenderLoopOptions& options,
+                              const std::function<void(DisplayOverlay*)>& overlay = nullptr);
+
+}  // namespace headcast

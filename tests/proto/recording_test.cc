@@ -1,0 +1,117 @@
+// Parameter recordings and proto conversions.
+#include "proto/recording.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/synthetic_motion.h"
+#include "proto/convert.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+
+RecordingInfo Info() {
+  RecordingInfo info;
+  info.head_model_name = "builtin";
+  info.head_model_fingerprint = Model().fingerprint();
+  info.num_expression = Model().num_expression();
+  info.fps = 30;
+  info.subject.shape = Eigen::VectorXf::LinSpaced(12, -1, 1);
+  info.subject.texture = Eigen::VectorXf::Ones(5);
+  info.subject.light[0] = 2.5f;
+  info.subject.intrinsics = PinholeCamera::FromFovY(256, 256, 24);
+  info.source = "test";
+  return info;
+}
+
+TEST(Convert, FrameParamsRoundTripAndLengthChecks) {
+  FrameParams p = SyntheticTalkingHead(Model(), 17);
+  p.confidence = 0.75f;
+  v1::FrameParams m;
+  ToProto(p, &m);
+  FrameParams back;
+  ASSERT_TRUE(FromProto(m, &back));
+  EXPECT_EQ(back.expression, p.expression);
+  EXPECT_EQ(back.jaw, p.jaw);
+  EXPECT_EQ(back.cam_rotation, p.cam_rotation);
+  EXPECT_EQ(back.cam_translation, p.cam_translation);
+  EXPECT_EQ(back.sequence, 17u);
+  EXPECT_EQ(back.confidence, 0.75f);
+  m.add_jaw(1.f);  // 4 values
+  std::string why;
+  EXPECT_FALSE(FromProto(m, &back, &why));
+  EXPECT_NE(why.find("jaw"), std::string::npos);
+}
+
+TEST(Recording, WritesAndReadsEveryFrame) {
+  const std::string path = testing::TempDir("rec") + "/a.hcrec";
+  {
+    RecordingWriter w(path, Info());
+    for (int i = 0; i < 50; ++i) w.Write(SyntheticTalkingHead(Model(), i));
+    EXPECT_EQ(w.frames_written(), 50);
+  }
+  RecordingInfo info;
+  const std::vector<FrameParams> frames = ReadRecording(path, &info);
+  ASSERT_EQ(frames.size(), 50u);
+  EXPECT_EQ(info.head_model_fingerprint, Model().fingerprint());
+  EXPECT_EQ(info.subject.shape, Info().subject.shape);
+  EXPECT_EQ(info.subject.intrinsics.width, 256);
+  for (int i = 0; i < 50; ++i) {
+    const FrameParams expected = SyntheticTalkingHead(Model(), i);
+    EXPECT_EQ(frames[i].expression, expected.expression);
+    EXPECT_EQ(frames[i].sequence, static_cast<uint64_t>(i));
+    EXPECT_DOUBLE_EQ(frames[i].capture_time_s, expected.capture_time_s);
+  }
+}
+
+TEST(Recording, TruncatedForeignAndMissingFiles) {
+  const std::string dir = testing::TempDir("bad");
+  const std::string path = dir + "/a.hcrec";
+  {
+    RecordingWriter w(path, Info());
+    for (int i = 0; i < 20; ++i) w.Write(SyntheticTalkingHead(Model(), i));
+  }
+  std::filesystem::resize_file(path, std::filesystem::file_size(path) - 7);
+  RecordingReader reader(path);
+  FrameParams f;
+  int n = 0;
+  while (reader.Next(&f)) ++n;
+  EXPECT_EQ(n, 19);  // every complete frame before the cut
+  EXPECT_NE(reader.error().find("truncated"), std::string::npos);
+  EXPECT_THROW(ReadRecording(path), std::runtime_error);
+  { std::ofstream(dir + "/foreign.hcrec") << "GIF89a..."; }
+  try {
+    RecordingReader r(dir + "/foreign.hcrec");
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("not a headcast parameter recording"), std::string::npos);
+  }
+  EXPECT_THROW(RecordingReader(dir + "/none.hcrec"), std::runtime_error);
+}
+
+TEST(SyntheticMotion, IsSmoothValidAndUsesTheJaw) {
+  FrameParams prev = SyntheticTalkingHead(Model(), 0);
+  float max_jaw = 0;
+  for (int i = 1; i < 300; ++i) {
+    const FrameParams p = SyntheticTalkingHead(Model(), i);
+    std::string why;
+    ASSERT_TRUE(p.IsValid(&why)) << why;
+    EXPECT_LT((p.cam_translation - prev.cam_translation).norm(), 0.01f);      // < 1 cm per frame
+    EXPECT_LT((p.expression - prev.expression).cwiseAbs().maxCoeff(), 0.7f);  // a blink takes ~5 frames
+    max_jaw = std::max(max_jaw, p.jaw.x());
+    prev = p;
+  }
+  EXPECT_GT(max_jaw, 0.15f);
+}
+
+}  // namespace
+}  // namespace headcast
