@@ -27,5 +27,6 @@ void AddStats(nlohmann::json* out, const std::string& prefix, const SampleStats&
 nlohmann::json RunHeadModelSuite(const BenchOptions& options);
 nlohmann::json RunRasterSuite(const BenchOptions& options);
 nlohmann::json RunRenderSuite(const BenchOptions& options);
+nlohmann::json RunQualitySuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -44,7 +44,12 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "avatar synthesis (random-initialised default avatar)");
   add_common(headmodel);
   add_common(raster);
+  auto* quality =
+      app.add_subcommand("quality", "quality/speed trade-offs of the avatar's speed switches (trains variants)");
   add_common(render);
+  add_common(quality);
+  quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
+  quality->add_option("--iterations", options.repeats, "training steps per variant (batch 4)");
   render->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   render->add_option("--threads", options.threads, "libtorch threads")->check(CLI::Range(1, 64));
   render->add_flag("--compare-headnerf", options.compare_headnerf,
@@ -56,7 +61,8 @@ int main(int argc, char** argv) {
       throw std::invalid_argument("--compare-headnerf is defined at --resolution 256 (HeadNeRF's 32x32 feature map)");
     nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options)
                             : raster->parsed()  ? bench::RunRasterSuite(options)
-                                                : bench::RunRenderSuite(options);
+                            : render->parsed()  ? bench::RunRenderSuite(options)
+                                                : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];
     result["command"] = cmd;

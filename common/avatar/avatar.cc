@@ -79,6 +79,33 @@ Avatar Avatar::CreateRandom(const AvatarConfig& config, const HeadModel& model, 
   return a;
 }
 
+Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
+  config.Check();
+  const AvatarConfig& c = impl_->config;
+  if (config.output_size != c.output_size || config.feature_channels != c.feature_channels ||
+      config.num_shape != c.num_shape || config.num_expression != c.num_expression ||
+      config.num_texture != c.num_texture || config.pe_frequencies != c.pe_frequencies ||
+      config.pe_scale != c.pe_scale || config.mlp_width != c.mlp_width || config.mlp_layers != c.mlp_layers ||
+      config.skip_layer != c.skip_layer || config.renderer_channels != c.renderer_channels)
+    throw std::invalid_argument(
+        "WithRuntimeSwitches: the network architecture differs; only run-time switches may change");
+  Avatar a;
+  a.impl_ = std::make_unique<Impl>(config);
+  a.impl_->subject = impl_->subject;
+  a.impl_->fingerprint = impl_->fingerprint;
+  a.impl_->training_summary = impl_->training_summary;
+  torch::NoGradGuard no_grad;
+  auto copy = [](const torch::nn::Module& from, torch::nn::Module& to) {
+    auto src = from.named_parameters();
+    for (auto& p : to.named_parameters()) p.value().copy_(src[p.key()]);
+    auto bsrc = from.named_buffers();
+    for (auto& b : to.named_buffers()) b.value().copy_(bsrc[b.key()]);
+  };
+  copy(*impl_->modules.cnerf, *a.impl_->modules.cnerf);
+  copy(*impl_->modules.renderer, *a.impl_->modules.renderer);
+  return a;
+}
+
 void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
   const Impl& m = *impl_;
   const auto& s = m.subject;

@@ -36,6 +36,10 @@ class Avatar {
   // The manifest of a file without loading the weights (for `info`).
   static nlohmann::json ReadManifest(const std::string& path);
 
+  // A copy whose run-time switches (sampling, samples per ray, shell, precompute)
+  // come from `config`; the architecture must be the same (throws otherwise).
+  Avatar WithRuntimeSwitches(const AvatarConfig& config) const;
+
   Avatar(Avatar&&) noexcept;
   Avatar& operator=(Avatar&&) noexcept;
   ~Avatar();

@@ -1,0 +1,79 @@
+// Synthetic data on the fly and fitting on tiny configurations.
+#include <gtest/gtest.h>
+
+#include "common/avatar/avatar_pipeline.h"
+#include "common/headmodel/builtin_head.h"
+#include "training/avatar_fit.h"
+
+namespace headcast {
+namespace {
+
+AvatarConfig Tiny() {
+  AvatarConfig c;
+  c.output_size = 128;
+  c.feature_channels = 8;
+  c.mlp_width = 16;
+  c.mlp_layers = 2;
+  c.pe_frequencies = 2;
+  c.samples_per_ray = 4;
+  c.renderer_channels = {8, 8, 4, 4};
+  return c;
+}
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+
+TEST(SyntheticData, DrawsValidVariedRendersAndRepeatsByIndex) {
+  SyntheticDataOptions o;
+  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 5);
+  const SyntheticSample a = data.Next(), b = data.Next();
+  EXPECT_EQ(a.image_bgr.size(), cv::Size(128, 128));
+  EXPECT_GT(cv::countNonZero(a.mask), 128 * 128 / 20);
+  EXPECT_GT(cv::norm(a.image_bgr, b.image_bgr, cv::NORM_L1), 0);
+  std::string why;
+  EXPECT_TRUE(a.frame.IsValid(&why)) << why;
+  for (int i = 0; i < a.subject.shape.size(); ++i) EXPECT_LE(std::abs(a.subject.shape[i]), o.coefficient_limit);
+  // METHOD §5 ranges: neck within +-80/60/80 degrees.
+  EXPECT_LE(std::abs(a.frame.neck.x()), 80 * M_PI / 180 + 1e-6);
+  EXPECT_LE(std::abs(a.frame.neck.y()), 60 * M_PI / 180 + 1e-6);
+  EXPECT_EQ(cv::norm(data.At(3).image_bgr, data.At(3).image_bgr, cv::NORM_INF), 0);
+  EXPECT_GT(cv::norm(data.At(3).image_bgr, data.At(4).image_bgr, cv::NORM_L1), 0);
+  o.distance_max = 0.1;
+  EXPECT_THROW(SyntheticData(Model(), o, DefaultSubject(Model(), 128), 1), std::invalid_argument);
+}
+
+TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
+  SyntheticDataOptions o;
+  o.neck_x_deg = o.neck_y_deg = o.neck_z_deg = 10;
+  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 2);
+  Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  const EvalResult before = EvaluateOnSynthetic(avatar, Model(), data, 4);
+  FitOptions f;
+  f.iterations = 40;
+  f.batch = 2;
+  f.learning_rate = 5e-3;
+  const FitResult r = FitOnSynthetic(avatar, Model(), data, f);
+  ASSERT_EQ(r.loss.size(), 40u);
+  const float first = (r.loss[0] + r.loss[1] + r.loss[2]) / 3, last = (r.loss[37] + r.loss[38] + r.loss[39]) / 3;
+  EXPECT_LT(last, 0.7f * first);
+  const EvalResult after = EvaluateOnSynthetic(avatar, Model(), data, 4);
+  EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
+  EXPECT_GT(r.samples_per_s, 0);
+}
+
+TEST(Avatar, RuntimeSwitchesKeepTheWeights) {
+  Avatar a = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  AvatarConfig c = Tiny();
+  c.precompute_conditioning = false;
+  Avatar b = a.WithRuntimeSwitches(c);
+  SyntheticData data(Model(), SyntheticDataOptions{}, DefaultSubject(Model(), 128), 2);
+  EXPECT_NEAR(EvaluateOnSynthetic(a, Model(), data, 2).psnr_mean, EvaluateOnSynthetic(b, Model(), data, 2).psnr_mean,
+              1e-3);
+  c.mlp_width = 32;
+  EXPECT_THROW(a.WithRuntimeSwitches(c), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace headcast
