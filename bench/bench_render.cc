@@ -82,6 +82,15 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
   const int frames = std::max(1, std::min(options.repeats, 1000));
   const nlohmann::json ours = MeasureConfig(options, AvatarConfig::Default(options.resolution), frames);
   for (auto& [k, v] : ours.items()) out[k] = v;
+  // The same frames with the other libtorch thread count, side by side.
+  BenchOptions other = options;
+  other.threads = options.threads == 1 ? 2 : 1;
+  const nlohmann::json alt = MeasureConfig(other, AvatarConfig::Default(options.resolution), frames);
+  out["other_thread_count"] = {{"threads", other.threads},
+                               {"ms_median", alt["ms_median"]},
+                               {"ms_p95", alt["ms_p95"]},
+                               {"fps_median", alt["fps_median"]},
+                               {"stage_ms_median", alt["stage_ms_median"]}};
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

@@ -18,7 +18,7 @@ namespace {
 
 struct RenderArgs {
   std::string avatar, head_model = "builtin", params, transfer, display = "window", video, stats_json;
-  int synthetic = 0, frames = 0, threads = 2;
+  int synthetic = 0, frames = 0, threads = 1;
   double orbit_deg = 0, fps = 30;
   bool transfer_pose = false, unpaced = false, no_overlay = false;
 };

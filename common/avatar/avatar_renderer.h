@@ -26,7 +26,11 @@ struct AvatarTimings {
 };
 
 struct AvatarRendererOptions {
-  int threads = 2;  // intra-op threads for libtorch
+  // libtorch intra-op (OpenMP) threads. 1 by default: measured on the 2-core
+  // machine, OpenBLAS already threads the MLP's matrix products, and a second
+  // OpenMP thread competing with it (and with the display) made frames slower
+  // (`headcast-bench render` reports both).
+  int threads = 1;
   void Check() const;
 };
 
