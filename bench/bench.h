@@ -28,5 +28,6 @@ nlohmann::json RunHeadModelSuite(const BenchOptions& options);
 nlohmann::json RunRasterSuite(const BenchOptions& options);
 nlohmann::json RunRenderSuite(const BenchOptions& options);
 nlohmann::json RunQualitySuite(const BenchOptions& options);
+nlohmann::json RunCodecSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

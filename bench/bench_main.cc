@@ -48,6 +48,8 @@ int main(int argc, char** argv) {
       app.add_subcommand("quality", "quality/speed trade-offs of the avatar's speed switches (trains variants)");
   add_common(render);
   add_common(quality);
+  auto* codec = app.add_subcommand("codec", "parameter codec: bits per frame and added error");
+  add_common(codec);
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   quality->add_option("--iterations", options.repeats, "training steps per variant (batch 4)");
   render->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
@@ -62,6 +64,7 @@ int main(int argc, char** argv) {
     nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options)
                             : raster->parsed()  ? bench::RunRasterSuite(options)
                             : render->parsed()  ? bench::RunRenderSuite(options)
+                            : codec->parsed()   ? bench::RunCodecSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

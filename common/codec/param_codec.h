@@ -1,0 +1,79 @@
+// The parameter codec: per-component quantisation (steps from each component's
+// measured effect on the mesh), prediction from the previous frame, adaptive
+// Exp-Golomb coding of the residuals, periodic key frames. Wire-independent.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common/headmodel/head_model.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+constexpr int kCodecVersion = 1;
+
+// What both ends agree on when a session starts (sent in Hello).
+struct CodecLayout {
+  int num_expression = 0;                  // E of the head model; unsent components decode as 0
+  std::vector<int> expression_components;  // indices sent, ascending, each < num_expression
+  // Quantisation step per coded value, in order: the sent expression
+  // components, jaw, neck, left eye, right eye (3 each, radians), cam rotation
+  // (3, radians), cam translation (3, metres).
+  std::vector<float> steps;
+  int key_frame_interval = 30;  // a key frame at least this often, frames
+
+  int num_values() const { return static_cast<int>(expression_components.size()) + 18; }
+  void Check() const;  // throws std::invalid_argument naming the problem
+
+  // Steps such that one step of any component moves no vertex of `model` by
+  // more than `max_vertex_error_m` (rotations: about the joint, over the mesh's
+  // extent). `components` empty = every expression component.
+  static CodecLayout FromModel(const HeadModel& model, double max_vertex_error_m = 2e-4,
+                               std::vector<int> components = {}, int key_frame_interval = 30);
+};
+
+class ParamEncoder {
+ public:
+  explicit ParamEncoder(CodecLayout layout);
+  // One frame to one packet. `time_origin_s` is subtracted from capture times
+  // (the session start), which travel in whole milliseconds.
+  std::string Encode(const FrameParams& frame, double time_origin_s = 0);
+  void ForceKeyFrame() { force_key_ = true; }
+  const CodecLayout& layout() const { return layout_; }
+
+ private:
+  CodecLayout layout_;
+  std::vector<int64_t> previous_;
+  std::vector<int> magnitude_;  // adaptive Exp-Golomb order state, one per value
+  uint64_t coded_ = 0, previous_sequence_ = 0;
+  int64_t previous_time_ms_ = 0;
+  int since_key_ = 0;
+  bool force_key_ = true;
+};
+
+class ParamDecoder {
+ public:
+  explicit ParamDecoder(CodecLayout layout);
+  // Decodes one packet. Returns false with `why` for garbage, a truncated or
+  // foreign packet, values out of range, or a delta frame whose reference is
+  // missing (it then waits for the next key frame). Never reads out of bounds.
+  bool Decode(const std::string& packet, FrameParams* out, std::string* why, double time_origin_s = 0);
+  const CodecLayout& layout() const { return layout_; }
+  bool waiting_for_key_frame() const { return !have_reference_; }
+
+ private:
+  CodecLayout layout_;
+  std::vector<int64_t> previous_;
+  std::vector<int> magnitude_;
+  uint64_t coded_ = 0, previous_sequence_ = 0;
+  int64_t previous_time_ms_ = 0;
+  bool have_reference_ = false;
+};
+
+// Several packets in one message: varint length + bytes each.
+std::string PackPackets(const std::vector<std::string>& packets);
+bool UnpackPackets(const std::string& payload, std::vector<std::string>* packets, std::string* why);
+
+}  // namespace headcast

@@ -1,0 +1,166 @@
+// The parameter codec: round trips within the quantisation step, few bits,
+// recovery after loss, and garbage refused without reading out of bounds.
+#include "common/codec/param_codec.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "common/codec/bit_stream.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/synthetic_motion.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+
+void ExpectWithinStep(const CodecLayout& l, const FrameParams& a, const FrameParams& b) {
+  for (size_t k = 0; k < l.expression_components.size(); ++k) {
+    const int c = l.expression_components[k];
+    EXPECT_LE(std::abs(a.expression[c] - b.expression[c]), 0.5f * l.steps[k] + 1e-6f) << "expression " << c;
+  }
+  const Eigen::Vector3f* va[] = {&a.jaw, &a.neck, &a.left_eye, &a.right_eye, &a.cam_rotation, &a.cam_translation};
+  const Eigen::Vector3f* vb[] = {&b.jaw, &b.neck, &b.left_eye, &b.right_eye, &b.cam_rotation, &b.cam_translation};
+  const size_t e = l.expression_components.size();
+  for (int g = 0; g < 6; ++g)
+    for (int i = 0; i < 3; ++i) EXPECT_LE(std::abs((*va[g])[i] - (*vb[g])[i]), 0.5f * l.steps[e + 3 * g + i] + 1e-6f);
+}
+
+TEST(BitStream, ExpGolombRoundTrips) {
+  BitWriter w;
+  const std::vector<int64_t> values = {0, 1, -1, 2, -7, 100, -100000, 1LL << 35};
+  for (int k : {0, 2, 5})
+    for (int64_t v : values) w.SignedExpGolomb(v, k);
+  const std::string bytes = w.Finish();
+  BitReader r(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size());
+  for (int k : {0, 2, 5})
+    for (int64_t v : values) {
+      int64_t got;
+      ASSERT_TRUE(r.SignedExpGolomb(k, &got));
+      EXPECT_EQ(got, v);
+    }
+  std::string varints;
+  PutVarint(300, &varints);
+  size_t pos = 0;
+  uint64_t v;
+  ASSERT_TRUE(GetVarint(varints, &pos, &v));
+  EXPECT_EQ(v, 300u);
+  pos = 0;
+  EXPECT_FALSE(GetVarint(std::string("\xff\xff"), &pos, &v));
+}
+
+TEST(ParamCodec, StepsComeFromSensitivity) {
+  const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4);
+  EXPECT_EQ(l.num_values(), Model().num_expression() + 18);
+  // A step of any expression component moves the mesh by at most ~0.2 mm.
+  for (size_t k = 0; k < l.expression_components.size(); ++k) {
+    HeadModelParams p;
+    p.expression = Eigen::VectorXd::Zero(Model().num_expression());
+    p.expression[l.expression_components[k]] = l.steps[k];
+    const float moved = (Model().Forward(p).vertices - Model().data().v_template).rowwise().norm().maxCoeff();
+    EXPECT_LE(moved, 2.01e-4f);
+    EXPECT_GT(moved, 1e-4f);
+  }
+  EXPECT_NEAR(l.steps.back(), 2e-4f, 1e-9f);  // translation: the error itself
+}
+
+TEST(ParamCodec, RoundTripWithinTheStepAndFewBits) {
+  const CodecLayout l = CodecLayout::FromModel(Model());
+  ParamEncoder enc(l);
+  ParamDecoder dec(l);
+  size_t bytes = 0;
+  const int n = 300;
+  for (int i = 0; i < n; ++i) {
+    const FrameParams f = SyntheticTalkingHead(Model(), i);
+    const std::string packet = enc.Encode(f);
+    bytes += packet.size();
+    FrameParams out;
+    std::string why;
+    ASSERT_TRUE(dec.Decode(packet, &out, &why)) << why;
+    ExpectWithinStep(l, f, out);
+    EXPECT_EQ(out.sequence, f.sequence);
+    EXPECT_NEAR(out.capture_time_s, f.capture_time_s, 0.0006);
+  }
+  const double bits_per_frame = 8.0 * bytes / n;
+  EXPECT_LT(bits_per_frame, 200);  // 31 values: a few bits each
+}
+
+TEST(ParamCodec, SubsetDecodesUnsentComponentsAsZero) {
+  const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4, {0, 8});
+  ParamEncoder enc(l);
+  ParamDecoder dec(l);
+  FrameParams f = SyntheticTalkingHead(Model(), 5);
+  f.expression.setConstant(0.5f);
+  FrameParams out;
+  ASSERT_TRUE(dec.Decode(enc.Encode(f), &out, nullptr));
+  EXPECT_NEAR(out.expression[0], 0.5f, l.steps[0]);
+  EXPECT_NEAR(out.expression[8], 0.5f, l.steps[1]);
+  EXPECT_EQ(out.expression[3], 0.f);
+}
+
+TEST(ParamCodec, RecoversAtTheNextKeyFrameAfterALoss) {
+  const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4, {}, 10);
+  ParamEncoder enc(l);
+  ParamDecoder dec(l);
+  std::vector<std::string> packets;
+  for (int i = 0; i < 25; ++i) packets.push_back(enc.Encode(SyntheticTalkingHead(Model(), i)));
+  FrameParams out;
+  std::string why;
+  int decoded = 0;
+  for (int i = 0; i < 25; ++i) {
+    if (i == 4) continue;  // lost
+    if (dec.Decode(packets[i], &out, &why)) {
+      ++decoded;
+      EXPECT_TRUE(i < 4 || i >= 10) << i;
+    } else {
+      EXPECT_TRUE(i > 4 && i < 10) << i << ": " << why;
+    }
+  }
+  EXPECT_EQ(decoded, 4 + 15);
+}
+
+TEST(ParamCodec, GarbageTruncationAndOutOfRangeAreRefused) {
+  const CodecLayout l = CodecLayout::FromModel(Model());
+  ParamEncoder enc(l);
+  const std::string good = enc.Encode(SyntheticTalkingHead(Model(), 0));
+  std::mt19937 rng(3);
+  for (int trial = 0; trial < 2000; ++trial) {
+    ParamDecoder dec(l);
+    std::string p = good;
+    if (trial % 3 == 0)
+      p.resize(rng() % p.size());
+    else if (trial % 3 == 1)
+      p[rng() % p.size()] ^= static_cast<char>(1 + rng() % 255);
+    else {
+      p.assign(1 + rng() % 40, '\0');
+      for (char& c : p) c = static_cast<char>(rng());
+    }
+    FrameParams out;
+    std::string why;
+    if (dec.Decode(p, &out, &why)) {
+      EXPECT_TRUE(out.expression.allFinite());  // a flip may still decode: values stay in range
+      EXPECT_LE(out.cam_rotation.norm(), 3 * M_PI);
+    } else {
+      EXPECT_FALSE(why.empty());
+    }
+  }
+  FrameParams huge = SyntheticTalkingHead(Model(), 0);
+  huge.cam_translation.z() = 500;  // 500 m: encodable, refused on decode
+  ParamEncoder e2(l);
+  ParamDecoder d2(l);
+  std::string why;
+  FrameParams out;
+  EXPECT_FALSE(d2.Decode(e2.Encode(huge), &out, &why));
+  EXPECT_NE(why.find("out of range"), std::string::npos);
+  std::vector<std::string> packets;
+  EXPECT_FALSE(UnpackPackets(std::string("\x05\x01", 2), &packets, &why));
+  ASSERT_TRUE(UnpackPackets(PackPackets({good, good}), &packets, &why));
+  EXPECT_EQ(packets.size(), 2u);
+}
+
+}  // namespace
+}  // namespace headcast
