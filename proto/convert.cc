@@ -87,4 +87,34 @@ bool FromProto(const v1::SubjectParams& in, SubjectParams* out, std::string* why
   return true;
 }
 
+void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out) {
+  out->Clear();
+  out->set_num_expression(in.num_expression);
+  for (int c : in.expression_components) out->add_expression_components(c);
+  for (float s : in.steps) out->add_steps(s);
+  out->set_key_frame_interval(in.key_frame_interval);
+  out->set_fps(fps);
+  out->set_codec_version(kCodecVersion);
+}
+
+bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why) {
+  if (in.codec_version() != kCodecVersion) {
+    if (why) *why = "codec version " + std::to_string(in.codec_version()) + ", this build speaks " + std::to_string(kCodecVersion);
+    return false;
+  }
+  CodecLayout l;
+  l.num_expression = static_cast<int>(std::min<uint32_t>(in.num_expression(), 1u << 20));
+  for (uint32_t c : in.expression_components()) l.expression_components.push_back(static_cast<int>(std::min<uint32_t>(c, 1u << 20)));
+  l.steps.assign(in.steps().begin(), in.steps().end());
+  l.key_frame_interval = static_cast<int>(std::min<uint32_t>(in.key_frame_interval(), 1u << 20));
+  try {
+    l.Check();
+  } catch (const std::invalid_argument& e) {
+    if (why) *why = e.what();
+    return false;
+  }
+  *out = l;
+  return true;
+}
+
 }  // namespace headcast

@@ -1,6 +1,7 @@
 // The one place that converts between headcast's types and its proto messages.
 #pragma once
 
+#include "common/codec/param_codec.h"
 #include "common/headmodel/params.h"
 #include "proto/headcast.pb.h"
 
@@ -12,5 +13,9 @@ bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why = n
 
 void ToProto(const SubjectParams& in, v1::SubjectParams* out);
 bool FromProto(const v1::SubjectParams& in, SubjectParams* out, std::string* why = nullptr);
+
+void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out);
+// Checks the layout (CodecLayout::Check) and says what is wrong.
+bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why = nullptr);
 
 }  // namespace headcast

@@ -1,0 +1,273 @@
+// The sender's gRPC client.
+#include "sender/session_client.h"
+
+#include <grpcpp/grpcpp.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <thread>
+
+#include "common/core/bounded_queue.h"
+#include "common/core/options.h"
+#include "common/core/zip_archive.h"
+#include "proto/convert.h"
+#include "proto/headcast.grpc.pb.h"
+#include "proto/protocol.h"
+
+namespace headcast {
+
+void SenderOptions::Check() const {
+  OptionsCheck c("SenderOptions");
+  c.NotEmpty("target", target).NotEmpty("avatar_id", avatar_id).Positive("fps", fps);
+  c.InRange("queue_frames", queue_frames, 1, 100000).InRange("max_batch", max_batch, 1, 1000);
+  c.NonNegative("min_send_interval_s", min_send_interval_s).Positive("reconnect_initial_s", reconnect_initial_s);
+  c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
+  c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
+  c.That(!plaintext || IsLoopbackAddress(target), "plaintext is only allowed to a loopback target (got " + target + ")");
+  c.That(plaintext || !tls_ca.empty(), "TLS needs tls_ca (the CA of the receiver's certificate), or plaintext on loopback");
+  c.ThrowIfErrors();
+}
+
+namespace {
+double Seconds() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+}  // namespace
+
+struct SenderClient::Impl {
+  SenderOptions options;
+  CodecLayout layout;
+  BoundedQueue<FrameParams> queue;
+  std::thread worker;
+  std::atomic<bool> stop{false};
+  std::string bye_reason = "done";
+  mutable std::mutex mutex;
+  mutable std::condition_variable cv;
+  SenderCounters counters;
+
+  Impl(SenderOptions o, CodecLayout l) : options(std::move(o)), layout(std::move(l)), queue(options.queue_frames) {}
+
+  std::shared_ptr<grpc::Channel> MakeChannel() const {
+    grpc::ChannelArguments args;
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(options.keepalive_s * 1000));
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 5000);
+    args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+    args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+    // Reconnect quickly after a receiver restart.
+    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
+    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_max_s * 1000));
+    if (!options.tls_server_name.empty()) args.SetSslTargetNameOverride(options.tls_server_name);
+    std::shared_ptr<grpc::ChannelCredentials> credentials;
+    if (options.plaintext) {
+      credentials = grpc::InsecureChannelCredentials();
+    } else {
+      grpc::SslCredentialsOptions ssl;
+      ssl.pem_root_certs = ReadFileBytes(options.tls_ca);
+      if (!options.tls_client_cert.empty()) {
+        ssl.pem_cert_chain = ReadFileBytes(options.tls_client_cert);
+        ssl.pem_private_key = ReadFileBytes(options.tls_client_key);
+      }
+      credentials = grpc::SslCredentials(ssl);
+    }
+    return grpc::CreateCustomChannel(options.target, credentials, args);
+  }
+
+  void SetError(const std::string& e) {
+    std::lock_guard<std::mutex> lock(mutex);
+    counters.last_error = e;
+  }
+
+  // One session: returns when the stream breaks or we stop.
+  void RunSession(const std::shared_ptr<grpc::Channel>& channel) {
+    auto stub = v1::Headcast::NewStub(channel);
+    grpc::ClientContext context;
+    if (!options.token.empty()) context.AddMetadata("authorization", "Bearer " + options.token);
+    auto stream = stub->Session(&context);
+    v1::Uplink hello;
+    hello.mutable_hello()->set_protocol_version(kProtocolVersion);
+    hello.mutable_hello()->set_avatar_id(options.avatar_id);
+    hello.mutable_hello()->set_sender_name(options.sender_name);
+    ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
+    if (!stream->Write(hello)) {
+      SetError("cannot reach the receiver at " + options.target);
+      stream->Finish();
+      return;
+    }
+    // Wait for Welcome or Reject (with a deadline: a silent receiver must not hang us).
+    std::atomic<int> welcomed{0};  // 0 waiting, 1 welcomed, -1 refused/closed
+    std::thread reader([&] {
+      v1::Downlink d;
+      while (stream->Read(&d)) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (d.has_welcome()) {
+          welcomed = 1;
+          counters.streaming = true;
+          cv.notify_all();
+        } else if (d.has_reject()) {
+          counters.last_rejection = v1::Reject::Reason_Name(d.reject().reason()) + ": " + d.reject().message();
+          ++counters.rejections;
+          welcomed = -1;
+          cv.notify_all();
+        } else if (d.has_stats()) {
+          counters.receiver_render_fps = d.stats().render_fps();
+          counters.receiver_kbps = d.stats().receive_kbps();
+          counters.receiver_frames = d.stats().frames_received();
+          counters.receiver_bad = d.stats().frames_bad();
+          counters.receiver_lost = d.stats().frames_lost();
+          counters.receiver_late = d.stats().frames_late();
+        } else if (d.has_error()) {
+          counters.last_error = d.error().message();
+        }
+      }
+      std::lock_guard<std::mutex> lock(mutex);
+      if (welcomed == 0) welcomed = -1;
+      counters.streaming = false;
+      cv.notify_all();
+    });
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      cv.wait_for(lock, std::chrono::duration<double>(options.welcome_timeout_s), [&] { return welcomed != 0 || stop; });
+    }
+    if (welcomed == 1) {
+      std::lock_guard<std::mutex> lock(mutex);
+      ++counters.connects;
+    }
+    if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", options.target, options.avatar_id);
+    ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame
+    const double origin = Seconds();
+    double last_send = 0;
+    while (welcomed == 1 && !stop) {
+      auto first = queue.Pop(std::chrono::milliseconds(50));
+      if (!first) continue;
+      if (options.min_send_interval_s > 0) {
+        const double wait = last_send + options.min_send_interval_s - Seconds();
+        if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+      }
+      // Whatever queued up while we waited or while the last write blocked
+      // (a narrow link) goes into this message: batching adapts to the link.
+      std::vector<std::string> packets;
+      packets.push_back(encoder.Encode(*first, origin));
+      while (static_cast<int>(packets.size()) < options.max_batch) {
+        auto more = queue.TryPop();
+        if (!more) break;
+        packets.push_back(encoder.Encode(*more, origin));
+      }
+      v1::Uplink up;
+      up.mutable_frames()->set_payload(PackPackets(packets));
+      up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
+      up.mutable_frames()->set_send_time_s(Seconds());
+      last_send = Seconds();
+      const bool ok = stream->Write(up);
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (ok) {
+          counters.sent += packets.size();
+          counters.messages += 1;
+          counters.payload_bytes += up.frames().payload().size();
+        }
+        cv.notify_all();
+      }
+      if (!ok) {
+        SetError("stream to " + options.target + " broke");
+        break;
+      }
+    }
+    if (welcomed == 1 && stop) {
+      v1::Uplink bye;
+      bye.mutable_bye()->set_reason(bye_reason);
+      stream->Write(bye);
+    }
+    stream->WritesDone();
+    context.TryCancel();
+    reader.join();
+    const grpc::Status status = stream->Finish();
+    if (!status.ok() && !stop) SetError(status.error_message());
+  }
+
+  void Run() {
+    double backoff = options.reconnect_initial_s;
+    std::shared_ptr<grpc::Channel> channel;
+    try {
+      channel = MakeChannel();
+    } catch (const std::exception& e) {
+      SetError(e.what());
+      spdlog::error("sender: {}", e.what());
+      return;
+    }
+    while (!stop) {
+      const double started = Seconds();
+      RunSession(channel);
+      if (stop) break;
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        counters.streaming = false;
+      }
+      if (Seconds() - started > 2 * options.reconnect_max_s) backoff = options.reconnect_initial_s;  // it had worked
+      spdlog::warn("sender: session ended ({}); retrying in {:.1f} s", counters.last_error, backoff);
+      std::unique_lock<std::mutex> lock(mutex);
+      cv.wait_for(lock, std::chrono::duration<double>(backoff), [&] { return stop.load(); });
+      backoff = std::min(options.reconnect_max_s, backoff * 2);
+    }
+  }
+};
+
+SenderClient::SenderClient(SenderOptions options, CodecLayout layout) {
+  options.Check();
+  layout.Check();
+  impl_ = std::make_unique<Impl>(std::move(options), std::move(layout));
+}
+
+SenderClient::~SenderClient() { Stop("sender closed"); }
+
+void SenderClient::Start() {
+  if (!impl_->worker.joinable()) impl_->worker = std::thread([this] { impl_->Run(); });
+}
+
+void SenderClient::Submit(const FrameParams& frame) {
+  std::string why;
+  if (!frame.IsValid(&why)) {  // NaN or out-of-range parameters never reach the encoder
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    ++impl_->counters.invalid;
+    impl_->counters.last_error = "frame " + std::to_string(frame.sequence) + " not sent: " + why;
+    return;
+  }
+  const bool dropped = impl_->queue.Push(frame);
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  ++impl_->counters.submitted;
+  if (dropped) ++impl_->counters.dropped;
+}
+
+void SenderClient::Stop(const std::string& reason) {
+  if (!impl_) return;
+  {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    impl_->bye_reason = reason;
+    impl_->stop = true;
+    impl_->cv.notify_all();
+  }
+  if (impl_->worker.joinable()) impl_->worker.join();
+}
+
+SenderCounters SenderClient::counters() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->counters;
+}
+
+bool SenderClient::WaitStreaming(double timeout_s) const {
+  std::unique_lock<std::mutex> lock(impl_->mutex);
+  return impl_->cv.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return impl_->counters.streaming; });
+}
+
+bool SenderClient::Flush(double timeout_s) const {
+  const double deadline = Seconds() + timeout_s;
+  while (Seconds() < deadline) {
+    {
+      std::lock_guard<std::mutex> lock(impl_->mutex);
+      const auto& c = impl_->counters;
+      if (impl_->queue.size() == 0 && c.sent + c.dropped >= c.submitted) return true;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
+}  // namespace headcast

@@ -1,0 +1,64 @@
+// The sender's gRPC client: Hello/Welcome, frames coded and sent as produced,
+// several per message when the link is narrow, the oldest dropped when
+// backlogged (latency never builds), reconnection with back-off.
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <string>
+
+#include "common/codec/param_codec.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+struct SenderOptions {
+  std::string target = "127.0.0.1:50051";  // receiver host:port
+  std::string avatar_id = "default";
+  std::string token;                       // bearer token (sent as "authorization" metadata)
+  std::string sender_name = "headcast-sender";
+  bool plaintext = false;                  // only allowed for a loopback target
+  std::string tls_ca;                      // PEM: CA that signed the receiver's certificate
+  std::string tls_client_cert, tls_client_key;  // PEM: optional client certificate
+  std::string tls_server_name;             // override the name checked in the certificate
+  double fps = 30;                         // capture rate, for the layout
+  int queue_frames = 8;                    // frames waiting at most; older ones are dropped
+  int max_batch = 12;                      // frames per message at most
+  double min_send_interval_s = 0;          // wait at least this long between messages (narrow links)
+  double reconnect_initial_s = 0.1, reconnect_max_s = 1.0;  // back-off between attempts
+  double welcome_timeout_s = 3;            // Hello -> Welcome deadline
+  double keepalive_s = 10;                 // HTTP/2 ping interval while idle
+  void Check() const;
+};
+
+struct SenderCounters {
+  uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0, rejections = 0;
+  bool streaming = false;        // welcomed and streaming now
+  std::string last_rejection;    // the receiver's reason, if it refused us
+  std::string last_error;        // the last receiver Error or transport problem
+  double receiver_render_fps = 0, receiver_kbps = 0;
+  uint64_t receiver_frames = 0, receiver_bad = 0, receiver_lost = 0, receiver_late = 0;
+};
+
+class SenderClient {
+ public:
+  SenderClient(SenderOptions options, CodecLayout layout);
+  ~SenderClient();  // stops
+  void Start();     // connects in the background and keeps reconnecting
+  // Never blocks: queues the frame, dropping the oldest if the queue is full.
+  // Invalid frames (NaN, out of range) are counted and not sent.
+  void Submit(const FrameParams& frame);
+  // Sends Bye (if streaming) and stops.
+  void Stop(const std::string& reason = "done");
+  SenderCounters counters() const;
+  // Blocks until streaming (welcomed) or the timeout; true if streaming.
+  bool WaitStreaming(double timeout_s) const;
+  // Blocks until the queue is empty and everything queued was written, or the timeout.
+  bool Flush(double timeout_s) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace headcast

@@ -1,0 +1,321 @@
+// Sessions end to end through real gRPC on 127.0.0.1: every frame arrives in
+// order within the quantisation step; bad input ends only the session that
+// sent it; eight concurrent sessions; a receiver restart is survived.
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/synthetic_motion.h"
+#include "proto/convert.h"
+#include "proto/headcast.grpc.pb.h"
+#include "receiver/session_server.h"
+#include "sender/session_client.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+const CodecLayout& Layout() {
+  static const CodecLayout l = CodecLayout::FromModel(Model());
+  return l;
+}
+
+ReceiverServerOptions ServerOptions(int port = 0) {
+  ReceiverServerOptions o;
+  o.listen = "127.0.0.1:" + std::to_string(port);
+  o.plaintext = true;
+  o.tokens = {"secret-token"};
+  o.stats_interval_s = 0.2;
+  return o;
+}
+
+std::map<std::string, AvatarEntry> Avatars() { return {{"demo", {Model().fingerprint(), Model().num_expression()}}}; }
+
+SenderOptions ClientOptions(int port) {
+  SenderOptions o;
+  o.target = "127.0.0.1:" + std::to_string(port);
+  o.plaintext = true;
+  o.token = "secret-token";
+  o.avatar_id = "demo";
+  o.queue_frames = 1000;  // tests want every frame; the product default drops
+  return o;
+}
+
+// Collects decoded frames per session.
+struct Collector {
+  std::mutex mutex;
+  std::map<std::string, std::vector<FrameParams>> frames;
+  void operator()(const std::string& id, const FrameParams& f) {
+    std::lock_guard<std::mutex> lock(mutex);
+    frames[id].push_back(f);
+  }
+  size_t Total() {
+    std::lock_guard<std::mutex> lock(mutex);
+    size_t n = 0;
+    for (auto& [id, v] : frames) n += v.size();
+    return n;
+  }
+};
+
+bool WaitFor(const std::function<bool()>& condition, double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return condition();
+}
+
+class SessionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    server_ = std::make_unique<ReceiverServer>(ServerOptions(), Avatars());
+    server_->SetFrameObserver([this](const std::string& id, const FrameParams& f) { collector_(id, f); });
+    server_->Start();
+  }
+  // A raw stream with a hand-made Hello, to send what a good sender would not.
+  struct RawSession {
+    std::unique_ptr<v1::Headcast::Stub> stub;
+    grpc::ClientContext context;
+    std::unique_ptr<grpc::ClientReaderWriter<v1::Uplink, v1::Downlink>> stream;
+  };
+  std::unique_ptr<RawSession> Raw(const std::string& token = "secret-token") {
+    auto r = std::make_unique<RawSession>();
+    r->stub = v1::Headcast::NewStub(
+        grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials()));
+    if (!token.empty()) r->context.AddMetadata("authorization", "Bearer " + token);
+    r->context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    r->stream = r->stub->Session(&r->context);
+    return r;
+  }
+  static v1::Uplink Hello(uint32_t version = kProtocolVersion, const std::string& avatar = "demo") {
+    v1::Uplink u;
+    u.mutable_hello()->set_protocol_version(version);
+    u.mutable_hello()->set_avatar_id(avatar);
+    ToProto(Layout(), 30, u.mutable_hello()->mutable_layout());
+    return u;
+  }
+  // Sends Hello and returns the first reply.
+  v1::Downlink HelloReply(RawSession* r, const v1::Uplink& hello) {
+    EXPECT_TRUE(r->stream->Write(hello));
+    v1::Downlink d;
+    EXPECT_TRUE(r->stream->Read(&d));
+    return d;
+  }
+  // The server still serves a normal session afterwards.
+  void ExpectServerStillServes() {
+    SenderClient client(ClientOptions(server_->port()), Layout());
+    client.Start();
+    ASSERT_TRUE(client.WaitStreaming(5)) << client.counters().last_error;
+    const size_t before = collector_.Total();
+    for (int i = 0; i < 5; ++i) client.Submit(SyntheticTalkingHead(Model(), i));
+    EXPECT_TRUE(WaitFor([&] { return collector_.Total() >= before + 5; }, 5));
+  }
+  std::unique_ptr<ReceiverServer> server_;
+  Collector collector_;
+};
+
+TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
+  SenderClient client(ClientOptions(server_->port()), Layout());
+  client.Start();
+  ASSERT_TRUE(client.WaitStreaming(5)) << client.counters().last_error;
+  std::vector<FrameParams> sent;
+  for (int i = 0; i < 120; ++i) {
+    sent.push_back(SyntheticTalkingHead(Model(), i));
+    client.Submit(sent.back());
+    if (i % 10 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(client.Flush(10));
+  ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 120; }, 10));
+  client.Stop("test done");
+  std::lock_guard<std::mutex> lock(collector_.mutex);
+  ASSERT_EQ(collector_.frames.size(), 1u);
+  const auto& got = collector_.frames.begin()->second;
+  ASSERT_EQ(got.size(), 120u);
+  const CodecLayout& l = Layout();
+  for (size_t i = 0; i < got.size(); ++i) {
+    EXPECT_EQ(got[i].sequence, i);
+    for (size_t k = 0; k < l.expression_components.size(); ++k)
+      EXPECT_LE(std::abs(got[i].expression[k] - sent[i].expression[k]), 0.5f * l.steps[k] + 1e-6f);
+    EXPECT_LE((got[i].cam_translation - sent[i].cam_translation).cwiseAbs().maxCoeff(), 0.5f * l.steps.back() + 1e-6f);
+    EXPECT_LE((got[i].jaw - sent[i].jaw).cwiseAbs().maxCoeff(), 0.5f * l.steps[l.expression_components.size()] + 1e-6f);
+  }
+  const SenderCounters c = client.counters();
+  EXPECT_EQ(c.sent, 120u);
+  EXPECT_EQ(c.dropped, 0u);
+  EXPECT_LE(c.messages, 120u);
+}
+
+TEST_F(SessionTest, RefusalsSayWhy) {
+  struct Case {
+    std::string token;
+    v1::Uplink hello;
+    v1::Reject::Reason reason;
+    std::string text;
+  };
+  v1::Uplink bad_layout = Hello();
+  bad_layout.mutable_hello()->mutable_layout()->set_steps(0, std::nanf(""));
+  v1::Uplink wrong_size = Hello();
+  wrong_size.mutable_hello()->mutable_layout()->set_num_expression(53);
+  v1::Uplink not_hello;
+  not_hello.mutable_frames()->set_payload("x");
+  const std::vector<Case> cases = {
+      {"secret-token", Hello(2), v1::Reject::PROTOCOL_VERSION, "protocol version 2"},
+      {"secret-token", Hello(kProtocolVersion, "nobody"), v1::Reject::UNKNOWN_AVATAR, "no avatar 'nobody'"},
+      {"", Hello(), v1::Reject::UNAUTHENTICATED, "no bearer token"},
+      {"guess", Hello(), v1::Reject::UNAUTHENTICATED, "wrong bearer token"},
+      {"secret-token", bad_layout, v1::Reject::BAD_LAYOUT, "step"},
+      {"secret-token", wrong_size, v1::Reject::BAD_LAYOUT, "avatar 'demo' has 13"},
+      {"secret-token", not_hello, v1::Reject::PROTOCOL, "must start with Hello"},
+  };
+  for (const Case& c : cases) {
+    auto raw = Raw(c.token);
+    const v1::Downlink d = HelloReply(raw.get(), c.hello);
+    ASSERT_TRUE(d.has_reject()) << c.text;
+    EXPECT_EQ(d.reject().reason(), c.reason) << c.text;
+    EXPECT_NE(d.reject().message().find(c.text), std::string::npos) << d.reject().message();
+  }
+  EXPECT_EQ(server_->counters().sessions_rejected, cases.size());
+  ExpectServerStillServes();
+}
+
+TEST_F(SessionTest, BadFramesAreRefusedAndTheSessionGoesOn) {
+  auto raw = Raw();
+  ASSERT_TRUE(HelloReply(raw.get(), Hello()).has_welcome());
+  ParamEncoder encoder(Layout());
+  const std::string good = encoder.Encode(SyntheticTalkingHead(Model(), 0));
+  // A truncated packet, garbage bytes, a value out of range (cam 500 m away).
+  FrameParams far = SyntheticTalkingHead(Model(), 1);
+  far.cam_translation.z() = 500;
+  ParamEncoder far_encoder(Layout());
+  for (const std::string& payload :
+       {PackPackets({good}).substr(0, 4), std::string("\x07garbage", 8), PackPackets({far_encoder.Encode(far)})}) {
+    v1::Uplink u;
+    u.mutable_frames()->set_payload(payload);
+    ASSERT_TRUE(raw->stream->Write(u));
+  }
+  v1::Uplink u;
+  u.mutable_frames()->set_payload(PackPackets({good}));
+  ASSERT_TRUE(raw->stream->Write(u));
+  ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 1; }, 5));
+  int errors = 0;
+  v1::Downlink d;
+  while (errors < 3 && raw->stream->Read(&d))
+    if (d.has_error()) ++errors;
+  EXPECT_EQ(errors, 3);
+  // The sender vanishes mid-stream (no Bye): the session ends, the server lives on.
+  raw->context.TryCancel();
+  raw.reset();
+  ASSERT_TRUE(WaitFor([&] { return server_->Sessions().empty(); }, 5));
+  EXPECT_GE(server_->counters().frames_bad, 3u);
+  ExpectServerStillServes();
+}
+
+TEST_F(SessionTest, GarbageBytesOnTheStreamEndOnlyThatSession) {
+  auto channel = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials());
+  grpc::GenericStub generic(channel);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer secret-token");
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  grpc::CompletionQueue cq;
+  auto call = generic.PrepareCall(&context, "/headcast.v1.Headcast/Session", &cq);
+  void* tag;
+  bool ok;
+  call->StartCall(reinterpret_cast<void*>(1));
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  grpc::Slice junk("\xff\xfe\x00 not a protobuf \x01\x02\x03", 24);
+  grpc::ByteBuffer buffer(&junk, 1);
+  call->Write(buffer, reinterpret_cast<void*>(2));
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  call->WritesDone(reinterpret_cast<void*>(3));
+  cq.Next(&tag, &ok);
+  grpc::Status status;
+  call->Finish(&status, reinterpret_cast<void*>(4));
+  while (cq.Next(&tag, &ok) && tag != reinterpret_cast<void*>(4)) {
+  }
+  EXPECT_FALSE(status.ok());
+  ExpectServerStillServes();
+  cq.Shutdown();
+  while (cq.Next(&tag, &ok)) {
+  }
+}
+
+TEST_F(SessionTest, EightConcurrentSessions) {
+  std::vector<std::unique_ptr<SenderClient>> clients;
+  for (int c = 0; c < 8; ++c) {
+    SenderOptions o = ClientOptions(server_->port());
+    o.sender_name = "client" + std::to_string(c);
+    clients.push_back(std::make_unique<SenderClient>(o, Layout()));
+    clients.back()->Start();
+  }
+  for (auto& c : clients) ASSERT_TRUE(c->WaitStreaming(10)) << c->counters().last_error;
+  EXPECT_EQ(server_->Sessions().size(), 8u);
+  for (int i = 0; i < 30; ++i) {
+    for (int c = 0; c < 8; ++c) {
+      SyntheticMotionOptions m;
+      m.seed = c + 1;
+      clients[c]->Submit(SyntheticTalkingHead(Model(), i, m));
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+  }
+  for (auto& c : clients) EXPECT_TRUE(c->Flush(10));
+  ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 240; }, 10));
+  std::lock_guard<std::mutex> lock(collector_.mutex);
+  EXPECT_EQ(collector_.frames.size(), 8u);
+  for (auto& [id, frames] : collector_.frames) EXPECT_EQ(frames.size(), 30u) << id;
+}
+
+TEST_F(SessionTest, SenderStreamsAgainWithinTwoSecondsOfAReceiverRestart) {
+  const int port = server_->port();
+  SenderClient client(ClientOptions(port), Layout());
+  client.Start();
+  ASSERT_TRUE(client.WaitStreaming(5));
+  client.Submit(SyntheticTalkingHead(Model(), 0));
+  ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 1; }, 5));
+  server_->Shutdown();  // the receiver dies
+  ASSERT_TRUE(WaitFor([&] { return !client.counters().streaming; }, 5));
+  server_ = std::make_unique<ReceiverServer>(ServerOptions(port), Avatars());
+  server_->SetFrameObserver([this](const std::string& id, const FrameParams& f) { collector_(id, f); });
+  const auto restarted = std::chrono::steady_clock::now();
+  server_->Start();
+  // Frames keep coming from the capture side; streaming must resume quickly.
+  int i = 1;
+  const size_t before = collector_.Total();
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        client.Submit(SyntheticTalkingHead(Model(), i++));
+        return collector_.Total() > before;
+      },
+      5));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - restarted).count();
+  EXPECT_LT(seconds, 2.0);
+  EXPECT_GE(client.counters().connects, 2u);
+  RecordProperty("restart_to_streaming_s", std::to_string(seconds));
+}
+
+TEST(ReceiverServerOptions, RefuseInsecureSetups) {
+  ReceiverServerOptions o = ServerOptions();
+  o.listen = "0.0.0.0:50051";
+  EXPECT_THROW(o.Check(), std::invalid_argument);  // plaintext off loopback
+  o = ServerOptions();
+  o.tokens.clear();
+  EXPECT_THROW(o.Check(), std::invalid_argument);  // no tokens
+  o.allow_no_token = true;
+  EXPECT_NO_THROW(o.Check());
+  SenderOptions s = ClientOptions(1);
+  s.target = "10.0.0.1:50051";
+  EXPECT_THROW(s.Check(), std::invalid_argument);
+  EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:5"));
+  EXPECT_TRUE(IsLoopbackAddress("[::1]:5"));
+  EXPECT_TRUE(IsLoopbackAddress("localhost:5"));
+  EXPECT_FALSE(IsLoopbackAddress("128.0.0.1:5"));
+}
+
+}  // namespace
+}  // namespace headcast
