@@ -99,12 +99,15 @@ void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out) {
 
 bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why) {
   if (in.codec_version() != kCodecVersion) {
-    if (why) *why = "codec version " + std::to_string(in.codec_version()) + ", this build speaks " + std::to_string(kCodecVersion);
+    if (why)
+      *why = "codec version " + std::to_string(in.codec_version()) + ", this build speaks " +
+             std::to_string(kCodecVersion);
     return false;
   }
   CodecLayout l;
   l.num_expression = static_cast<int>(std::min<uint32_t>(in.num_expression(), 1u << 20));
-  for (uint32_t c : in.expression_components()) l.expression_components.push_back(static_cast<int>(std::min<uint32_t>(c, 1u << 20)));
+  for (uint32_t c : in.expression_components())
+    l.expression_components.push_back(static_cast<int>(std::min<uint32_t>(c, 1u << 20)));
   l.steps.assign(in.steps().begin(), in.steps().end());
   l.key_frame_interval = static_cast<int>(std::min<uint32_t>(in.key_frame_interval(), 1u << 20));
   try {

@@ -36,7 +36,8 @@ FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double
   out.left_eye = Slerp(a.left_eye, b.left_eye, t);
   out.right_eye = Slerp(a.right_eye, b.right_eye, t);
   out.cam_rotation = Slerp(a.cam_rotation, b.cam_rotation, t);
-  out.cam_translation = ((1 - t) * a.cam_translation.cast<double>() + t * b.cam_translation.cast<double>()).cast<float>();
+  out.cam_translation =
+      ((1 - t) * a.cam_translation.cast<double>() + t * b.cam_translation.cast<double>()).cast<float>();
   out.capture_time_s = (1 - t) * a.capture_time_s + t * b.capture_time_s;
   out.confidence = static_cast<float>((1 - t) * a.confidence + t * b.confidence);
   return out;
@@ -69,19 +70,26 @@ void JitterBuffer::Push(const FrameParams& f, double arrival_s) {
 std::optional<FrameParams> JitterBuffer::Sample(double now_s) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (frames_.empty() || !have_offset_) return std::nullopt;
-  const double t = now_s - offset_ - options_.target_delay_s;  // capture time to show now
+  const double t = now_s - offset_ - options_.target_delay_s;   // capture time to show now
   if (t < frames_.front().capture_time_s) return std::nullopt;  // not due yet
+  // Playout passes frames in order; sequence numbers it passes without having
+  // seen them are lost.
+  auto pass = [&](const FrameParams& f) {
+    if (played_any_ && f.sequence > played_sequence_ + 1) stats_.lost += f.sequence - played_sequence_ - 1;
+    if (!played_any_ || f.sequence > played_sequence_) played_sequence_ = f.sequence;
+    played_any_ = true;
+    played_capture_s_ = std::max(played_capture_s_, f.capture_time_s);
+  };
   // Drop frames wholly in the past, keeping the one just before t for interpolation.
-  while (frames_.size() >= 2 && frames_[1].capture_time_s <= t) frames_.pop_front();
+  while (frames_.size() >= 2 && frames_[1].capture_time_s <= t) {
+    pass(frames_.front());
+    frames_.pop_front();
+  }
   const FrameParams& a = frames_.front();
-  // Count sequence numbers that playout has passed without seeing.
-  if (played_any_ && a.sequence > played_sequence_ + 1) stats_.lost += a.sequence - played_sequence_ - 1;
-  if (!played_any_ || a.sequence > played_sequence_) played_sequence_ = a.sequence;
-  played_any_ = true;
-  played_capture_s_ = std::max(played_capture_s_, a.capture_time_s);
+  pass(a);
   if (frames_.size() == 1) {
     if (t - a.capture_time_s > options_.max_hold_s) return std::nullopt;  // the sender went quiet
-    return a;  // hold the newest rather than extrapolate
+    return a;                                                             // hold the newest rather than extrapolate
   }
   const FrameParams& b = frames_[1];
   const double span = b.capture_time_s - a.capture_time_s;

@@ -24,8 +24,10 @@ void ReceiverServerOptions::Check() const {
   c.InRange("target_delay_s", target_delay_s, 0, 10).InRange("stats_interval_s", stats_interval_s, 0.05, 3600);
   c.That(!plaintext || IsLoopbackAddress(listen),
          "plaintext is only allowed on a loopback address (got " + listen + "); configure TLS");
-  c.That(plaintext || (!tls_cert.empty() && !tls_key.empty()), "TLS needs tls_cert and tls_key (or plaintext on loopback)");
-  c.That(!tokens.empty() || (allow_no_token && plaintext), "bearer tokens are required (allow_no_token only with plaintext on loopback)");
+  c.That(plaintext || (!tls_cert.empty() && !tls_key.empty()),
+         "TLS needs tls_cert and tls_key (or plaintext on loopback)");
+  c.That(!tokens.empty() || (allow_no_token && plaintext),
+         "bearer tokens are required (allow_no_token only with plaintext on loopback)");
   c.ThrowIfErrors();
 }
 
@@ -74,15 +76,18 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
     return grpc::Status(code, message);
   }
 
-  grpc::Status Session(grpc::ServerContext* context, grpc::ServerReaderWriter<v1::Downlink, v1::Uplink>* stream) override {
+  grpc::Status Session(grpc::ServerContext* context,
+                       grpc::ServerReaderWriter<v1::Downlink, v1::Uplink>* stream) override {
     v1::Uplink up;
     if (!stream->Read(&up)) return grpc::Status(grpc::StatusCode::CANCELLED, "stream closed before Hello");
-    if (!up.has_hello()) return Reject(stream, v1::Reject::PROTOCOL, "the stream must start with Hello", grpc::StatusCode::INVALID_ARGUMENT);
+    if (!up.has_hello())
+      return Reject(stream, v1::Reject::PROTOCOL, "the stream must start with Hello",
+                    grpc::StatusCode::INVALID_ARGUMENT);
     const v1::Hello& hello = up.hello();
     if (hello.protocol_version() != kProtocolVersion)
       return Reject(stream, v1::Reject::PROTOCOL_VERSION,
-                    "protocol version " + std::to_string(hello.protocol_version()) + " is not supported; this receiver speaks version " +
-                        std::to_string(kProtocolVersion),
+                    "protocol version " + std::to_string(hello.protocol_version()) +
+                        " is not supported; this receiver speaks version " + std::to_string(kProtocolVersion),
                     grpc::StatusCode::FAILED_PRECONDITION);
     std::string token = hello.auth_token();
     const auto& metadata = context->client_metadata();
@@ -92,22 +97,25 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
       if (value.rfind("Bearer ", 0) == 0) token = value.substr(7);
     }
     if (!options.tokens.empty() || !options.allow_no_token) {
-      if (token.empty()) return Reject(stream, v1::Reject::UNAUTHENTICATED, "no bearer token", grpc::StatusCode::UNAUTHENTICATED);
+      if (token.empty())
+        return Reject(stream, v1::Reject::UNAUTHENTICATED, "no bearer token", grpc::StatusCode::UNAUTHENTICATED);
       bool known = false;
       for (const auto& t : options.tokens) known |= SameToken(t, token);
-      if (!known) return Reject(stream, v1::Reject::UNAUTHENTICATED, "wrong bearer token", grpc::StatusCode::UNAUTHENTICATED);
+      if (!known)
+        return Reject(stream, v1::Reject::UNAUTHENTICATED, "wrong bearer token", grpc::StatusCode::UNAUTHENTICATED);
     }
     auto avatar = avatars.find(hello.avatar_id());
     if (avatar == avatars.end())
-      return Reject(stream, v1::Reject::UNKNOWN_AVATAR, "no avatar '" + hello.avatar_id() + "' on this receiver", grpc::StatusCode::NOT_FOUND);
+      return Reject(stream, v1::Reject::UNKNOWN_AVATAR, "no avatar '" + hello.avatar_id() + "' on this receiver",
+                    grpc::StatusCode::NOT_FOUND);
     CodecLayout layout;
     std::string why;
     if (!FromProto(hello.layout(), &layout, &why))
       return Reject(stream, v1::Reject::BAD_LAYOUT, "bad parameter layout: " + why, grpc::StatusCode::INVALID_ARGUMENT);
     if (layout.num_expression != avatar->second.num_expression)
       return Reject(stream, v1::Reject::BAD_LAYOUT,
-                    "layout has " + std::to_string(layout.num_expression) + " expression components, avatar '" + hello.avatar_id() +
-                        "' has " + std::to_string(avatar->second.num_expression),
+                    "layout has " + std::to_string(layout.num_expression) + " expression components, avatar '" +
+                        hello.avatar_id() + "' has " + std::to_string(avatar->second.num_expression),
                     grpc::StatusCode::INVALID_ARGUMENT);
     SessionView view;
     {
@@ -234,8 +242,9 @@ void ReceiverServer::Start() {
   if (o.plaintext) {
     credentials = grpc::InsecureServerCredentials();
   } else {
-    grpc::SslServerCredentialsOptions ssl(o.tls_client_ca.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
-                                                                  : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+    grpc::SslServerCredentialsOptions ssl(o.tls_client_ca.empty()
+                                              ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+                                              : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
     ssl.pem_key_cert_pairs.push_back({ReadFileBytes(o.tls_key), ReadFileBytes(o.tls_cert)});
     if (!o.tls_client_ca.empty()) ssl.pem_root_certs = ReadFileBytes(o.tls_client_ca);
     credentials = grpc::SslServerCredentials(ssl);
@@ -250,7 +259,8 @@ void ReceiverServer::Start() {
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PING_STRIKES, 0);
   impl_->server = builder.BuildAndStart();
-  if (!impl_->server || impl_->port == 0) throw std::runtime_error("receiver: cannot listen on " + o.listen + " (in use?)");
+  if (!impl_->server || impl_->port == 0)
+    throw std::runtime_error("receiver: cannot listen on " + o.listen + " (in use?)");
   spdlog::info("receiver listening on {} (port {}, {})", o.listen, impl_->port, o.plaintext ? "plaintext" : "TLS");
 }
 

@@ -19,15 +19,15 @@ namespace headcast {
 
 struct ReceiverServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
-  std::vector<std::string> tokens;          // accepted bearer tokens (required unless allow_no_token)
-  bool allow_no_token = false;              // only with plaintext on loopback
-  bool plaintext = false;                   // TLS off: only allowed when listening on loopback
-  std::string tls_cert, tls_key;            // PEM files: server certificate chain and key
-  std::string tls_client_ca;                // PEM: if set, clients must present a certificate signed by it
+  std::vector<std::string> tokens;         // accepted bearer tokens (required unless allow_no_token)
+  bool allow_no_token = false;             // only with plaintext on loopback
+  bool plaintext = false;                  // TLS off: only allowed when listening on loopback
+  std::string tls_cert, tls_key;           // PEM files: server certificate chain and key
+  std::string tls_client_ca;               // PEM: if set, clients must present a certificate signed by it
   int max_sessions = 16;
-  double target_delay_s = 0.1;              // jitter buffer delay
-  double stats_interval_s = 1.0;            // how often Stats go back, seconds
-  void Check() const;  // throws std::invalid_argument, e.g. plaintext on a non-loopback address
+  double target_delay_s = 0.1;    // jitter buffer delay
+  double stats_interval_s = 1.0;  // how often Stats go back, seconds
+  void Check() const;             // throws std::invalid_argument, e.g. plaintext on a non-loopback address
 };
 
 // What an avatar id stands for, to validate layouts.

@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <optional>
 #include <thread>
 
 #include "common/core/bounded_queue.h"
@@ -23,8 +24,10 @@ void SenderOptions::Check() const {
   c.NonNegative("min_send_interval_s", min_send_interval_s).Positive("reconnect_initial_s", reconnect_initial_s);
   c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
-  c.That(!plaintext || IsLoopbackAddress(target), "plaintext is only allowed to a loopback target (got " + target + ")");
-  c.That(plaintext || !tls_ca.empty(), "TLS needs tls_ca (the CA of the receiver's certificate), or plaintext on loopback");
+  c.That(!plaintext || IsLoopbackAddress(target),
+         "plaintext is only allowed to a loopback target (got " + target + ")");
+  c.That(plaintext || !tls_ca.empty(),
+         "TLS needs tls_ca (the CA of the receiver's certificate), or plaintext on loopback");
   c.ThrowIfErrors();
 }
 
@@ -125,7 +128,8 @@ struct SenderClient::Impl {
     });
     {
       std::unique_lock<std::mutex> lock(mutex);
-      cv.wait_for(lock, std::chrono::duration<double>(options.welcome_timeout_s), [&] { return welcomed != 0 || stop; });
+      cv.wait_for(lock, std::chrono::duration<double>(options.welcome_timeout_s),
+                  [&] { return welcomed != 0 || stop; });
     }
     if (welcomed == 1) {
       std::lock_guard<std::mutex> lock(mutex);
@@ -133,7 +137,8 @@ struct SenderClient::Impl {
     }
     if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", options.target, options.avatar_id);
     ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame
-    const double origin = Seconds();
+    // Capture times travel relative to the session's first frame (whole ms).
+    std::optional<double> origin;
     double last_send = 0;
     while (welcomed == 1 && !stop) {
       auto first = queue.Pop(std::chrono::milliseconds(50));
@@ -144,12 +149,13 @@ struct SenderClient::Impl {
       }
       // Whatever queued up while we waited or while the last write blocked
       // (a narrow link) goes into this message: batching adapts to the link.
+      if (!origin) origin = first->capture_time_s;
       std::vector<std::string> packets;
-      packets.push_back(encoder.Encode(*first, origin));
+      packets.push_back(encoder.Encode(*first, *origin));
       while (static_cast<int>(packets.size()) < options.max_batch) {
         auto more = queue.TryPop();
         if (!more) break;
-        packets.push_back(encoder.Encode(*more, origin));
+        packets.push_back(encoder.Encode(*more, *origin));
       }
       v1::Uplink up;
       up.mutable_frames()->set_payload(PackPackets(packets));

@@ -15,27 +15,28 @@ namespace headcast {
 struct SenderOptions {
   std::string target = "127.0.0.1:50051";  // receiver host:port
   std::string avatar_id = "default";
-  std::string token;                       // bearer token (sent as "authorization" metadata)
+  std::string token;  // bearer token (sent as "authorization" metadata)
   std::string sender_name = "headcast-sender";
-  bool plaintext = false;                  // only allowed for a loopback target
-  std::string tls_ca;                      // PEM: CA that signed the receiver's certificate
-  std::string tls_client_cert, tls_client_key;  // PEM: optional client certificate
-  std::string tls_server_name;             // override the name checked in the certificate
-  double fps = 30;                         // capture rate, for the layout
-  int queue_frames = 8;                    // frames waiting at most; older ones are dropped
-  int max_batch = 12;                      // frames per message at most
-  double min_send_interval_s = 0;          // wait at least this long between messages (narrow links)
+  bool plaintext = false;                                   // only allowed for a loopback target
+  std::string tls_ca;                                       // PEM: CA that signed the receiver's certificate
+  std::string tls_client_cert, tls_client_key;              // PEM: optional client certificate
+  std::string tls_server_name;                              // override the name checked in the certificate
+  double fps = 30;                                          // capture rate, for the layout
+  int queue_frames = 8;                                     // frames waiting at most; older ones are dropped
+  int max_batch = 12;                                       // frames per message at most
+  double min_send_interval_s = 0;                           // wait at least this long between messages (narrow links)
   double reconnect_initial_s = 0.1, reconnect_max_s = 1.0;  // back-off between attempts
-  double welcome_timeout_s = 3;            // Hello -> Welcome deadline
-  double keepalive_s = 10;                 // HTTP/2 ping interval while idle
+  double welcome_timeout_s = 3;                             // Hello -> Welcome deadline
+  double keepalive_s = 10;                                  // HTTP/2 ping interval while idle
   void Check() const;
 };
 
 struct SenderCounters {
-  uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0, rejections = 0;
-  bool streaming = false;        // welcomed and streaming now
-  std::string last_rejection;    // the receiver's reason, if it refused us
-  std::string last_error;        // the last receiver Error or transport problem
+  uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0,
+           rejections = 0;
+  bool streaming = false;      // welcomed and streaming now
+  std::string last_rejection;  // the receiver's reason, if it refused us
+  std::string last_error;      // the last receiver Error or transport problem
   double receiver_render_fps = 0, receiver_kbps = 0;
   uint64_t receiver_frames = 0, receiver_bad = 0, receiver_lost = 0, receiver_late = 0;
 };

@@ -1,0 +1,138 @@
+// headcast-sender: streams head-model parameters to a receiver. Sources so far:
+// a parameter recording (replayed in real time) or the synthetic talking head;
+// camera capture and tracking arrive with the tracking work.
+#include <CLI/CLI.hpp>
+#include <csignal>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "common/core/log.h"
+#include "common/core/timer.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/headmodel/synthetic_motion.h"
+#include "proto/recording.h"
+#include "sender/session_client.h"
+
+namespace {
+std::atomic<bool> g_stop{false};
+}
+
+int main(int argc, char** argv) {
+  using namespace headcast;
+  CLI::App app{"headcast-sender: stream head-model parameters to a headcast receiver"};
+  app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
+  SenderOptions o;
+  std::string log_level, head_model_spec = "builtin", params, record, stats_json, components;
+  int synthetic = 0;
+  double duration = 0, error_m = 2e-4;
+  bool loop = false;
+  app.add_option("--log", log_level, "log level");
+  app.add_option("--target", o.target, "receiver host:port")->capture_default_str();
+  app.add_option("--avatar-id", o.avatar_id, "which of the receiver's avatars to drive")->capture_default_str();
+  app.add_option("--token", o.token, "bearer token");
+  app.add_flag("--plaintext", o.plaintext, "no TLS (loopback targets only)");
+  app.add_option("--tls-ca", o.tls_ca, "PEM CA of the receiver's certificate");
+  app.add_option("--tls-cert", o.tls_client_cert, "PEM client certificate (if the receiver requires one)");
+  app.add_option("--tls-key", o.tls_client_key, "PEM client key");
+  app.add_option("--tls-server-name", o.tls_server_name, "name to check in the receiver's certificate");
+  app.add_option("--head-model", head_model_spec, "head model: builtin or .npz")->capture_default_str();
+  app.add_option("--params", params, "replay this parameter recording (.hcrec)");
+  app.add_option("--synthetic", synthetic, "send this many frames of the synthetic talking head (default source)");
+  app.add_flag("--loop", loop, "replay the source forever");
+  app.add_option("--fps", o.fps, "frame rate of the synthetic source")->capture_default_str();
+  app.add_option("--expression-components", components, "comma-separated expression indices to send (default all)");
+  app.add_option("--quantisation-error", error_m, "largest vertex error one quantisation step may cause, metres")
+      ->capture_default_str();
+  app.add_option("--max-batch", o.max_batch, "frames per message at most")->capture_default_str();
+  app.add_option("--min-send-interval", o.min_send_interval_s, "seconds between messages at least (narrow links)")
+      ->capture_default_str();
+  app.add_option("--queue", o.queue_frames, "frames queued at most (older ones are dropped)")->capture_default_str();
+  app.add_option("--record", record, "also record the sent parameters (.hcrec)");
+  app.add_option("--duration", duration, "stop after this many seconds (0: at the end of the source)");
+  app.add_option("--stats-json", stats_json, "write sender statistics here at the end");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    InitLogging(log_level);
+    std::signal(SIGINT, [](int) { g_stop = true; });
+    std::signal(SIGTERM, [](int) { g_stop = true; });
+    const HeadModel model = LoadHeadModelSpec(head_model_spec);
+    std::vector<int> subset;
+    std::stringstream ss(components);
+    for (std::string item; std::getline(ss, item, ',');)
+      if (!item.empty()) subset.push_back(std::stoi(item));
+    const CodecLayout layout = CodecLayout::FromModel(model, error_m, subset);
+    std::vector<FrameParams> frames;
+    RecordingInfo info;
+    if (!params.empty()) {
+      frames = ReadRecording(params, &info);
+      if (!info.head_model_fingerprint.empty() && info.head_model_fingerprint != model.fingerprint())
+        throw std::runtime_error(params + ": recorded with another head model ('" + info.head_model_name + "')");
+      o.fps = info.fps;
+    } else {
+      SyntheticMotionOptions motion;
+      motion.fps = o.fps;
+      for (int i = 0; i < (synthetic > 0 ? synthetic : 300); ++i)
+        frames.push_back(SyntheticTalkingHead(model, i, motion));
+    }
+    if (frames.empty()) throw std::runtime_error("nothing to send");
+    std::unique_ptr<RecordingWriter> recorder;
+    if (!record.empty()) {
+      info.head_model_name = model.data().name;
+      info.head_model_fingerprint = model.fingerprint();
+      info.num_expression = model.num_expression();
+      info.fps = o.fps;
+      info.source = "headcast-sender";
+      recorder = std::make_unique<RecordingWriter>(record, info);
+    }
+    SenderClient client(o, layout);
+    client.Start();
+    // Real-time pacing by capture timestamps; each frame stamped with the send-side clock.
+    Stopwatch clock;
+    const double t0 = frames.front().capture_time_s, span = frames.back().capture_time_s - t0 + 1.0 / o.fps;
+    uint64_t sequence = 0;
+    for (size_t i = 0; !g_stop; ++i) {
+      if (i == frames.size()) {
+        if (!loop) break;
+        i = 0;
+      }
+      const double lap = std::floor(sequence / static_cast<double>(frames.size()));
+      const double due = frames[i].capture_time_s - t0 + lap * span;
+      if (duration > 0 && due > duration) break;
+      const double wait = due - clock.ElapsedSeconds();
+      if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+      FrameParams f = frames[i];
+      f.sequence = sequence++;
+      f.capture_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+      client.Submit(f);
+      if (recorder) recorder->Write(f);
+    }
+    client.Flush(2.0);
+    client.Stop(g_stop ? "interrupted" : "end of source");
+    const SenderCounters c = client.counters();
+    nlohmann::json report = {{"frames_submitted", c.submitted},
+                             {"frames_sent", c.sent},
+                             {"frames_dropped", c.dropped},
+                             {"frames_invalid", c.invalid},
+                             {"messages", c.messages},
+                             {"payload_bytes", c.payload_bytes},
+                             {"payload_kbps", 8e-3 * c.payload_bytes / std::max(1e-3, clock.ElapsedSeconds())},
+                             {"seconds", clock.ElapsedSeconds()},
+                             {"connects", c.connects},
+                             {"rejection", c.last_rejection},
+                             {"last_error", c.last_error},
+                             {"receiver_frames", c.receiver_frames},
+                             {"receiver_bad", c.receiver_bad}};
+    std::cout << report.dump(2) << "\n";
+    if (!stats_json.empty()) std::ofstream(stats_json) << report.dump(2) << "\n";
+    if (c.connects == 0) {
+      spdlog::error("never streamed: {}", c.last_rejection.empty() ? c.last_error : c.last_rejection);
+      return 2;
+    }
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+  return 0;
+}
