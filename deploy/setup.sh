@@ -23,8 +23,10 @@ packages=(
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libzip-dev libjemalloc-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
-  # converters and small tools
-  python3 python3-numpy python3-scipy python3-grpcio python3-protobuf
+  # converters, the Python test client, plots
+  python3 python3-numpy python3-scipy python3-grpcio python3-protobuf python3-matplotlib
+  # fuzzing (libFuzzer ships with clang's runtime), TLS certificates, network lab
+  clang libclang-rt-14-dev openssl iproute2
 )
 
 missing=()
