@@ -67,6 +67,9 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "libtorch threads")->capture_default_str();
   app.add_option("--duration", duration, "stop after this many seconds (0: run until interrupted)");
   app.add_option("--stats-json", stats_json, "write render and server statistics here at the end");
+  std::string latency_csv;
+  app.add_option("--latency-csv", latency_csv,
+                 "log every received frame: arrival time, session, sequence, capture-to-arrival ms (same-host clocks)");
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);
@@ -92,18 +95,28 @@ int main(int argc, char** argv) {
     std::unique_ptr<RecordingWriter> recorder;
     std::mutex record_mutex;
     std::string recorded_session;
-    if (!record.empty()) {
+    std::ofstream latency_log;
+    if (!latency_csv.empty()) {
+      latency_log.open(latency_csv);
+      if (!latency_log) throw std::runtime_error(latency_csv + ": cannot write");
+      latency_log << "arrival_s,session,sequence,latency_ms\n";
+    }
+    if (!record.empty() || !latency_csv.empty()) {
       RecordingInfo info;
       info.head_model_name = model->data().name;
       info.head_model_fingerprint = model->fingerprint();
       info.num_expression = model->num_expression();
       info.subject = shown->subject();
       info.source = "headcast-receiver (received stream)";
-      recorder = std::make_unique<RecordingWriter>(record, info);
+      if (!record.empty()) recorder = std::make_unique<RecordingWriter>(record, info);
       server.SetFrameObserver([&](const std::string& id, const FrameParams& f) {
         std::lock_guard<std::mutex> lock(record_mutex);
         if (recorded_session.empty()) recorded_session = id;
-        if (id == recorded_session) recorder->Write(f);
+        if (recorder && id == recorded_session) recorder->Write(f);
+        if (latency_log.is_open()) {
+          const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+          latency_log << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s) << "\n";
+        }
       });
     }
     server.Start();

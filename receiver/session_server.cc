@@ -8,10 +8,12 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <optional>
 #include <thread>
 
 #include "common/codec/param_codec.h"
 #include "common/core/options.h"
+#include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "proto/convert.h"
 #include "proto/headcast.grpc.pb.h"
@@ -148,6 +150,8 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
     std::condition_variable done_cv;
     bool done = false;
     std::atomic<uint64_t> bad{0}, bytes{0}, decoded{0};
+    std::mutex latency_mutex;
+    SampleStats latency_ms;  // capture -> arrival, this stats interval
     std::thread stats_thread([&] {
       std::unique_lock<std::mutex> lock(done_mutex);
       double last_bytes = 0, last_t = Now();
@@ -160,8 +164,12 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
         s->set_frames_late(js.late);
         s->set_frames_bad(bad);
         s->set_render_fps(render_fps);
-        s->set_latency_ms_p50(-1);
-        s->set_latency_ms_p95(-1);
+        {
+          std::lock_guard<std::mutex> ll(latency_mutex);
+          s->set_latency_ms_p50(latency_ms.empty() ? -1 : latency_ms.Median());
+          s->set_latency_ms_p95(latency_ms.empty() ? -1 : latency_ms.Percentile(95));
+          latency_ms = SampleStats();
+        }
         const double now = Now();
         s->set_receive_kbps(8e-3 * (bytes - last_bytes) / std::max(1e-3, now - last_t));
         last_bytes = static_cast<double>(bytes);
@@ -191,11 +199,22 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
       if (!UnpackPackets(up.frames().payload(), &packets, &error)) {
         ++bad;
       } else {
+        std::optional<double> batch_shift;  // relative (decoded) -> sender's absolute clock
         for (const auto& packet : packets) {
           FrameParams f;
           if (!decoder.Decode(packet, &f, &error, origin) || !f.IsValid(&error)) {
             ++bad;
             continue;
+          }
+          if (up.frames().first_capture_time_s() > 0) {
+            if (!batch_shift) batch_shift = up.frames().first_capture_time_s() - f.capture_time_s;
+            f.capture_time_s += *batch_shift;
+            // Same host (netlab, loopback tests): the clocks agree and arrival latency is meaningful.
+            const double latency = SteadySeconds() - f.capture_time_s;
+            if (std::abs(latency) < 60) {
+              std::lock_guard<std::mutex> lock(latency_mutex);
+              latency_ms.Add(1e3 * latency);
+            }
           }
           view.buffer->Push(f, Now());
           if (observer) observer(view.id, f);

@@ -150,6 +150,7 @@ struct SenderClient::Impl {
       // Whatever queued up while we waited or while the last write blocked
       // (a narrow link) goes into this message: batching adapts to the link.
       if (!origin) origin = first->capture_time_s;
+      const double first_capture = first->capture_time_s;
       std::vector<std::string> packets;
       packets.push_back(encoder.Encode(*first, *origin));
       while (static_cast<int>(packets.size()) < options.max_batch) {
@@ -161,6 +162,7 @@ struct SenderClient::Impl {
       up.mutable_frames()->set_payload(PackPackets(packets));
       up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
       up.mutable_frames()->set_send_time_s(Seconds());
+      up.mutable_frames()->set_first_capture_time_s(first_capture);
       last_send = Seconds();
       const bool ok = stream->Write(up);
       {
