@@ -66,14 +66,14 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
 
   grpc::Status Reject(grpc::ServerReaderWriter<v1::Downlink, v1::Uplink>* stream, v1::Reject::Reason reason,
                       const std::string& message, grpc::StatusCode code) {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      ++counters.sessions_rejected;  // before the reply, so whoever reads it sees the count
+    }
     v1::Downlink d;
     d.mutable_reject()->set_reason(reason);
     d.mutable_reject()->set_message(message);
     stream->Write(d);
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      ++counters.sessions_rejected;
-    }
     spdlog::info("session rejected: {}", message);
     return grpc::Status(code, message);
   }

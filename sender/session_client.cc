@@ -24,6 +24,7 @@ void SenderOptions::Check() const {
   c.NonNegative("min_send_interval_s", min_send_interval_s).Positive("reconnect_initial_s", reconnect_initial_s);
   c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
+  c.NonNegative("max_kbps", max_kbps).InRange("wire_overhead_bytes", wire_overhead_bytes, 0, 10000);
   c.That(!plaintext || IsLoopbackAddress(target),
          "plaintext is only allowed to a loopback target (got " + target + ")");
   c.That(plaintext || !tls_ca.empty(),
@@ -45,8 +46,14 @@ struct SenderClient::Impl {
   mutable std::mutex mutex;
   mutable std::condition_variable cv;
   SenderCounters counters;
+  std::atomic<double> budget_kbps{0};
 
-  Impl(SenderOptions o, CodecLayout l) : options(std::move(o)), layout(std::move(l)), queue(options.queue_frames) {}
+  uint64_t sent_before_session = 0;
+
+  Impl(SenderOptions o, CodecLayout l) : options(std::move(o)), layout(std::move(l)), queue(options.queue_frames) {
+    budget_kbps = options.max_kbps;
+    counters.budget_kbps = options.max_kbps;
+  }
 
   std::shared_ptr<grpc::Channel> MakeChannel() const {
     grpc::ChannelArguments args;
@@ -111,6 +118,16 @@ struct SenderClient::Impl {
           welcomed = -1;
           cv.notify_all();
         } else if (d.has_stats()) {
+          if (options.max_kbps > 0) {
+            // Frames sent but not yet decoded by the receiver: a backlog in the
+            // network. More than ~0.3 s of frames: back off; otherwise recover.
+            const double backlog = static_cast<double>(counters.sent) - static_cast<double>(d.stats().frames_received()) -
+                                   static_cast<double>(sent_before_session);
+            const double budget = budget_kbps.load();
+            budget_kbps = backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7)
+                                                      : std::min(options.max_kbps, budget * 1.05);
+            counters.budget_kbps = budget_kbps;
+          }
           counters.receiver_render_fps = d.stats().render_fps();
           counters.receiver_kbps = d.stats().receive_kbps();
           counters.receiver_frames = d.stats().frames_received();
@@ -137,15 +154,33 @@ struct SenderClient::Impl {
     }
     if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", options.target, options.avatar_id);
     ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      sent_before_session = counters.sent;
+    }
     // Capture times travel relative to the session's first frame (whole ms).
     std::optional<double> origin;
     double last_send = 0;
+    double tokens = 0, token_time = Seconds();
     while (welcomed == 1 && !stop) {
       auto first = queue.Pop(std::chrono::milliseconds(50));
       if (!first) continue;
       if (options.min_send_interval_s > 0) {
         const double wait = last_send + options.min_send_interval_s - Seconds();
         if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+      }
+      if (options.max_kbps > 0) {
+        // Token bucket in bytes: wait until this message's estimated wire size fits.
+        const double estimate = options.wire_overhead_bytes + 14.0 * (1 + queue.size());
+        for (;;) {
+          const double now = Seconds();
+          const double budget = budget_kbps.load();
+          tokens = std::min(tokens + (now - token_time) * budget * 125.0, 2 * estimate);
+          token_time = now;
+          if (tokens >= estimate || stop) break;
+          std::this_thread::sleep_for(std::chrono::duration<double>((estimate - tokens) / (budget * 125.0)));
+        }
+        tokens -= estimate;
       }
       // Whatever queued up while we waited or while the last write blocked
       // (a narrow link) goes into this message: batching adapts to the link.
@@ -161,7 +196,6 @@ struct SenderClient::Impl {
       v1::Uplink up;
       up.mutable_frames()->set_payload(PackPackets(packets));
       up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
-      up.mutable_frames()->set_send_time_s(Seconds());
       up.mutable_frames()->set_first_capture_time_s(first_capture);
       last_send = Seconds();
       const bool ok = stream->Write(up);

@@ -25,6 +25,11 @@ struct SenderOptions {
   int queue_frames = 8;                                     // frames waiting at most; older ones are dropped
   int max_batch = 12;                                       // frames per message at most
   double min_send_interval_s = 0;                           // wait at least this long between messages (narrow links)
+  // Link budget in kbit/s on the wire (0: none). Messages are paced to it, so
+  // frames batch up (and the oldest are dropped) instead of queueing in the
+  // network; it is lowered when the receiver reports a backlog and recovers slowly.
+  double max_kbps = 0;
+  int wire_overhead_bytes = 140;  // per message on the wire (Ethernet+IP+TCP+TLS+HTTP/2+gRPC+proto, ACKs), measured
   double reconnect_initial_s = 0.1, reconnect_max_s = 1.0;  // back-off between attempts
   double welcome_timeout_s = 3;                             // Hello -> Welcome deadline
   double keepalive_s = 10;                                  // HTTP/2 ping interval while idle
@@ -38,6 +43,7 @@ struct SenderCounters {
   std::string last_rejection;  // the receiver's reason, if it refused us
   std::string last_error;      // the last receiver Error or transport problem
   double receiver_render_fps = 0, receiver_kbps = 0;
+  double budget_kbps = 0;  // the current pacing budget (max_kbps after adaptation)
   uint64_t receiver_frames = 0, receiver_bad = 0, receiver_lost = 0, receiver_late = 0;
 };
 

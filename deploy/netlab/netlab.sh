@@ -2,7 +2,7 @@
 # headcast bandwidth measurement runs.
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
-#                           [--recording REC] [--out DIR] [--min-send-interval S] [--max-batch N]
+#                           [--recording REC] [--out DIR] [--min-send-interval S] [--max-batch N] [--max-kbps K]
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -17,7 +17,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" out="" min_interval=0 max_batch=12 python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" out="" min_interval=0 max_batch=12 max_kbps="" python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -28,12 +28,15 @@ while [ $# -gt 0 ]; do
     --out) out=$2; shift 2 ;;
     --min-send-interval) min_interval=$2; shift 2 ;;
     --max-batch) max_batch=$2; shift 2 ;;
+    --max-kbps) max_kbps=$2; shift 2 ;;
     -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
     *) echo "netlab: unknown option $1" >&2; exit 2 ;;
   esac
 done
 [ -x "$python" ] || python=python3
 [ -n "$out" ] || out=$root/out/netlab/${mode}_${rate}kbit
+# The sender's link budget: 85 % of the rate limit unless given.
+[ -n "$max_kbps" ] || max_kbps=$(awk "BEGIN{print ($rate > 0) ? $rate * 0.85 : 0}")
 mkdir -p "$out"
 for b in headcast-sender headcast-receiver headcast-avatar; do
   [ -x "$bin/$b" ] || { echo "netlab: $bin/$b missing; run deploy/setup.sh" >&2; exit 1; }
@@ -105,6 +108,7 @@ for _ in $(seq 100); do grep -q listening "$work/receiver.log" && break; sleep 0
 grep -q listening "$work/receiver.log" || { cat "$work/receiver.log"; exit 1; }
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
   --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
+  --max-kbps "$max_kbps" \
   --stats-json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
 spid=$!
 echo "t,up_bytes,down_bytes,up_packets,down_packets" > "$out/timeline.csv"
