@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# headcast-receiver and headcast-sender as a user runs them: config files, TLS
+# with certificates from deploy/make_certs.sh, recordings at both ends, refusals.
+set -u
+bin=$1; src=$2
+tmp=$(mktemp -d)
+port=$((20000 + RANDOM % 20000))
+pass=0 fail=0
+ok() { echo "ok   $1"; pass=$((pass + 1)); }
+bad() { echo "FAIL $1"; fail=$((fail + 1)); }
+cleanup() { [ -n "${rpid:-}" ] && kill "$rpid" 2>/dev/null; wait 2>/dev/null; rm -rf "$tmp"; }
+trap cleanup EXIT
+"$src/deploy/make_certs.sh" "$tmp/certs" > /dev/null
+"$bin/headcast-avatar" create --resolution 128 --out "$tmp/demo.hcavatar" > /dev/null
+echo "s3cret" > "$tmp/tokens.txt"
+cat > "$tmp/receiver.toml" <<TOML
+listen = "127.0.0.1:$port"
+tls-cert = "$tmp/certs/server.pem"
+tls-key = "$tmp/certs/server.key"
+token-file = "$tmp/tokens.txt"
+avatar = ["demo=$tmp/demo.hcavatar"]
+display = "none"
+duration = 8
+record = "$tmp/received.hcrec"
+stats-json = "$tmp/receiver.json"
+TOML
+"$bin/headcast-receiver" --config "$tmp/receiver.toml" > /dev/null 2> "$tmp/receiver.log" &
+rpid=$!
+for _ in $(seq 50); do grep -q listening "$tmp/receiver.log" && break; sleep 0.1; done
+cat > "$tmp/sender.toml" <<TOML
+target = "localhost:$port"
+tls-ca = "$tmp/certs/ca.pem"
+token = "s3cret"
+avatar-id = "demo"
+synthetic = 60
+record = "$tmp/sent.hcrec"
+TOML
+"$bin/headcast-sender" --config "$tmp/sender.toml" > "$tmp/sender.json" 2> "$tmp/sender.log" \
+  && grep -q '"frames_sent": 60' "$tmp/sender.json" && ok "sender streams 60 frames over TLS (config file)" || bad "sender: $(cat "$tmp/sender.log")"
+out=$("$bin/headcast-sender" --config "$tmp/sender.toml" --token wrong --synthetic 5 2>&1); rc=$?
+[ $rc -eq 2 ] && grep -q "UNAUTHENTICATED: wrong bearer token" <<<"$out" && ok "wrong token refused with the reason" || bad "wrong token: $out"
+out=$("$bin/headcast-sender" --target "10.1.2.3:$port" --plaintext --token s3cret 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "plaintext is only allowed" <<<"$out" && ok "plaintext off loopback refused" || bad "plaintext: $out"
+out=$("$bin/headcast-sender" --config "$tmp/sender.toml" --avatar-id nobody --synthetic 5 2>&1); rc=$?
+[ $rc -eq 2 ] && grep -q "UNKNOWN_AVATAR" <<<"$out" && ok "unknown avatar refused" || bad "avatar: $out"
+wait "$rpid"; rpid=
+grep -q '"frames_received": 60' "$tmp/receiver.json" && ok "receiver got 60 frames" || bad "receiver: $(cat "$tmp/receiver.json")"
+sent=$("$bin/headcast-avatar" render "$tmp/demo.hcavatar" --params "$tmp/received.hcrec" --display none --unpaced --stats-json "$tmp/r.json" > /dev/null 2>&1; grep -o '"rendered": [0-9]*' "$tmp/r.json")
+[ "$sent" = '"rendered": 60' ] && ok "the receiver's recording replays (60 frames)" || bad "replay: $sent"
+echo "streaming cli checks: $pass ok, $fail failing"
+[ $fail -eq 0 ]
