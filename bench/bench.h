@@ -16,6 +16,7 @@ struct BenchOptions {
   int resolution = 256;           // render: output size
   int threads = 2;                // render: libtorch threads
   bool compare_headnerf = false;  // render: also run the HeadNeRF-sized configuration
+  std::string avatar;             // codec: measure the PSNR the codec costs with this avatar
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.

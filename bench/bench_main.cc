@@ -50,6 +50,8 @@ int main(int argc, char** argv) {
   add_common(quality);
   auto* codec = app.add_subcommand("codec", "parameter codec: bits per frame and added error");
   add_common(codec);
+  codec->add_option("--avatar", options.avatar,
+                    "an .hcavatar for the built-in head: also report the PSNR the codec costs");
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   quality->add_option("--iterations", options.repeats, "training steps per variant (batch 4)");
   render->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));

@@ -115,7 +115,8 @@ int main(int argc, char** argv) {
         if (recorder && id == recorded_session) recorder->Write(f);
         if (latency_log.is_open()) {
           const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-          latency_log << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s) << "\n";
+          latency_log << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s)
+                      << "\n";
         }
       });
     }

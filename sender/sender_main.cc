@@ -48,7 +48,8 @@ int main(int argc, char** argv) {
   app.add_option("--max-batch", o.max_batch, "frames per message at most")->capture_default_str();
   app.add_option("--min-send-interval", o.min_send_interval_s, "seconds between messages at least (narrow links)")
       ->capture_default_str();
-  app.add_option("--max-kbps", o.max_kbps, "link budget on the wire, kbit/s (0: none); adapted down on backlog")->capture_default_str();
+  app.add_option("--max-kbps", o.max_kbps, "link budget on the wire, kbit/s (0: none); adapted down on backlog")
+      ->capture_default_str();
   app.add_option("--queue", o.queue_frames, "frames queued at most (older ones are dropped)")->capture_default_str();
   app.add_option("--record", record, "also record the sent parameters (.hcrec)");
   app.add_option("--duration", duration, "stop after this many seconds (0: at the end of the source)");

@@ -121,11 +121,12 @@ struct SenderClient::Impl {
           if (options.max_kbps > 0) {
             // Frames sent but not yet decoded by the receiver: a backlog in the
             // network. More than ~0.3 s of frames: back off; otherwise recover.
-            const double backlog = static_cast<double>(counters.sent) - static_cast<double>(d.stats().frames_received()) -
+            const double backlog = static_cast<double>(counters.sent) -
+                                   static_cast<double>(d.stats().frames_received()) -
                                    static_cast<double>(sent_before_session);
             const double budget = budget_kbps.load();
-            budget_kbps = backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7)
-                                                      : std::min(options.max_kbps, budget * 1.05);
+            budget_kbps =
+                backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7) : std::min(options.max_kbps, budget * 1.05);
             counters.budget_kbps = budget_kbps;
           }
           counters.receiver_render_fps = d.stats().render_fps();

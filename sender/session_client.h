@@ -17,14 +17,14 @@ struct SenderOptions {
   std::string avatar_id = "default";
   std::string token;  // bearer token (sent as "authorization" metadata)
   std::string sender_name = "headcast-sender";
-  bool plaintext = false;                                   // only allowed for a loopback target
-  std::string tls_ca;                                       // PEM: CA that signed the receiver's certificate
-  std::string tls_client_cert, tls_client_key;              // PEM: optional client certificate
-  std::string tls_server_name;                              // override the name checked in the certificate
-  double fps = 30;                                          // capture rate, for the layout
-  int queue_frames = 8;                                     // frames waiting at most; older ones are dropped
-  int max_batch = 12;                                       // frames per message at most
-  double min_send_interval_s = 0;                           // wait at least this long between messages (narrow links)
+  bool plaintext = false;                       // only allowed for a loopback target
+  std::string tls_ca;                           // PEM: CA that signed the receiver's certificate
+  std::string tls_client_cert, tls_client_key;  // PEM: optional client certificate
+  std::string tls_server_name;                  // override the name checked in the certificate
+  double fps = 30;                              // capture rate, for the layout
+  int queue_frames = 8;                         // frames waiting at most; older ones are dropped
+  int max_batch = 12;                           // frames per message at most
+  double min_send_interval_s = 0;               // wait at least this long between messages (narrow links)
   // Link budget in kbit/s on the wire (0: none). Messages are paced to it, so
   // frames batch up (and the oldest are dropped) instead of queueing in the
   // network; it is lowered when the receiver reports a backlog and recovers slowly.
