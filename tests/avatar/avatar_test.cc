@@ -6,6 +6,7 @@
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
+#include "tests/testing/tiny_avatar.h"
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
@@ -15,18 +16,7 @@
 namespace headcast {
 namespace {
 
-AvatarConfig Tiny() {
-  AvatarConfig c;
-  c.output_size = 128;
-  c.feature_channels = 8;
-  c.mlp_width = 16;
-  c.mlp_layers = 3;
-  c.skip_layer = 2;
-  c.pe_frequencies = 2;
-  c.samples_per_ray = 4;
-  c.renderer_channels = {8, 8, 4, 4};
-  return c;
-}
+AvatarConfig Tiny() { return testing::TinyAvatarConfig(); }
 
 std::shared_ptr<const HeadModel> Builtin() {
   static auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());

@@ -2,11 +2,8 @@
 # headcast-headmodel as a user runs it: convert, summarise, render; bad files refused clearly.
 set -u
 bin=$1
-tmp=$(mktemp -d)
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 trap 'rm -rf "$tmp"' EXIT
-pass=0 fail=0
-ok() { echo "ok   $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL $1"; fail=$((fail + 1)); }
 
 "$bin" convert builtin --out "$tmp/builtin.npz" >/dev/null && ok "convert builtin" || bad "convert builtin"
 "$bin" summary "$tmp/builtin.npz" | grep -q "expressions: smile" && ok "summary lists expressions" || bad "summary"
@@ -20,5 +17,4 @@ out=$("$bin" summary "$tmp/cut.npz" 2>&1); rc=$?
 [ $rc -eq 1 ] && grep -q "cut.npz" <<<"$out" && ok "truncated model refused by name" || bad "truncated: $out"
 out=$("$bin" summary "$tmp/none.npz" 2>&1); rc=$?
 [ $rc -eq 1 ] && grep -q "no such file" <<<"$out" && ok "missing model refused" || bad "missing: $out"
-echo "headmodel cli checks: $pass ok, $fail failing"
-[ $fail -eq 0 ]
+checks_summary "headmodel cli"

@@ -3,11 +3,8 @@
 # with certificates from deploy/make_certs.sh, recordings at both ends, refusals.
 set -u
 bin=$1; src=$2
-tmp=$(mktemp -d)
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 port=$((20000 + RANDOM % 20000))
-pass=0 fail=0
-ok() { echo "ok   $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL $1"; fail=$((fail + 1)); }
 cleanup() { [ -n "${rpid:-}" ] && kill "$rpid" 2>/dev/null; wait 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
 "$src/deploy/make_certs.sh" "$tmp/certs" > /dev/null
@@ -47,5 +44,4 @@ wait "$rpid"; rpid=
 grep -q '"frames_received": 60' "$tmp/receiver.json" && ok "receiver got 60 frames" || bad "receiver: $(cat "$tmp/receiver.json")"
 sent=$("$bin/headcast-avatar" render "$tmp/demo.hcavatar" --params "$tmp/received.hcrec" --display none --unpaced --stats-json "$tmp/r.json" > /dev/null 2>&1; grep -o '"rendered": [0-9]*' "$tmp/r.json")
 [ "$sent" = '"rendered": 60' ] && ok "the receiver's recording replays (60 frames)" || bad "replay: $sent"
-echo "streaming cli checks: $pass ok, $fail failing"
-[ $fail -eq 0 ]
+checks_summary "streaming cli"

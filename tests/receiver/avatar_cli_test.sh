@@ -2,11 +2,8 @@
 # headcast-avatar end to end on its own files; bad inputs refused with clear messages.
 set -u
 bin=$1
-tmp=$(mktemp -d)
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 trap 'rm -rf "$tmp"' EXIT
-pass=0 fail=0
-ok() { echo "ok   $1"; pass=$((pass + 1)); }
-bad() { echo "FAIL $1"; fail=$((fail + 1)); }
 
 "$bin" create --resolution 128 --out "$tmp/a.hcavatar" >/dev/null && ok "create" || bad "create"
 "$bin" info "$tmp/a.hcavatar" | grep -q '"format": "headcast-avatar"' && ok "info" || bad "info"
@@ -25,5 +22,4 @@ out=$("$bin" render "$tmp/a.hcavatar" --params "$tmp/g.hcrec" --display none 2>&
 [ $rc -ne 0 ] && grep -q "not a headcast parameter recording" <<<"$out" && ok "foreign recording refused" || bad "foreign rec: $out"
 out=$("$bin" render "$tmp/a.hcavatar" --display hologram 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "unknown display" <<<"$out" && ok "unknown display refused" || bad "display: $out"
-echo "avatar cli checks: $pass ok, $fail failing"
-[ $fail -eq 0 ]
+checks_summary "avatar cli"

@@ -1,4 +1,5 @@
 // The render loop: paces, skips rather than lags, refuses bad parameters, stops on quit.
+#include "tests/testing/tiny_avatar.h"
 #include "receiver/render_loop.h"
 
 #include <gtest/gtest.h>
@@ -11,17 +12,7 @@
 namespace headcast {
 namespace {
 
-AvatarConfig Tiny() {
-  AvatarConfig c;
-  c.output_size = 128;
-  c.feature_channels = 8;
-  c.mlp_width = 16;
-  c.mlp_layers = 2;
-  c.pe_frequencies = 2;
-  c.samples_per_ray = 4;
-  c.renderer_channels = {8, 8, 4, 4};
-  return c;
-}
+AvatarConfig Tiny() { return testing::TinyAvatarConfig(); }
 
 // Counts frames; can be told to quit, or to be slow (to test skipping).
 class FakeDisplay : public Display {

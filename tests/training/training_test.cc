@@ -1,6 +1,7 @@
 // Synthetic data on the fly and fitting on tiny configurations.
 #include <gtest/gtest.h>
 
+#include "tests/testing/tiny_avatar.h"
 #include "common/avatar/avatar_pipeline.h"
 #include "common/headmodel/builtin_head.h"
 #include "training/avatar_fit.h"
@@ -8,17 +9,7 @@
 namespace headcast {
 namespace {
 
-AvatarConfig Tiny() {
-  AvatarConfig c;
-  c.output_size = 128;
-  c.feature_channels = 8;
-  c.mlp_width = 16;
-  c.mlp_layers = 2;
-  c.pe_frequencies = 2;
-  c.samples_per_ray = 4;
-  c.renderer_channels = {8, 8, 4, 4};
-  return c;
-}
+AvatarConfig Tiny() { return testing::TinyAvatarConfig(); }
 
 const HeadModel& Model() {
   static const HeadModel m = MakeBuiltinHead();
