@@ -5,6 +5,7 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <thread>
 
 #include "common/headmodel/builtin_head.h"
@@ -131,8 +132,15 @@ TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
     client.Submit(sent.back());
     if (i % 10 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
+  // NaN and infinite parameters never leave the sender.
+  FrameParams nan_frame = sent.back(), inf_frame = sent.back();
+  nan_frame.expression[2] = std::nanf("");
+  inf_frame.cam_translation.x() = std::numeric_limits<float>::infinity();
+  client.Submit(nan_frame);
+  client.Submit(inf_frame);
   ASSERT_TRUE(client.Flush(10));
   ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 120; }, 10));
+  EXPECT_EQ(client.counters().invalid, 2u);
   client.Stop("test done");
   std::lock_guard<std::mutex> lock(collector_.mutex);
   ASSERT_EQ(collector_.frames.size(), 1u);
