@@ -1,0 +1,177 @@
+// Face detection, landmarks and filtering with dlib.
+#include "common/tracking/face_tracker.h"
+
+#include <dlib/image_processing.h>
+#include <dlib/image_processing/frontal_face_detector.h>
+#include <dlib/opencv/cv_image.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include "common/core/options.h"
+
+namespace headcast {
+
+void FaceTrackerOptions::Check() const {
+  OptionsCheck c("FaceTrackerOptions");
+  c.NotEmpty("predictor_path", predictor_path).InRange("detect_width", detect_width, 64, 8192);
+  c.InRange("redetect_interval", redetect_interval, 1, 100000).Positive("min_face_px", min_face_px);
+  c.Positive("filter_min_cutoff", filter_min_cutoff).NonNegative("filter_beta", filter_beta);
+  c.ThrowIfErrors();
+}
+
+const char* FaceStatusName(FaceStatus s) {
+  switch (s) {
+    case FaceStatus::kDetected:
+      return "detected";
+    case FaceStatus::kTracked:
+      return "tracked";
+    case FaceStatus::kNoFace:
+      return "no_face";
+  }
+  return "?";
+}
+
+double OneEuroFilter::Filter(double x, double t) {
+  auto alpha = [](double cutoff, double dt) {
+    const double tau = 1.0 / (2 * M_PI * cutoff);
+    return 1.0 / (1.0 + tau / dt);
+  };
+  if (!initialised_ || t <= t_) {
+    if (!initialised_) {
+      x_ = x;
+      dx_ = 0;
+      t_ = t;
+      initialised_ = true;
+    }
+    return x_;
+  }
+  const double dt = t - t_;
+  const double dx = (x - x_) / dt;
+  dx_ += alpha(d_cutoff_, dt) * (dx - dx_);
+  const double cutoff = min_cutoff_ + beta_ * std::abs(dx_);
+  x_ += alpha(cutoff, dt) * (x - x_);
+  t_ = t;
+  return x_;
+}
+
+struct FaceTracker::Impl {
+  FaceTrackerOptions options;
+  dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
+  dlib::shape_predictor predictor;
+  bool tracking = false;
+  int since_detection = 0;
+  Landmarks2d previous{};
+  std::vector<OneEuroFilter> filters;
+
+  cv::Rect BoxFromLandmarks(const Landmarks2d& l) const {
+    double x0 = 1e9, y0 = 1e9, x1 = -1e9, y1 = -1e9;
+    for (const auto& p : l) {
+      x0 = std::min(x0, p.x());
+      y0 = std::min(y0, p.y());
+      x1 = std::max(x1, p.x());
+      y1 = std::max(y1, p.y());
+    }
+    // The 68 points span brows to chin; the detector's box reaches a little above.
+    const double w = x1 - x0, h = y1 - y0;
+    return cv::Rect(cv::Point(static_cast<int>(x0 - 0.05 * w), static_cast<int>(y0 - 0.15 * h)),
+                    cv::Point(static_cast<int>(x1 + 0.05 * w), static_cast<int>(y1 + 0.05 * h)));
+  }
+};
+
+FaceTracker::FaceTracker(const FaceTrackerOptions& options) : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  impl_->options = options;
+  if (!std::filesystem::exists(options.predictor_path))
+    throw std::runtime_error(options.predictor_path +
+                             ": no such shape predictor (install libdlib-data, or give its path)");
+  try {
+    dlib::deserialize(options.predictor_path) >> impl_->predictor;
+  } catch (const std::exception& e) {
+    throw std::runtime_error(options.predictor_path + ": not a dlib shape predictor: " + e.what());
+  }
+  for (int i = 0; i < 2 * kNumLandmarks; ++i)
+    impl_->filters.emplace_back(options.filter_min_cutoff, options.filter_beta);
+}
+
+FaceTracker::~FaceTracker() = default;
+
+void FaceTracker::Reset() {
+  impl_->tracking = false;
+  for (auto& f : impl_->filters) f.Reset();
+}
+
+FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
+  Impl& m = *impl_;
+  FaceObservation obs;
+  if (image.empty() || image.type() != CV_8UC3) return obs;
+  cv::Mat gray;
+  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  cv::Rect box;
+  const bool detect = !m.tracking || m.since_detection >= m.options.redetect_interval;
+  if (detect) {
+    // HOG's cost grows with the pixel count; faces in a call fill much of the frame.
+    // Small images are enlarged (up to 2x): HOG finds faces from about 80 px.
+    double scale = std::clamp(static_cast<double>(m.options.detect_width) / gray.cols, 0.05, 2.0);
+    auto run_detector = [&](double s) {
+      cv::Mat small;
+      cv::resize(gray, small, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+      return m.detector(dlib::cv_image<unsigned char>(small));
+    };
+    std::vector<dlib::rectangle> faces = run_detector(scale);
+    if (faces.empty() && scale < 1) {
+      // Maybe a small face: look once more at full resolution (only frames without a found face pay).
+      scale = std::min(2.0, std::max(1.0, 2.0 * m.options.detect_width / gray.cols));
+      faces = run_detector(scale);
+    }
+    obs.faces_detected = static_cast<int>(faces.size());
+    // Several faces: follow the one we track (nearest box), else the largest.
+    double best = -1e18;
+    const cv::Rect previous = m.tracking ? m.BoxFromLandmarks(m.previous) : cv::Rect();
+    for (const auto& f : faces) {
+      const double s = 1.0 / scale;
+      const cv::Rect r(cv::Point(static_cast<int>(f.left() * s), static_cast<int>(f.top() * s)),
+                       cv::Point(static_cast<int>(f.right() * s), static_cast<int>(f.bottom() * s)));
+      if (r.width < m.options.min_face_px) continue;
+      const double score =
+          m.tracking ? -cv::norm((r.tl() + r.br()) / 2 - (previous.tl() + previous.br()) / 2) : r.area();
+      if (score > best) best = score, box = r;
+    }
+    if (box.area() == 0) {
+      m.tracking = false;
+      return obs;  // no face: a status, not an error
+    }
+    m.since_detection = 0;
+    obs.status = FaceStatus::kDetected;
+  } else {
+    box = m.BoxFromLandmarks(m.previous);
+    ++m.since_detection;
+    obs.status = FaceStatus::kTracked;
+  }
+  const dlib::full_object_detection shape = m.predictor(
+      dlib::cv_image<unsigned char>(gray), dlib::rectangle(box.x, box.y, box.x + box.width, box.y + box.height));
+  for (int l = 0; l < kNumLandmarks; ++l) obs.raw[l] = Eigen::Vector2d(shape.part(l).x(), shape.part(l).y());
+  // A face that left the frame or a box on nothing: the landmarks collapse or fly off.
+  const cv::Rect found = m.BoxFromLandmarks(obs.raw);
+  const bool plausible = found.width >= m.options.min_face_px * 0.5 && found.height >= m.options.min_face_px * 0.5 &&
+                         (found & cv::Rect(0, 0, image.cols, image.rows)).area() > 0.5 * found.area();
+  if (!plausible) {
+    m.tracking = false;
+    obs.status = FaceStatus::kNoFace;
+    return obs;
+  }
+  if (detect && !m.tracking)
+    for (auto& f : m.filters) f.Reset();  // a new face: do not smooth from the old one
+  for (int l = 0; l < kNumLandmarks; ++l)
+    obs.landmarks[l] = Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
+                                       m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
+  obs.box = found;
+  m.previous = obs.raw;
+  m.tracking = true;
+  return obs;
+}
+
+}  // namespace headcast

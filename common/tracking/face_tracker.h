@@ -1,0 +1,63 @@
+// FaceTracker: dlib's HOG face detector on a downscaled frame, then the face
+// box followed from the previous landmarks (the detector runs only on loss or
+// periodically), dlib's 68-point shape predictor, and One-Euro filtering of the
+// landmarks. Per-frame outcomes are statuses, never exceptions.
+#pragma once
+
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "common/tracking/head_fitter.h"
+
+namespace headcast {
+
+struct FaceTrackerOptions {
+  std::string predictor_path = "/usr/share/dlib/shape_predictor_68_face_landmarks.dat";
+  int detect_width = 320;          // the detector sees the frame scaled to this width (at most 2x up), pixels
+  int redetect_interval = 30;      // frames between detections while tracking
+  double min_face_px = 40;         // smaller faces are ignored, pixels (full frame)
+  double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
+  double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
+  void Check() const;
+};
+
+enum class FaceStatus { kDetected, kTracked, kNoFace };
+const char* FaceStatusName(FaceStatus s);
+
+struct FaceObservation {
+  FaceStatus status = FaceStatus::kNoFace;
+  Landmarks2d landmarks{};  // filtered, pixels
+  Landmarks2d raw{};        // as the predictor gave them
+  cv::Rect box;
+  int faces_detected = 0;  // faces the detector saw (when it ran)
+};
+
+class FaceTracker {
+ public:
+  // Throws std::runtime_error naming the file if the shape predictor cannot be read.
+  explicit FaceTracker(const FaceTrackerOptions& options = {});
+  ~FaceTracker();
+  FaceObservation Track(const cv::Mat& image_bgr, double time_s);
+  void Reset();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// One-Euro filter (Casiez et al. 2012) for one value.
+class OneEuroFilter {
+ public:
+  OneEuroFilter(double min_cutoff, double beta, double derivative_cutoff = 1.0)
+      : min_cutoff_(min_cutoff), beta_(beta), d_cutoff_(derivative_cutoff) {}
+  double Filter(double value, double time_s);
+  void Reset() { initialised_ = false; }
+
+ private:
+  double min_cutoff_, beta_, d_cutoff_;
+  bool initialised_ = false;
+  double x_ = 0, dx_ = 0, t_ = 0;
+};
+
+}  // namespace headcast

@@ -1,0 +1,229 @@
+// Landmark fitting with Ceres.
+#include "common/tracking/head_fitter.h"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <opencv2/calib3d.hpp>
+
+#include "common/core/options.h"
+#include "common/core/rotation.h"
+
+namespace headcast {
+
+void HeadFitterOptions::Check() const {
+  OptionsCheck c("HeadFitterOptions");
+  c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
+  c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
+  c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
+  c.ThrowIfErrors();
+}
+
+// The 68 landmarks as linear functions of expression, in the head frame, plus
+// how much of each follows the jaw joint (skinning weights at the landmark).
+struct HeadFitter::LandmarkBasis {
+  Eigen::Matrix<double, kNumLandmarks, 3, Eigen::RowMajor> base;
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> dirs;  // per landmark: 3 x E
+  Eigen::Matrix<double, kNumLandmarks, 1> jaw_weight;
+  Eigen::Vector3d jaw_joint;
+};
+
+HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options) : model_(model), options_(options) {
+  options.Check();
+  num_expression_ =
+      options.num_expression > 0 ? std::min(options.num_expression, model.num_expression()) : model.num_expression();
+  SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));
+}
+
+void HeadFitter::SetIdentity(const Eigen::VectorXd& shape) { identity_ = model_.MakeIdentity(shape); }
+
+HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose) const {
+  LandmarkBasis b;
+  Eigen::VectorXi faces;
+  RowMatrixX3f bary;
+  model_.LandmarkEmbedding(pose, &faces, &bary);
+  const auto& d = model_.data();
+  b.dirs.assign(kNumLandmarks, Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, num_expression_));
+  b.base.setZero();
+  b.jaw_weight.setZero();
+  for (int l = 0; l < kNumLandmarks; ++l)
+    for (int k = 0; k < 3; ++k) {
+      const int v = d.faces(faces[l], k);
+      const double w = bary(l, k);
+      if (w == 0) continue;
+      b.base.row(l) += w * identity_.v_shaped.segment<3>(3 * v).cast<double>().transpose();
+      b.dirs[l] += w * d.expressiondirs.block(3 * v, 0, 3, num_expression_).cast<double>();
+      b.jaw_weight[l] += w * d.weights(v, kJawJoint);
+    }
+  b.jaw_joint = identity_.joints.row(kJawJoint).cast<double>().transpose();
+  return b;
+}
+
+namespace {
+
+struct LandmarkResidual {
+  LandmarkResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
+                   const Eigen::Vector3d& jaw_joint, const Eigen::Vector2d& observed, const PinholeCamera& cam,
+                   double weight)
+      : base(base),
+        dirs(dirs),
+        jaw_weight(jaw_weight),
+        jaw_joint(jaw_joint),
+        observed(observed),
+        cam(cam),
+        weight(weight) {}
+
+  // DynamicAutoDiffCostFunction's form: the blocks are rotation, translation, expression, jaw.
+  template <typename T>
+  bool operator()(T const* const* blocks, T* residual) const {
+    return (*this)(blocks[0], blocks[1], blocks[2], blocks[3], residual);
+  }
+
+  template <typename T>
+  bool operator()(const T* cam_rotation, const T* cam_translation, const T* expression, const T* jaw,
+                  T* residual) const {
+    T p[3];
+    for (int c = 0; c < 3; ++c) {
+      p[c] = T(base[c]);
+      for (int k = 0; k < dirs.cols(); ++k) p[c] += T(dirs(c, k)) * expression[k];
+    }
+    if (jaw_weight > 0) {
+      // Linear blend skinning between the head (identity) and the jaw joint's rotation.
+      T rel[3] = {p[0] - T(jaw_joint[0]), p[1] - T(jaw_joint[1]), p[2] - T(jaw_joint[2])}, rotated[3];
+      ceres::AngleAxisRotatePoint(jaw, rel, rotated);
+      for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + T(jaw_joint[c]));
+    }
+    T x[3];
+    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
+    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
+    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    return true;
+  }
+
+  Eigen::Vector3d base;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dirs;
+  double jaw_weight;
+  Eigen::Vector3d jaw_joint;
+  Eigen::Vector2d observed;
+  PinholeCamera cam;
+  double weight;
+};
+
+// w * x for a whole parameter block, with its (diagonal) Jacobian.
+class PriorCost : public ceres::CostFunction {
+ public:
+  PriorCost(int size, double weight) : weight_(weight) {
+    set_num_residuals(size);
+    mutable_parameter_block_sizes()->push_back(size);
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const int n = num_residuals();
+    for (int i = 0; i < n; ++i) residuals[i] = weight_ * x[0][i];
+    if (jacobians && jacobians[0]) {
+      std::fill(jacobians[0], jacobians[0] + n * n, 0.0);
+      for (int i = 0; i < n; ++i) jacobians[0][i * n + i] = weight_;
+    }
+    return true;
+  }
+
+ private:
+  double weight_;
+};
+
+}  // namespace
+
+Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& cam) const {
+  const LandmarkBasis b = MakeBasis(frame.HeadPose());
+  const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
+  const Eigen::Matrix3d J = AxisAngleToMatrix(frame.jaw.cast<double>());
+  Landmarks2d out;
+  for (int l = 0; l < kNumLandmarks; ++l) {
+    Eigen::Vector3d p = b.base.row(l).transpose();
+    for (int k = 0; k < num_expression_ && k < frame.expression.size(); ++k)
+      p += b.dirs[l].col(k) * frame.expression[k];
+    if (b.jaw_weight[l] > 0) p = (1 - b.jaw_weight[l]) * p + b.jaw_weight[l] * (J * (p - b.jaw_joint) + b.jaw_joint);
+    out[l] = cam.Project(R * p + frame.cam_translation.cast<double>());
+  }
+  return out;
+}
+
+FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame) const {
+  if (frame->expression.size() != model_.num_expression())
+    frame->expression = Eigen::VectorXf::Zero(model_.num_expression());
+  const LandmarkBasis b = MakeBasis(frame->HeadPose());
+  if (!(frame->cam_translation.z() > 0)) {
+    // Initial pose from the rigid inner-face landmarks with OpenCV's PnP.
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (int l = 17; l < kNumLandmarks; ++l) {
+      object.emplace_back(b.base(l, 0), b.base(l, 1), b.base(l, 2));
+      image.emplace_back(observed[l].x(), observed[l].y());
+    }
+    cv::Mat K = (cv::Mat_<double>(3, 3) << cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1), rvec, tvec;
+    // Start in front of the camera, facing it (head y up -> camera y down).
+    rvec = (cv::Mat_<double>(3, 1) << M_PI, 0, 0);
+    tvec = (cv::Mat_<double>(3, 1) << 0, 0, 0.6);
+    if (!cv::solvePnP(object, image, K, cv::noArray(), rvec, tvec, true, cv::SOLVEPNP_ITERATIVE) ||
+        tvec.at<double>(2) <= 0)
+      return {};
+    frame->cam_rotation = Eigen::Vector3f(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
+    frame->cam_translation = Eigen::Vector3f(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+  }
+  double rotation[3], translation[3], jaw[3];
+  for (int i = 0; i < 3; ++i) {
+    rotation[i] = frame->cam_rotation[i];
+    translation[i] = frame->cam_translation[i];
+    jaw[i] = frame->jaw[i];
+  }
+  std::vector<double> expression(num_expression_);
+  for (int k = 0; k < num_expression_; ++k) expression[k] = frame->expression[k];
+  ceres::Problem problem;
+  for (int l = 0; l < kNumLandmarks; ++l) {
+    const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<LandmarkResidual, 8>(new LandmarkResidual(
+        b.base.row(l).transpose(), b.dirs[l], b.jaw_weight[l], b.jaw_joint, observed[l], cam, weight));
+    cost->AddParameterBlock(3);
+    cost->AddParameterBlock(3);
+    cost->AddParameterBlock(num_expression_);
+    cost->AddParameterBlock(3);
+    cost->SetNumResiduals(2);
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
+                             {rotation, translation, expression.data(), jaw});
+  }
+  if (num_expression_ > 0)
+    problem.AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr,
+                             expression.data());
+  problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
+  if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.max_num_iterations = options_.max_iterations;
+  solver.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  FitResult r;
+  r.iterations = static_cast<int>(summary.iterations.size());
+  r.ok = summary.IsSolutionUsable() && translation[2] > 0;
+  if (!r.ok) return r;
+  for (int i = 0; i < 3; ++i) {
+    frame->cam_rotation[i] = static_cast<float>(rotation[i]);
+    frame->cam_translation[i] = static_cast<float>(translation[i]);
+    frame->jaw[i] = static_cast<float>(jaw[i]);
+  }
+  for (int k = 0; k < num_expression_; ++k) frame->expression[k] = static_cast<float>(expression[k]);
+  const Landmarks2d fitted = Project(*frame, cam);
+  double sq = 0;
+  for (int l = 0; l < kNumLandmarks; ++l) sq += (fitted[l] - observed[l]).squaredNorm();
+  r.rms_px = std::sqrt(sq / kNumLandmarks);
+  return r;
+}
+
+double LandmarkErrorIod(const Landmarks2d& a, const Landmarks2d& b) {
+  double sum = 0;
+  for (int l = 0; l < kNumLandmarks; ++l) sum += (a[l] - b[l]).norm();
+  const double iod = (b[36] - b[45]).norm();
+  return sum / kNumLandmarks / std::max(iod, 1e-9);
+}
+
+}  // namespace headcast

@@ -1,0 +1,60 @@
+// HeadFitter: fits the head model to one frame's 68 detected landmarks with
+// Ceres — cam_from_head, expression and jaw, warm-started from the previous
+// frame, with priors (METHOD §2, landmark term and regularisers). Identity
+// (shape, focal length) is calibrated separately over key frames, then frozen.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <vector>
+
+#include "common/core/camera.h"
+#include "common/headmodel/head_model.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
+
+struct HeadFitterOptions {
+  int num_expression = 0;          // expression components fitted (0: all the model has)
+  double expression_prior = 2e-3;  // weight of sum(psi^2) against squared pixels
+  double jaw_prior = 10;           // weight of |jaw|^2 (radians^2)
+  double contour_weight = 0.5;     // landmarks 0..16 sit on a contour the model only approximates
+  int max_iterations = 25;         // Levenberg-Marquardt iterations per frame
+  double huber_px = 3;             // robust loss scale on landmark residuals, pixels
+  void Check() const;
+};
+
+struct FitResult {
+  bool ok = false;
+  double rms_px = 0;  // landmark reprojection error after the fit, pixels
+  int iterations = 0;
+};
+
+class HeadFitter {
+ public:
+  HeadFitter(const HeadModel& model, const HeadFitterOptions& options = {});
+  // Identity used from now on (shape beta; zero when never set).
+  void SetIdentity(const Eigen::VectorXd& shape);
+  // Fits `frame` (expression, jaw, cam_from_head) to `landmarks`, starting from
+  // its current values. A frame whose cam_translation.z <= 0 is initialised
+  // from the landmarks (PnP on a neutral face) first.
+  FitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame) const;
+  // Model landmarks of `frame` projected with `camera`.
+  Landmarks2d Project(const FrameParams& frame, const PinholeCamera& camera) const;
+  const HeadFitterOptions& options() const { return options_; }
+
+ private:
+  struct LandmarkBasis;
+  LandmarkBasis MakeBasis(const PoseVector& pose) const;
+  const HeadModel& model_;
+  HeadFitterOptions options_;
+  HeadIdentity identity_;
+  int num_expression_;
+};
+
+// The normalised landmark error: mean distance / outer-eye-corner distance (points 36, 45).
+double LandmarkErrorIod(const Landmarks2d& a, const Landmarks2d& b);
+
+}  // namespace headcast
