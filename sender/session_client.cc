@@ -61,6 +61,8 @@ struct SenderClient::Impl {
     args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 5000);
     args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
     args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+    // No bandwidth-delay-product probing: its pings cost more than our frames on narrow links.
+    args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
     // Reconnect quickly after a receiver restart.
     args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
     args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
