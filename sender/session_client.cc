@@ -173,20 +173,18 @@ struct SenderClient::Impl {
         if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
       }
       if (options.max_kbps > 0) {
-        // Token bucket in bytes: wait until this message's estimated wire size fits.
-        const double estimate = options.wire_overhead_bytes + 14.0 * (1 + queue.size());
+        // Token bucket in bytes, allowed to go into debt: wait until the last
+        // message's real cost has been paid off at the budget rate.
         for (;;) {
           const double now = Seconds();
           const double budget = budget_kbps.load();
-          tokens = std::min(tokens + (now - token_time) * budget * 125.0, 2 * estimate);
+          tokens =
+              std::min(tokens + (now - token_time) * budget * 125.0, static_cast<double>(options.wire_overhead_bytes));
           token_time = now;
-          if (tokens >= estimate || stop) break;
-          std::this_thread::sleep_for(std::chrono::duration<double>((estimate - tokens) / (budget * 125.0)));
+          if (tokens >= 0 || stop) break;
+          std::this_thread::sleep_for(std::chrono::duration<double>(-tokens / (budget * 125.0)));
         }
-        tokens -= estimate;
       }
-      // Whatever queued up while we waited or while the last write blocked
-      // (a narrow link) goes into this message: batching adapts to the link.
       if (!origin) origin = first->capture_time_s;
       const double first_capture = first->capture_time_s;
       std::vector<std::string> packets;
@@ -198,6 +196,7 @@ struct SenderClient::Impl {
       }
       v1::Uplink up;
       up.mutable_frames()->set_payload(PackPackets(packets));
+      if (options.max_kbps > 0) tokens -= options.wire_overhead_bytes + up.frames().payload().size();
       up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
       up.mutable_frames()->set_first_capture_time_s(first_capture);
       last_send = Seconds();

@@ -17,7 +17,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" out="" min_interval=0 max_batch=12 max_kbps="" python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" out="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
