@@ -10,13 +10,15 @@
 namespace headcast::bench {
 
 struct BenchOptions {
-  int repeats = 200;              // timed runs per measurement
-  int warmup = 20;                // untimed runs first
-  std::string json_path;          // where to write results ("" = stdout only)
-  int resolution = 256;           // render: output size
-  int threads = 2;                // render: libtorch threads
-  bool compare_headnerf = false;  // render: also run the HeadNeRF-sized configuration
-  std::string avatar;             // codec: measure the PSNR the codec costs with this avatar
+  int repeats = 200;                   // timed runs per measurement
+  int warmup = 20;                     // untimed runs first
+  std::string json_path;               // where to write results ("" = stdout only)
+  int resolution = 256;                // render: output size
+  int threads = 2;                     // render: libtorch threads
+  bool compare_headnerf = false;       // render: also run the HeadNeRF-sized configuration
+  std::string avatar;                  // codec: measure the PSNR the codec costs with this avatar
+  std::string video;                   // track: the video to track
+  std::string head_model = "builtin";  // track: head model (builtin or .npz)
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.
@@ -30,5 +32,6 @@ nlohmann::json RunRasterSuite(const BenchOptions& options);
 nlohmann::json RunRenderSuite(const BenchOptions& options);
 nlohmann::json RunQualitySuite(const BenchOptions& options);
 nlohmann::json RunCodecSuite(const BenchOptions& options);
+nlohmann::json RunTrackSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -50,6 +50,10 @@ int main(int argc, char** argv) {
   add_common(quality);
   auto* codec = app.add_subcommand("codec", "parameter codec: bits per frame and added error");
   add_common(codec);
+  auto* track = app.add_subcommand("track", "tracking cost per frame on a video (face tracker + fit)");
+  add_common(track);
+  track->add_option("--video", options.video, "video to track")->required();
+  track->add_option("--head-model", options.head_model, "builtin or a model .npz");
   codec->add_option("--avatar", options.avatar,
                     "an .hcavatar for the built-in head: also report the PSNR the codec costs");
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
@@ -67,6 +71,7 @@ int main(int argc, char** argv) {
                             : raster->parsed()  ? bench::RunRasterSuite(options)
                             : render->parsed()  ? bench::RunRenderSuite(options)
                             : codec->parsed()   ? bench::RunCodecSuite(options)
+                            : track->parsed()   ? bench::RunTrackSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

@@ -1,0 +1,57 @@
+// Benchmark suite "track": the sender's per-frame tracking cost (face tracker,
+// landmarks, head-model fit) on a video, as headcast-track runs it.
+#include "bench/bench.h"
+#include "common/core/image_io.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/tracking/face_tracker.h"
+#include "common/tracking/head_fitter.h"
+
+namespace headcast::bench {
+
+nlohmann::json RunTrackSuite(const BenchOptions& options) {
+  if (options.video.empty())
+    throw std::invalid_argument("track: give --video (e.g. ../shared/data/video/talking_d9.mp4)");
+  const HeadModel model = LoadHeadModelSpec(options.head_model);
+  FaceTracker tracker;
+  HeadFitter fitter(model);
+  VideoReader video(options.video);
+  const double fps = video.fps() > 0 ? video.fps() : 30;
+  SampleStats total, track_ms, fit_ms, error;
+  int frames = 0, fitted = 0;
+  FrameParams params;
+  cv::Mat frame;
+  while (video.Read(&frame) && (options.repeats <= 0 || frames < options.repeats)) {
+    const PinholeCamera camera = PinholeCamera::FromFovY(frame.cols, frame.rows, 40);
+    Stopwatch watch;
+    const FaceObservation obs = tracker.Track(frame, frames / fps);
+    const double t_track = watch.ElapsedMs();
+    FitResult fit;
+    if (obs.status != FaceStatus::kNoFace) fit = fitter.Fit(obs.landmarks, camera, &params);
+    if (!fit.ok) params.cam_translation.setZero();
+    total.Add(watch.ElapsedMs());
+    track_ms.Add(t_track);
+    fit_ms.Add(watch.ElapsedMs() - t_track);
+    ++frames;
+    if (fit.ok) {
+      ++fitted;
+      error.Add(LandmarkErrorIod(fitter.Project(params, camera), obs.raw));
+    }
+  }
+  nlohmann::json out;
+  out["suite"] = "track";
+  out["what"] =
+      "FaceTracker::Track + HeadFitter::Fit per frame (detect/track + 68 landmarks + fit), ms; run under taskset -c 0 "
+      "for one core";
+  out["video"] = options.video;
+  out["head_model"] = model.data().name;
+  out["frames"] = frames;
+  out["fitted_frames"] = fitted;
+  out["landmark_error_iod_mean"] = error.Mean();
+  out["ms_per_frame_median"] = total.Median();
+  out["ms_per_frame_p95"] = total.Percentile(95);
+  out["track_ms_median"] = track_ms.Median();
+  out["fit_ms_median"] = fit_ms.Median();
+  return out;
+}
+
+}  // namespace headcast::bench
