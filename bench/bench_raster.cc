@@ -18,9 +18,8 @@ nlohmann::json RunRasterSuite(const BenchOptions& options) {
   const cv::Mat albedo = AlbedoTexture(model);
   for (int size : {128, 256, 512}) {
     const PinholeCamera camera = PinholeCamera::FromFovY(size, size, 24);
-    const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
-    const RasterVertices v_cam =
-        (posed.vertices * R.transpose()).rowwise() + cam_from_head.translation.cast<float>().transpose();
+    RasterVertices v_cam;
+    TransformToCamera(posed.vertices, cam_from_head, &v_cam);
     RasterBuffers buffers;
     RasterOptions raster_options;
     const SampleStats raster =

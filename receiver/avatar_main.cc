@@ -68,9 +68,7 @@ int Render(const RenderArgs& a) {
     }
   }
   if (a.orbit_deg != 0) {
-    const HeadModelOutput rest = model->Forward(HeadModelParams{});
-    const Eigen::Vector3d centre =
-        rest.landmarks.colwise().mean().cast<double>().transpose() - Eigen::Vector3d(0, 0, 0.06);
+    const Eigen::Vector3d centre = model->rest_landmark_centroid() - Eigen::Vector3d(0, 0, 0.06);
     for (size_t i = 0; i < frames.size(); ++i) {
       const double angle = a.orbit_deg * M_PI / 180 * std::sin(2 * M_PI * i / std::max<size_t>(frames.size(), 1));
       frames[i].SetCamFromHead(Orbit(frames[i].CamFromHead(), centre, angle));

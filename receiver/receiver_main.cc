@@ -7,6 +7,7 @@
 
 #include "common/avatar/avatar_renderer.h"
 #include "common/core/log.h"
+#include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_model_io.h"
 #include "proto/recording.h"
@@ -114,7 +115,7 @@ int main(int argc, char** argv) {
         if (recorded_session.empty()) recorded_session = id;
         if (recorder && id == recorded_session) recorder->Write(f);
         if (latency_log.is_open()) {
-          const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+          const double now = SteadyNowSeconds();
           latency_log << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s)
                       << "\n";
         }

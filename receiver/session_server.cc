@@ -35,10 +35,6 @@ void ReceiverServerOptions::Check() const {
 
 namespace {
 
-double SteadySeconds() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 // Constant-time comparison, so response times do not reveal a token's prefix.
 bool SameToken(const std::string& a, const std::string& b) {
   if (a.size() != b.size()) return false;
@@ -54,7 +50,7 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
   std::map<std::string, AvatarEntry> avatars;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
-  double t0 = SteadySeconds();
+  double t0 = SteadyNowSeconds();
   mutable std::mutex mutex;
   std::map<std::string, SessionView> sessions;
   ServerCounters counters;
@@ -62,7 +58,7 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
   std::atomic<uint64_t> next_id{1};
   std::function<void(const std::string&, const FrameParams&)> observer;
 
-  double Now() const { return SteadySeconds() - t0; }
+  double Now() const { return SteadyNowSeconds() - t0; }
 
   grpc::Status Reject(grpc::ServerReaderWriter<v1::Downlink, v1::Uplink>* stream, v1::Reject::Reason reason,
                       const std::string& message, grpc::StatusCode code) {
@@ -210,7 +206,7 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
             if (!batch_shift) batch_shift = up.frames().first_capture_time_s() - f.capture_time_s;
             f.capture_time_s += *batch_shift;
             // Same host (netlab, loopback tests): the clocks agree and arrival latency is meaningful.
-            const double latency = SteadySeconds() - f.capture_time_s;
+            const double latency = SteadyNowSeconds() - f.capture_time_s;
             if (std::abs(latency) < 60) {
               std::lock_guard<std::mutex> lock(latency_mutex);
               latency_ms.Add(1e3 * latency);

@@ -106,7 +106,7 @@ int main(int argc, char** argv) {
       if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
       FrameParams f = frames[i];
       f.sequence = sequence++;
-      f.capture_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+      f.capture_time_s = SteadyNowSeconds();
       client.Submit(f);
       if (recorder) recorder->Write(f);
     }

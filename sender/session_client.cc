@@ -10,6 +10,7 @@
 
 #include "common/core/bounded_queue.h"
 #include "common/core/options.h"
+#include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "proto/convert.h"
 #include "proto/headcast.grpc.pb.h"
@@ -33,7 +34,7 @@ void SenderOptions::Check() const {
 }
 
 namespace {
-double Seconds() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+double Seconds() { return SteadyNowSeconds(); }
 }  // namespace
 
 struct SenderClient::Impl {

@@ -1,25 +1,13 @@
 // Synthetic fitting and evaluation.
 #include "training/avatar_fit.h"
 
-#include <opencv2/imgproc.hpp>
-
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
+#include "common/headmodel/head_render.h"
 
 namespace headcast {
 namespace {
-
-// (1, 3, H, W) RGB in [0, 1] from a BGR8 image.
-torch::Tensor ImageTensor(const cv::Mat& bgr) {
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8)
-             .permute({2, 0, 1})
-             .unsqueeze(0)
-             .to(torch::kFloat) /
-         255.f;
-}
 
 struct PreparedSample {
   RayBatch rays;
@@ -35,12 +23,12 @@ PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const
   HeadModelOutput posed;
   model.Forward(model.MakeIdentity(s.subject.shape.cast<double>()), s.frame.expression.cast<double>(),
                 s.frame.HeadPose(), &posed);
-  const RasterVertices v = (posed.vertices * p.cam_from_head.rotation.cast<float>().transpose()).rowwise() +
-                           p.cam_from_head.translation.cast<float>().transpose();
+  RasterVertices v;
+  TransformToCamera(posed.vertices, p.cam_from_head, &v);
   const int f = config.feature_size();
   sampler->Sample(v, model.data().faces, s.subject.intrinsics.Resized(f, f), p.cam_from_head, rng, &p.rays);
   p.conditioning = MakeConditioning(config, s.subject, s.frame);
-  p.target = ImageTensor(s.image_bgr);
+  p.target = BgrToImageTensor(s.image_bgr);
   return p;
 }
 
@@ -110,6 +98,16 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
   r.ms_median = ms.Median();
   r.count = count;
   return r;
+}
+
+cv::Mat RenderSampleBgr(Avatar& avatar, const HeadModel& model, const SyntheticSample& sample) {
+  avatar.modules().eval();
+  torch::InferenceMode inference;
+  RaySampler sampler(avatar.config());
+  const PreparedSample p = Prepare(avatar.config(), model, sample, &sampler, nullptr);
+  cv::Mat bgr;
+  ImageTensorToBgr(RunAvatar(avatar.modules(), p.rays, p.cam_from_head, p.conditioning).image, &bgr);
+  return bgr;
 }
 
 }  // namespace headcast

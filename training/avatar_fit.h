@@ -39,4 +39,7 @@ struct EvalResult {
 EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count,
                                uint64_t first = 1000000);
 
+// The avatar's picture (BGR) for a sample's parameters, e.g. beside its ground truth.
+cv::Mat RenderSampleBgr(Avatar& avatar, const HeadModel& model, const SyntheticSample& sample);
+
 }  // namespace headcast

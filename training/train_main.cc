@@ -7,7 +7,6 @@
 #include <iostream>
 #include <opencv2/imgproc.hpp>
 
-#include "common/avatar/avatar_pipeline.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/timer.h"
@@ -28,27 +27,10 @@ struct PretrainArgs {
 // Ground truth | avatar for a few held-out samples, stacked.
 cv::Mat Preview(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count) {
   std::vector<cv::Mat> rows;
-  torch::InferenceMode inference;
-  RaySampler sampler(avatar.config());
   for (int i = 0; i < count; ++i) {
     const SyntheticSample s = data.At(2000000 + i);
-    HeadModelOutput posed;
-    model.Forward(model.MakeIdentity(s.subject.shape.cast<double>()), s.frame.expression.cast<double>(),
-                  s.frame.HeadPose(), &posed);
-    const RigidTransform cam_from_head = s.frame.CamFromHead();
-    const RasterVertices v = (posed.vertices * cam_from_head.rotation.cast<float>().transpose()).rowwise() +
-                             cam_from_head.translation.cast<float>().transpose();
-    RayBatch rays;
-    const int f = avatar.config().feature_size();
-    sampler.Sample(v, model.data().faces, s.subject.intrinsics.Resized(f, f), cam_from_head, nullptr, &rays);
-    const AvatarOutput out =
-        RunAvatar(avatar.modules(), rays, cam_from_head, MakeConditioning(avatar.config(), s.subject, s.frame));
-    const torch::Tensor bytes =
-        out.image.squeeze(0).permute({1, 2, 0}).mul(255).round().clamp(0, 255).to(torch::kUInt8).contiguous();
-    cv::Mat rgb(static_cast<int>(bytes.size(0)), static_cast<int>(bytes.size(1)), CV_8UC3, bytes.data_ptr<uint8_t>());
-    cv::Mat bgr, row;
-    cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
-    cv::hconcat(s.image_bgr, bgr, row);
+    cv::Mat row;
+    cv::hconcat(s.image_bgr, RenderSampleBgr(avatar, model, s), row);
     rows.push_back(row);
   }
   cv::Mat sheet;

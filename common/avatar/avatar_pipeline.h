@@ -17,6 +17,10 @@ struct AvatarOutput {
   torch::Tensor opacity;      // (1, 1, h, w)
 };
 
+// (1, 3, H, W) RGB in [0, 1] <-> H x W BGR bytes (CV_8UC3); `out` is reused.
+void ImageTensorToBgr(const torch::Tensor& image, cv::Mat* out);
+torch::Tensor BgrToImageTensor(const cv::Mat& image_bgr);
+
 // Runs CNeRF on the batch's samples, composites the feature map and upsamples it.
 AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
                        const AvatarConditioning& conditioning, AvatarTimings* timings = nullptr);

@@ -6,6 +6,7 @@
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
+#include "common/headmodel/head_render.h"
 
 namespace headcast {
 
@@ -20,6 +21,23 @@ AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& 
   for (int i = 0; i < 27; ++i) a[i] = subject.light[i];
   for (int i = 0; i < std::min<int>(c.num_texture, subject.texture.size()); ++i) a[27 + i] = subject.texture[i];
   return {torch::tensor(g).view({1, -1}), torch::tensor(a).view({1, -1})};
+}
+
+void ImageTensorToBgr(const torch::Tensor& image, cv::Mat* out) {
+  const torch::Tensor bytes =
+      image.squeeze(0).flip({0}).permute({1, 2, 0}).mul(255.f).round().clamp(0, 255).to(torch::kUInt8).contiguous();
+  out->create(static_cast<int>(bytes.size(0)), static_cast<int>(bytes.size(1)), CV_8UC3);
+  std::memcpy(out->data, bytes.data_ptr<uint8_t>(), bytes.numel());
+}
+
+torch::Tensor BgrToImageTensor(const cv::Mat& bgr) {
+  const cv::Mat contiguous = bgr.isContinuous() ? bgr : bgr.clone();
+  return torch::from_blob(contiguous.data, {contiguous.rows, contiguous.cols, 3}, torch::kUInt8)
+             .flip({2})
+             .permute({2, 0, 1})
+             .unsqueeze(0)
+             .to(torch::kFloat) /
+         255.f;
 }
 
 AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
@@ -121,9 +139,7 @@ bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTim
   const RigidTransform cam_from_head = params.CamFromHead();
   Eigen::VectorXd psi = params.expression.cast<double>();
   m.model->Forward(m.identity, psi, params.HeadPose(), &m.posed);
-  const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
-  m.v_cam.noalias() = m.posed.vertices * R.transpose();
-  m.v_cam.rowwise() += cam_from_head.translation.cast<float>().transpose();
+  TransformToCamera(m.posed.vertices, cam_from_head, &m.v_cam);
   t.head_model_ms = watch.ElapsedMs();
   watch.Restart();
   m.sampler.Sample(m.v_cam, m.model->data().faces, m.feature_camera, cam_from_head, nullptr, &m.rays);
@@ -131,12 +147,7 @@ bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTim
   const AvatarConditioning cond = MakeConditioning(m.avatar.config(), m.avatar.subject(), params);
   const AvatarOutput out = RunAvatar(m.avatar.modules(), m.rays, cam_from_head, cond, &t);
   watch.Restart();
-  // (1, 3, H, W) RGB float -> H x W BGR bytes.
-  const torch::Tensor bytes =
-      out.image.squeeze(0).flip({0}).permute({1, 2, 0}).mul(255.f).round().clamp(0, 255).to(torch::kUInt8).contiguous();
-  const int size = static_cast<int>(bytes.size(0));
-  image->create(size, size, CV_8UC3);
-  std::memcpy(image->data, bytes.data_ptr<uint8_t>(), static_cast<size_t>(size) * size * 3);
+  ImageTensorToBgr(out.image, image);
   t.convert_ms = watch.ElapsedMs();
   t.total_ms = total.ElapsedMs();
   return true;

@@ -8,6 +8,10 @@
 
 namespace headcast {
 
+double SteadyNowSeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 double SampleStats::Mean() const {
   if (values_.empty()) return std::numeric_limits<double>::quiet_NaN();
   return std::accumulate(values_.begin(), values_.end(), 0.0) / values_.size();

@@ -19,6 +19,10 @@ class Stopwatch {
   Clock::time_point start_;
 };
 
+// Seconds on the steady clock since an arbitrary epoch; equal across processes
+// of one machine (capture timestamps, same-host latency).
+double SteadyNowSeconds();
+
 // Samples (e.g. milliseconds per frame) and their summary statistics.
 class SampleStats {
  public:

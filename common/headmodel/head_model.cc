@@ -74,6 +74,10 @@ HeadModel::HeadModel(HeadModelData data) : data_(std::move(data)) {
   }
   has_posedirs_ = data_.posedirs.size() > 0 && data_.posedirs.cwiseAbs().maxCoeff() > 0.f;
 
+  Eigen::Matrix<float, kNumLandmarks, 3, Eigen::RowMajor> rest;
+  ComputeLandmarks(data_.v_template, PoseVector::Zero(), &rest);
+  rest_landmark_centroid_ = rest.colwise().mean().cast<double>().transpose();
+
   uint64_t h = 1469598103934665603ull;
   const int64_t counts[] = {n, num_faces(), num_shape(), num_expression()};
   h = Fnv1a(h, counts, sizeof(counts));

@@ -112,6 +112,9 @@ class HeadModel {
   // Faces and barycentrics actually used for the 68 landmarks at this pose.
   void LandmarkEmbedding(const PoseVector& pose, Eigen::VectorXi* faces, RowMatrixX3f* bary) const;
 
+  // Mean of the 68 landmarks in the rest pose (head frame): where to aim a camera.
+  const Eigen::Vector3d& rest_landmark_centroid() const { return rest_landmark_centroid_; }
+
   // Per-vertex normals (area weighted) of a posed mesh.
   RowMatrixX3f VertexNormals(const RowMatrixX3f& vertices) const;
   std::string Summary() const;
@@ -130,6 +133,7 @@ class HeadModel {
   bool has_posedirs_ = false;
   std::array<bool, kNumHeadJoints> articulated_{};
   std::string fingerprint_;
+  Eigen::Vector3d rest_landmark_centroid_;
 };
 
 }  // namespace headcast

@@ -181,7 +181,8 @@ void SaveHeadModel(const HeadModel& model, const std::string& path) {
   }
   a["kintree_table"] = NpyArray::From<int32_t>({2, kNumHeadJoints}, kintree.data());
   a["f"] = NpyArray::From<int32_t>({model.num_faces(), 3}, RowMajorValues<int32_t>(d.faces).data());
-  a["lmk_faces_idx"] = NpyArray::From<int32_t>({kNumLandmarks}, RowMajorValues<int32_t>(Eigen::MatrixXi(d.lmk_faces)).data());
+  a["lmk_faces_idx"] =
+      NpyArray::From<int32_t>({kNumLandmarks}, RowMajorValues<int32_t>(Eigen::MatrixXi(d.lmk_faces)).data());
   a["lmk_bary_coords"] = NpyArray::From<float>({kNumLandmarks, 3}, RowMajorValues<float>(d.lmk_bary).data());
   if (d.dyn_lmk_faces.size() > 0) {
     a["dynamic_lmk_faces_idx"] =

@@ -23,6 +23,12 @@ RigidTransform FrontalCamFromHead(double distance, double yaw_deg, double pitch_
   return t;
 }
 
+void TransformToCamera(const RowMatrixX3f& vertices, const RigidTransform& cam_from_head, RasterVertices* out) {
+  const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
+  out->noalias() = vertices * R.transpose();
+  out->rowwise() += cam_from_head.translation.cast<float>().transpose();
+}
+
 cv::Mat AlbedoTexture(const HeadModel& model, const Eigen::VectorXd& tau) {
   const auto& d = model.data();
   if (!model.has_texture()) return cv::Mat(4, 4, CV_32FC3, cv::Scalar(0.80, 0.62, 0.52));
@@ -48,9 +54,8 @@ HeadRender RenderHead(const HeadModel& model, const RowMatrixX3f& vertices, cons
                       RasterBuffers* buffers) {
   RasterBuffers local;
   RasterBuffers& buf = buffers ? *buffers : local;
-  const Eigen::Matrix3f R = cam_from_head.rotation.cast<float>();
-  const Eigen::RowVector3f t = cam_from_head.translation.cast<float>().transpose();
-  RasterVertices v_cam = (vertices * R.transpose()).rowwise() + t;
+  RasterVertices v_cam;
+  TransformToCamera(vertices, cam_from_head, &v_cam);
   Rasterize(v_cam, model.data().faces, camera, options.raster, &buf);
   const RowMatrixX3f normals = model.VertexNormals(v_cam);
   const cv::Mat normal_image = InterpolateVertexAttribute(buf, model.data().faces, normals);

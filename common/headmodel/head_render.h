@@ -12,12 +12,14 @@
 
 namespace headcast {
 
-
 // A camera `distance` metres in front of the face looking at `target` (head
 // frame), the head turned by `yaw_deg` (positive: toward the subject's left)
 // and pitched by `pitch_deg` (positive: chin down).
 RigidTransform FrontalCamFromHead(double distance, double yaw_deg = 0, double pitch_deg = 0,
                                   const Eigen::Vector3d& target = Eigen::Vector3d(0, -0.01, 0.02));
+
+// Vertices (head frame) to the camera frame; `out` is reused across frames.
+void TransformToCamera(const RowMatrixX3f& vertices, const RigidTransform& cam_from_head, RasterVertices* out);
 
 // Albedo texture (CV_32FC3, RGB) for texture coefficients tau; flat skin if the model has none.
 cv::Mat AlbedoTexture(const HeadModel& model, const Eigen::VectorXd& tau = {});

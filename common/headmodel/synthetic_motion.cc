@@ -56,11 +56,8 @@ FrameParams SyntheticTalkingHead(const HeadModel& model, int index, const Synthe
   if (model.JointIsArticulated(kLeftEyeJoint)) p.left_eye = p.right_eye = gaze;
   const double yaw = o.max_yaw_deg * std::sin(2 * M_PI * 0.07 * t + phase);
   const double pitch = o.max_pitch_deg * std::sin(2 * M_PI * 0.05 * t + 0.5 * phase);
-  // Centre the view on the model's landmarks so any model (metres, any origin) is
-  // framed; a rest-pose forward pass costs well under a millisecond.
-  const HeadModelOutput rest = model.Forward(HeadModelParams{});
-  const Eigen::Vector3d target =
-      rest.landmarks.colwise().mean().cast<double>().transpose() + Eigen::Vector3d(0, -0.01, 0);
+  // Centre the view on the model's landmarks so any model (metres, any origin) is framed.
+  const Eigen::Vector3d target = model.rest_landmark_centroid() + Eigen::Vector3d(0, -0.01, 0);
   p.SetCamFromHead(FrontalCamFromHead(o.distance, yaw, pitch, target));
   return p;
 }

@@ -6,12 +6,12 @@
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
-#include "tests/testing/tiny_avatar.h"
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
 namespace {
@@ -121,8 +121,8 @@ TEST(RaySampler, MeshGuidedRaysCoverTheHeadAndSkipTheRest) {
   const FrameParams p = Frontal();
   const RigidTransform cam_from_head = p.CamFromHead();
   const HeadModelOutput posed = m.Forward(HeadModelParams{});
-  RasterVertices v = (posed.vertices * cam_from_head.rotation.cast<float>().transpose()).rowwise() +
-                     cam_from_head.translation.cast<float>().transpose();
+  RasterVertices v;
+  TransformToCamera(posed.vertices, cam_from_head, &v);
   const PinholeCamera cam = DefaultSubject(m, c.output_size).intrinsics.Resized(16, 16);
   RayBatch guided, uniform;
   RaySampler(c).Sample(v, m.data().faces, cam, cam_from_head, nullptr, &guided);
@@ -159,18 +159,14 @@ TEST(AvatarPipeline, AFewStepsReduceTheLossOnAFixedTarget) {
   const FrameParams p = Frontal(0.1f);
   const RigidTransform cam_from_head = p.CamFromHead();
   const HeadModelOutput posed = m.Forward(HeadModelParams{});
-  RasterVertices v = (posed.vertices * cam_from_head.rotation.cast<float>().transpose()).rowwise() +
-                     cam_from_head.translation.cast<float>().transpose();
+  RasterVertices v;
+  TransformToCamera(posed.vertices, cam_from_head, &v);
   RayBatch rays;
   RaySampler(c).Sample(v, m.data().faces, avatar.subject().intrinsics.Resized(16, 16), cam_from_head, nullptr, &rays);
   // Target: the head model's own render (what the general model learns from).
   const HeadRender target_render =
       RenderHead(m, posed.vertices, cam_from_head, avatar.subject().intrinsics, AlbedoTexture(m));
-  cv::Mat rgb;
-  cv::cvtColor(target_render.image_bgr, rgb, cv::COLOR_BGR2RGB);
-  const torch::Tensor target =
-      torch::from_blob(rgb.data, {128, 128, 3}, torch::kUInt8).permute({2, 0, 1}).unsqueeze(0).to(torch::kFloat) /
-      255.f;
+  const torch::Tensor target = BgrToImageTensor(target_render.image_bgr);
   const AvatarConditioning cond = MakeConditioning(c, avatar.subject(), p);
   torch::optim::Adam adam(avatar.modules().parameters(), torch::optim::AdamOptions(5e-3));
   std::vector<float> losses;
