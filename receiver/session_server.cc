@@ -6,7 +6,9 @@
 #include <grpcpp/health_check_service_interface.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <optional>
 #include <thread>
@@ -87,6 +89,9 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
                     "protocol version " + std::to_string(hello.protocol_version()) +
                         " is not supported; this receiver speaks version " + std::to_string(kProtocolVersion),
                     grpc::StatusCode::FAILED_PRECONDITION);
+    // NaN or negative asks fall back to our own interval; at most a minute.
+    const double asked = std::isfinite(hello.stats_interval_s()) ? hello.stats_interval_s() : 0.0;
+    const double stats_interval_s = std::clamp(asked, options.stats_interval_s, std::max(60.0, options.stats_interval_s));
     std::string token = hello.auth_token();
     const auto& metadata = context->client_metadata();
     auto it = metadata.find("authorization");
@@ -138,6 +143,7 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
       d.mutable_welcome()->set_protocol_version(kProtocolVersion);
       d.mutable_welcome()->set_session_id(view.id);
       d.mutable_welcome()->set_target_delay_s(options.target_delay_s);
+      d.mutable_welcome()->set_stats_interval_s(stats_interval_s);
       std::lock_guard<std::mutex> lock(write_mutex);
       stream->Write(d);
     }
@@ -151,7 +157,7 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
     std::thread stats_thread([&] {
       std::unique_lock<std::mutex> lock(done_mutex);
       double last_bytes = 0, last_t = Now();
-      while (!done_cv.wait_for(lock, std::chrono::duration<double>(options.stats_interval_s), [&] { return done; })) {
+      while (!done_cv.wait_for(lock, std::chrono::duration<double>(stats_interval_s), [&] { return done; })) {
         const JitterBufferStats js = view.buffer->stats();
         v1::Downlink d;
         auto* s = d.mutable_stats();

@@ -2,6 +2,7 @@
 // a parameter recording (replayed in real time) or the synthetic talking head;
 // camera capture and tracking arrive with the tracking work.
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <csignal>
 #include <fstream>
 #include <iostream>
@@ -25,7 +26,7 @@ int main(int argc, char** argv) {
   app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
   SenderOptions o;
   std::string log_level, head_model_spec = "builtin", params, record, stats_json, components;
-  int synthetic = 0;
+  int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
   app.add_option("--log", log_level, "log level");
@@ -50,6 +51,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--max-kbps", o.max_kbps, "link budget on the wire, kbit/s (0: none); adapted down on backlog")
       ->capture_default_str();
+  auto* stats_opt = app.add_option("--stats-interval", o.stats_interval_s,
+                                   "ask for receiver Stats this often, seconds (0: the receiver's choice; "
+                                   "default 5 under a 32 kbit/s budget)");
+  auto* key_opt = app.add_option("--key-interval", key_interval,
+                                 "a key frame at least every N frames (default 30; 10 s under a 32 kbit/s budget)");
   app.add_option("--queue", o.queue_frames, "frames queued at most (older ones are dropped)")->capture_default_str();
   app.add_option("--record", record, "also record the sent parameters (.hcrec)");
   app.add_option("--duration", duration, "stop after this many seconds (0: at the end of the source)");
@@ -64,7 +70,6 @@ int main(int argc, char** argv) {
     std::stringstream ss(components);
     for (std::string item; std::getline(ss, item, ',');)
       if (!item.empty()) subset.push_back(std::stoi(item));
-    const CodecLayout layout = CodecLayout::FromModel(model, error_m, subset);
     std::vector<FrameParams> frames;
     RecordingInfo info;
     if (!params.empty()) {
@@ -72,7 +77,14 @@ int main(int argc, char** argv) {
       if (!info.head_model_fingerprint.empty() && info.head_model_fingerprint != model.fingerprint())
         throw std::runtime_error(params + ": recorded with another head model ('" + info.head_model_name + "')");
       o.fps = info.fps;
-    } else {
+    }
+    if (o.max_kbps > 0 && o.max_kbps < kNarrowLinkKbps) {
+      if (stats_opt->count() == 0) o.stats_interval_s = kNarrowLinkStatsInterval;
+      if (key_opt->count() == 0) key_interval = static_cast<int>(std::lround(kNarrowLinkKeySeconds * o.fps));
+    }
+    if (key_interval < 1) throw std::invalid_argument("--key-interval must be at least 1");
+    const CodecLayout layout = CodecLayout::FromModel(model, error_m, subset, key_interval);
+    if (params.empty()) {
       SyntheticMotionOptions motion;
       motion.fps = o.fps;
       for (int i = 0; i < (synthetic > 0 ? synthetic : 300); ++i)

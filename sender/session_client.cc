@@ -26,6 +26,7 @@ void SenderOptions::Check() const {
   c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
   c.NonNegative("max_kbps", max_kbps).InRange("wire_overhead_bytes", wire_overhead_bytes, 0, 10000);
+  c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000).InRange("stats_interval_s", stats_interval_s, 0, 60);
   c.That(!plaintext || IsLoopbackAddress(target),
          "plaintext is only allowed to a loopback target (got " + target + ")");
   c.That(plaintext || !tls_ca.empty(),
@@ -48,6 +49,7 @@ struct SenderClient::Impl {
   mutable std::condition_variable cv;
   SenderCounters counters;
   std::atomic<double> budget_kbps{0};
+  std::atomic<int> downlink_debt_bytes{0};  // uplink cost of downlink messages, not yet charged
 
   uint64_t sent_before_session = 0;
 
@@ -99,6 +101,7 @@ struct SenderClient::Impl {
     hello.mutable_hello()->set_protocol_version(kProtocolVersion);
     hello.mutable_hello()->set_avatar_id(options.avatar_id);
     hello.mutable_hello()->set_sender_name(options.sender_name);
+    hello.mutable_hello()->set_stats_interval_s(options.stats_interval_s);
     ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
     if (!stream->Write(hello)) {
       SetError("cannot reach the receiver at " + options.target);
@@ -122,6 +125,7 @@ struct SenderClient::Impl {
           cv.notify_all();
         } else if (d.has_stats()) {
           if (options.max_kbps > 0) {
+            downlink_debt_bytes += options.downlink_overhead_bytes;
             // Frames sent but not yet decoded by the receiver: a backlog in the
             // network. More than ~0.3 s of frames: back off; otherwise recover.
             const double backlog = static_cast<double>(counters.sent) -
@@ -182,6 +186,7 @@ struct SenderClient::Impl {
           tokens =
               std::min(tokens + (now - token_time) * budget * 125.0, static_cast<double>(options.wire_overhead_bytes));
           token_time = now;
+          tokens -= downlink_debt_bytes.exchange(0);
           if (tokens >= 0 || stop) break;
           std::this_thread::sleep_for(std::chrono::duration<double>(-tokens / (budget * 125.0)));
         }

@@ -32,12 +32,26 @@ struct SenderOptions {
   // Per message on the wire, measured (netlab + tcpdump): ~140 B for the message
   // (Ethernet, IP, TCP, TLS, HTTP/2, gRPC, proto) and ~66 B for the TCP ACK the
   // sender returns for the receiver's per-message HTTP/2 WINDOW_UPDATEs.
-  int wire_overhead_bytes = 230;
+  int wire_overhead_bytes = 205;
+  // Uplink bytes each downlink message (Stats) costs: the TCP ACK plus the HTTP/2
+  // WINDOW_UPDATE gRPC answers with and its ACK (measured ~181 B with TLS).
+  int downlink_overhead_bytes = 180;
+  // How often we want Stats, seconds (0: the receiver's choice). Narrow links
+  // ask for fewer: see NarrowLinkDefaults().
+  double stats_interval_s = 0;
   double reconnect_initial_s = 0.1, reconnect_max_s = 1.0;  // back-off between attempts
   double welcome_timeout_s = 3;                             // Hello -> Welcome deadline
   double keepalive_s = 10;                                  // HTTP/2 ping interval while idle
   void Check() const;
 };
+
+// Below this budget (kbit/s) the sender defaults to the narrow-link settings:
+// Stats every kNarrowLinkStatsInterval seconds and a key frame every
+// kNarrowLinkKeySeconds (TCP loses no message, so key frames only serve
+// recovery, and each costs ~28 B more than a delta frame).
+constexpr double kNarrowLinkKbps = 32;
+constexpr double kNarrowLinkStatsInterval = 5;
+constexpr double kNarrowLinkKeySeconds = 10;
 
 struct SenderCounters {
   uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0,

@@ -3,6 +3,7 @@
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
 #                           [--recording REC] [--out DIR] [--min-send-interval S] [--max-batch N] [--max-kbps K]
+#                           [--pcap FILE]
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -17,7 +18,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" out="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" out="" pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -29,14 +30,15 @@ while [ $# -gt 0 ]; do
     --min-send-interval) min_interval=$2; shift 2 ;;
     --max-batch) max_batch=$2; shift 2 ;;
     --max-kbps) max_kbps=$2; shift 2 ;;
-    -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
+    --pcap) pcap=$2; shift 2 ;;
+    -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
     *) echo "netlab: unknown option $1" >&2; exit 2 ;;
   esac
 done
 [ -x "$python" ] || python=python3
 [ -n "$out" ] || out=$root/out/netlab/${mode}_${rate}kbit
-# The sender's link budget: 85 % of the rate limit unless given.
-[ -n "$max_kbps" ] || max_kbps=$(awk "BEGIN{print ($rate > 0) ? $rate * 0.85 : 0}")
+# The sender's link budget: 92 % of the rate limit unless given (its pacer counts every byte it causes).
+[ -n "$max_kbps" ] || max_kbps=$(awk "BEGIN{print ($rate > 0) ? $rate * 0.92 : 0}")
 mkdir -p "$out"
 for b in headcast-sender headcast-receiver headcast-avatar; do
   [ -x "$bin/$b" ] || { echo "netlab: $bin/$b missing; run deploy/setup.sh" >&2; exit 1; }
@@ -46,6 +48,7 @@ rx=hc_netlab_rx_$$ tx=hc_netlab_tx_$$
 cleanup() {
   [ -n "${rpid:-}" ] && kill "$rpid" 2>/dev/null || true
   [ -n "${spid:-}" ] && kill "$spid" 2>/dev/null || true
+  [ -n "${dpid:-}" ] && kill "$dpid" 2>/dev/null || true
   wait 2>/dev/null || true
   if [ "$mode" = netns ]; then
     ip netns del "$rx" 2>/dev/null || true
@@ -106,6 +109,14 @@ fi
 rpid=$!
 for _ in $(seq 100); do grep -q listening "$work/receiver.log" && break; sleep 0.1; done
 grep -q listening "$work/receiver.log" || { cat "$work/receiver.log"; exit 1; }
+if [ -n "$pcap" ]; then
+  # Packet capture on the sender's side of the link, for looking at per-message overheads.
+  command -v tcpdump > /dev/null || { echo "netlab: --pcap needs tcpdump (apt-get install tcpdump)" >&2; exit 1; }
+  if [ "$mode" = netns ]; then dev=veth_tx_$$; else dev=lo; fi
+  "${run_tx[@]}" tcpdump -i "$dev" -s 200 -w "$pcap" tcp 2> /dev/null &
+  dpid=$!
+  sleep 0.5
+fi
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
   --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
   --max-kbps "$max_kbps" \
@@ -124,4 +135,5 @@ spid=
 kill "$rpid" 2>/dev/null || true
 wait "$rpid" 2>/dev/null || true
 rpid=
+if [ -n "${dpid:-}" ]; then kill "$dpid" 2>/dev/null || true; wait "$dpid" 2>/dev/null || true; dpid=; fi
 "$python" "$root/deploy/netlab/analyse.py" --dir "$out" --mode "$mode" --rate "$rate" --fps "$fps" --duration "$duration"
