@@ -14,6 +14,7 @@
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/mesh_fitter.h"
 #include "proto/recording.h"
 
 namespace fs = std::filesystem;
@@ -21,7 +22,7 @@ namespace fs = std::filesystem;
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
-  std::string input, head_model_spec = "builtin", out, report_path, overlay, log_level, predictor;
+  std::string input, head_model_spec = "builtin", out, report_path, overlay, log_level, predictor, identity_from;
   int max_frames = 0;
   double fov_deg = 40;
   app.add_option("--input", input, "video file or folder of images")->required();
@@ -33,6 +34,8 @@ int main(int argc, char** argv) {
   app.add_option("--fov", fov_deg, "vertical field of view of the camera, degrees (until calibration exists)")
       ->capture_default_str();
   app.add_option("--predictor", predictor, "dlib 68-point shape predictor (.dat)");
+  app.add_option("--identity-from", identity_from,
+                 "take the identity (shape) from a headcast-fit-mesh PARAMS.json instead of neutral");
   app.add_option("--log", log_level, "log level");
   CLI11_PARSE(app, argc, argv);
   try {
@@ -42,6 +45,9 @@ int main(int argc, char** argv) {
     if (!predictor.empty()) tracker_options.predictor_path = predictor;
     FaceTracker tracker(tracker_options);
     HeadFitter fitter(model);
+    Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
+    if (!identity_from.empty()) identity = ReadIdentityFromMeshFit(identity_from, model);
+    fitter.SetIdentity(identity);
     // Frames from a video or a sorted folder of images.
     std::unique_ptr<VideoReader> video;
     std::vector<fs::path> images;
@@ -90,7 +96,7 @@ int main(int argc, char** argv) {
         info.head_model_fingerprint = model.fingerprint();
         info.num_expression = model.num_expression();
         info.fps = fps;
-        info.subject.shape = Eigen::VectorXf::Zero(model.num_shape());
+        info.subject.shape = identity.cast<float>();
         info.subject.texture = Eigen::VectorXf::Zero(model.num_texture());
         info.subject.intrinsics = camera;
         info.source = "headcast-track " + input;
@@ -138,7 +144,8 @@ int main(int argc, char** argv) {
                              {"landmark_error_iod_mean", error_iod.empty() ? -1.0 : error_iod.Mean()},
                              {"ms_per_frame_median", ms.Median()},
                              {"ms_per_frame_p95", ms.Percentile(95)},
-                             {"note", "identity (shape, focal) not calibrated yet: beta = 0, focal from --fov"}};
+                             {"identity", identity_from.empty() ? "neutral (beta = 0)" : identity_from},
+                             {"note", "identity is not calibrated from the video yet; focal from --fov"}};
     std::cout << report.dump(2) << "\n";
     if (!report_path.empty()) std::ofstream(report_path) << report.dump(2) << "\n";
   } catch (const std::exception& e) {

@@ -283,10 +283,10 @@ void HeadModel::ComputeLandmarks(const RowMatrixX3f& vertices, const PoseVector&
   }
 }
 
-RowMatrixX3f HeadModel::VertexNormals(const RowMatrixX3f& v) const {
+RowMatrixX3f VertexNormals(const RowMatrixX3f& v, const RowMatrixX3i& faces) {
   RowMatrixX3f normals = RowMatrixX3f::Zero(v.rows(), 3);
-  for (int f = 0; f < num_faces(); ++f) {
-    const int a = data_.faces(f, 0), b = data_.faces(f, 1), c = data_.faces(f, 2);
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    const int a = faces(f, 0), b = faces(f, 1), c = faces(f, 2);
     const Eigen::RowVector3f n = (v.row(b) - v.row(a)).cross(v.row(c) - v.row(a));  // area weighted
     normals.row(a) += n;
     normals.row(b) += n;
@@ -297,6 +297,10 @@ RowMatrixX3f HeadModel::VertexNormals(const RowMatrixX3f& v) const {
     if (len > 0) normals.row(i) /= len;
   }
   return normals;
+}
+
+RowMatrixX3f HeadModel::VertexNormals(const RowMatrixX3f& vertices) const {
+  return headcast::VertexNormals(vertices, data_.faces);
 }
 
 std::string HeadModel::Summary() const {

@@ -73,6 +73,9 @@ struct HeadModelOutput {
   Eigen::Matrix<float, kNumHeadJoints, 3, Eigen::RowMajor> joints;  // posed joint positions
 };
 
+// Area-weighted unit vertex normals of any triangle mesh (zero for unused vertices).
+RowMatrixX3f VertexNormals(const RowMatrixX3f& vertices, const RowMatrixX3i& faces);
+
 class HeadModel {
  public:
   // Validates `data` (shapes, index ranges, finiteness) and throws

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iostream>
 #include <opencv2/imgproc.hpp>
 
 #include "common/core/image_io.h"
@@ -11,6 +13,7 @@
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
 #include "common/headmodel/ict_converter.h"
+#include "common/headmodel/mesh_io.h"
 
 namespace headcast {
 namespace {
@@ -24,6 +27,7 @@ struct RenderArgs {
   int size = 512;
   double yaw = 0, pitch = 0, jaw_deg = 0;
   std::vector<std::string> expressions;  // name=value
+  std::vector<std::string> shapes;       // index=value
   bool landmarks = false;
 };
 
@@ -80,7 +84,36 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
       throw std::invalid_argument("model has no expression component '" + name + "' (see: headcast-headmodel summary)");
     p.expression[idx] = std::stod(e.substr(eq + 1));
   }
+  for (const auto& e : args.shapes) {
+    const auto eq = e.find('=');
+    if (eq == std::string::npos) throw std::invalid_argument("--shape wants index=value, got '" + e + "'");
+    const int idx = std::stoi(e.substr(0, eq));
+    if (idx < 0 || idx >= model.num_shape())
+      throw std::invalid_argument("--shape: the model has shape components 0.." + std::to_string(model.num_shape() - 1));
+    p.shape[idx] = std::stod(e.substr(eq + 1));
+  }
   return p;
+}
+
+// The posed mesh as OBJ/PLY and, optionally, its 68 landmarks as JSON
+// {"index": [x, y, z]} (the format headcast-fit-mesh --landmarks reads).
+int Export(const RenderArgs& args, const std::string& landmarks_out) {
+  const HeadModel model = LoadHeadModelSpec(args.model);
+  const HeadModelOutput out = model.Forward(ParamsFromArgs(model, args));
+  WriteMesh(args.out, TriangleMesh{out.vertices, model.data().faces});
+  if (!landmarks_out.empty()) {
+    std::ofstream f(landmarks_out);
+    f.precision(9);
+    f << "{";
+    for (int l = 0; l < kNumLandmarks; ++l)
+      f << (l ? ",\n " : "") << '"' << l << "\": [" << out.landmarks(l, 0) << ", " << out.landmarks(l, 1) << ", "
+        << out.landmarks(l, 2) << "]";
+    f << "}\n";
+    if (!f) throw std::runtime_error(landmarks_out + ": cannot write");
+  }
+  std::cout << "wrote " << args.out << " (" << model.num_vertices() << " vertices, " << model.num_faces()
+            << " faces)\n";
+  return 0;
 }
 
 int Render(const RenderArgs& args) {
@@ -247,6 +280,16 @@ int main(int argc, char** argv) {
   render->add_option("--expression", r.expressions, "name=value, repeatable");
   render->add_flag("--landmarks", r.landmarks, "draw the 68 landmarks");
 
+  RenderArgs x;
+  std::string landmarks_out;
+  auto* export_mesh = app.add_subcommand("export", "write a posed model mesh (.obj/.ply) and its landmarks");
+  export_mesh->add_option("model", x.model, "builtin or a model .npz")->required();
+  export_mesh->add_option("--out", x.out, ".obj or .ply to write")->required();
+  export_mesh->add_option("--jaw", x.jaw_deg, "jaw opening, degrees");
+  export_mesh->add_option("--expression", x.expressions, "name=value, repeatable");
+  export_mesh->add_option("--shape", x.shapes, "index=value, repeatable");
+  export_mesh->add_option("--landmarks-out", landmarks_out, "also write the 68 landmarks (JSON)");
+
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);
@@ -278,6 +321,8 @@ int main(int argc, char** argv) {
     } else if (render->parsed()) {
       if (r.out.empty() && r.video.empty()) throw std::invalid_argument("render: give --out PNG and/or --video MP4");
       return Render(r);
+    } else if (export_mesh->parsed()) {
+      return Export(x, landmarks_out);
     }
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -5,6 +5,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <limits>
 #include <thread>
 
@@ -160,6 +162,34 @@ TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
   EXPECT_EQ(c.sent, 120u);
   EXPECT_EQ(c.dropped, 0u);
   EXPECT_LE(c.messages, 120u);
+}
+
+// Narrow links ask for fewer Stats: the receiver takes the larger interval
+// (never below its own, at most a minute) and says which in Welcome.
+TEST_F(SessionTest, StatsComeAsOftenAsTheSenderAsked) {
+  auto raw = Raw();
+  v1::Uplink hello = Hello();
+  hello.mutable_hello()->set_stats_interval_s(0.6);
+  v1::Downlink d = HelloReply(raw.get(), hello);
+  ASSERT_TRUE(d.has_welcome());
+  EXPECT_DOUBLE_EQ(d.welcome().stats_interval_s(), 0.6);
+  const auto start = std::chrono::steady_clock::now();
+  int stats = 0;
+  while (stats < 3 && raw->stream->Read(&d))
+    if (d.has_stats()) ++stats;
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(stats, 3);
+  EXPECT_GT(seconds, 1.6);  // three at 0.6 s, not at the server's 0.2 s
+  raw->context.TryCancel();
+  for (double asked : {0.01, std::nan(""), 1e9}) {
+    auto r = Raw();
+    v1::Uplink h = Hello();
+    h.mutable_hello()->set_stats_interval_s(asked);
+    const v1::Downlink w = HelloReply(r.get(), h);
+    ASSERT_TRUE(w.has_welcome());
+    EXPECT_DOUBLE_EQ(w.welcome().stats_interval_s(), asked > 1e6 ? 60.0 : 0.2) << asked;
+    r->context.TryCancel();
+  }
 }
 
 TEST_F(SessionTest, RefusalsSayWhy) {

@@ -1,0 +1,163 @@
+// The mesh fit's model and residual, exposed for ceres::GradientChecker tests.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Core>
+#include <array>
+
+#include "common/core/rotation.h"
+#include "common/headmodel/head_model.h"
+
+namespace headcast::mesh_fit_internal {
+
+// The model with the root at rest, linear in the fitted coefficients
+// c = (shape[0..S), expression[0..E)) except for the jaw rotation:
+//   p_i = mean_i + dirs_i c,  J = jaw_mean + jaw_dirs c,
+//   p'_i = p_i + P_i vec(R_jaw - I),  q_i = p'_i + w_i (R_jaw - I)(p'_i - J).
+// With neck and eye rotations zero this is exactly HeadModel::Forward.
+struct MeshBasis {
+  int n = 0, ns = 0, ne = 0, k = 1;  // k >= 1: a zero column when nothing is fitted
+  Eigen::VectorXd mean;              // 3N
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> dirs;  // 3N x k
+  Eigen::Vector3d jaw_mean;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_dirs;  // 3 x k
+  Eigen::VectorXd jaw_weight;                         // N
+  Eigen::Matrix<double, Eigen::Dynamic, 9, Eigen::RowMajor> jaw_posedirs;  // 3N x 9, or empty
+
+  MeshBasis(const HeadModel& model, int num_shape, int num_expression) : n(model.num_vertices()) {
+    const auto& d = model.data();
+    ns = num_shape;
+    ne = num_expression;
+    k = std::max(1, ns + ne);
+    mean = Eigen::Map<const Eigen::VectorXf>(d.v_template.data(), 3 * n).cast<double>();
+    dirs.setZero(3 * n, k);
+    if (ns > 0) dirs.leftCols(ns) = d.shapedirs.leftCols(ns).cast<double>();
+    if (ne > 0) dirs.middleCols(ns, ne) = d.expressiondirs.leftCols(ne).cast<double>();
+    const Eigen::VectorXd reg = d.j_regressor.row(kJawJoint).transpose().cast<double>();
+    jaw_mean.setZero();
+    jaw_dirs.setZero(3, k);
+    for (int i = 0; i < n; ++i) {
+      if (reg[i] == 0) continue;
+      jaw_mean += reg[i] * mean.segment<3>(3 * i);
+      jaw_dirs += reg[i] * dirs.middleRows(3 * i, 3);
+    }
+    jaw_weight = d.weights.col(kJawJoint).cast<double>();
+    if (model.has_posedirs()) jaw_posedirs = d.posedirs.middleCols(9 * (kJawJoint - 1), 9).cast<double>();
+  }
+
+  // q_i and, when asked, dq/dc (3 x k, accumulated with weight b) and dq/dtheta (3 x 3).
+  struct Jaw {
+    Eigen::Matrix3d R, RmI;
+    std::array<Eigen::Matrix3d, 3> dR;
+    Eigen::Vector3d joint;
+    Eigen::Matrix<double, 3, Eigen::Dynamic> RmI_jaw_dirs;  // (R - I) jaw_dirs
+  };
+  Jaw MakeJaw(const double* c, const double* theta) const {
+    Jaw j;
+    j.R = AxisAngleToMatrix(Eigen::Vector3d(theta[0], theta[1], theta[2]), &j.dR);
+    j.RmI = j.R - Eigen::Matrix3d::Identity();
+    j.joint = jaw_mean + jaw_dirs * Eigen::Map<const Eigen::VectorXd>(c, k);
+    j.RmI_jaw_dirs = j.RmI * jaw_dirs;
+    return j;
+  }
+  void Vertex(int i, const double* c, const Jaw& jaw, double b, Eigen::Vector3d* q,
+              Eigen::Matrix<double, 3, Eigen::Dynamic>* dq_dc, Eigen::Matrix3d* dq_dtheta) const {
+    const auto Bi = dirs.middleRows(3 * i, 3);
+    Eigen::Vector3d p = mean.segment<3>(3 * i) + Bi * Eigen::Map<const Eigen::VectorXd>(c, k);
+    if (jaw_posedirs.rows() > 0) {
+      const auto Pi = jaw_posedirs.middleRows(3 * i, 3);
+      p += Pi * Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix<double, 3, 3, Eigen::RowMajor>(jaw.RmI).data());
+    }
+    const double w = jaw_weight[i];
+    const Eigen::Vector3d u = p - jaw.joint;
+    *q += b * (p + w * jaw.RmI * u);
+    if (dq_dc) {
+      const Eigen::Matrix3d A = Eigen::Matrix3d::Identity() + w * jaw.RmI;
+      dq_dc->noalias() += b * (A * Bi - w * jaw.RmI_jaw_dirs);
+    }
+    if (dq_dtheta) {
+      const Eigen::Matrix3d A = Eigen::Matrix3d::Identity() + w * jaw.RmI;
+      for (int a = 0; a < 3; ++a) {
+        Eigen::Vector3d col = w * jaw.dR[a] * u;
+        if (jaw_posedirs.rows() > 0) {
+          const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> dRa = jaw.dR[a];
+          col += A * (jaw_posedirs.middleRows(3 * i, 3) * Eigen::Map<const Eigen::Matrix<double, 9, 1>>(dRa.data()));
+        }
+        dq_dtheta->col(a) += b * col;
+      }
+    }
+  }
+};
+
+// Parameter blocks of every residual: coefficients (k), root rotation (3),
+// translation (3), log scale (1), jaw rotation (3).
+enum Block { kCoefficients = 0, kRotation, kTranslation, kLogScale, kJaw };
+
+// A point on the model surface (1..3 vertices with barycentric weights) in the
+// mesh frame minus its target point: 3 residuals, analytic Jacobians.
+class SurfacePointCost final : public ceres::CostFunction {
+ public:
+  // `metric` weighs the difference: identity for point-to-point; for closest
+  // points n n^T + e (I - n n^T) with the target's normal n, mostly
+  // point-to-plane, so the surface may slide along itself between rounds.
+  SurfacePointCost(const MeshBasis* basis, const std::array<int, 3>& vertices, const Eigen::Vector3d& bary, int count,
+                   const Eigen::Vector3d& target, const Eigen::Matrix3d& metric = Eigen::Matrix3d::Identity())
+      : basis_(basis), vertices_(vertices), bary_(bary), count_(count), target_(target), metric_(metric) {
+    set_num_residuals(3);
+    *mutable_parameter_block_sizes() = {basis->k, 3, 3, 1, 3};
+  }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
+    const MeshBasis& b = *basis_;
+    const MeshBasis::Jaw jaw = b.MakeJaw(p[kCoefficients], p[kJaw]);
+    std::array<Eigen::Matrix3d, 3> dRr;
+    const Eigen::Matrix3d Rr = AxisAngleToMatrix(Eigen::Vector3d(p[kRotation][0], p[kRotation][1], p[kRotation][2]), &dRr);
+    const double s = std::exp(p[kLogScale][0]);
+    const bool want = jacobians != nullptr;
+    const bool want_c = want && jacobians[kCoefficients], want_jaw = want && jacobians[kJaw];
+    Eigen::Vector3d q = Eigen::Vector3d::Zero();
+    Eigen::Matrix<double, 3, Eigen::Dynamic> dq_dc;
+    Eigen::Matrix3d dq_dtheta = Eigen::Matrix3d::Zero();
+    if (want_c) dq_dc.setZero(3, b.k);
+    for (int v = 0; v < count_; ++v)
+      b.Vertex(vertices_[v], p[kCoefficients], jaw, bary_[v], &q, want_c ? &dq_dc : nullptr,
+               want_jaw ? &dq_dtheta : nullptr);
+    const Eigen::Vector3d x = s * Rr * q + Eigen::Map<const Eigen::Vector3d>(p[kTranslation]);
+    Eigen::Map<Eigen::Vector3d> residual(residuals);
+    residual = metric_ * (x - target_);
+    if (!want) return true;
+    const Eigen::Matrix3d sR = s * metric_ * Rr;
+    if (want_c) {
+      Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[kCoefficients], 3, b.k);
+      J = sR * dq_dc;
+    }
+    if (jacobians[kRotation]) {
+      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kRotation]);
+      for (int a = 0; a < 3; ++a) J.col(a) = s * metric_ * dRr[a] * q;
+    }
+    if (jacobians[kTranslation]) {
+      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kTranslation]);
+      J = metric_;
+    }
+    if (jacobians[kLogScale]) {
+      Eigen::Map<Eigen::Vector3d> J(jacobians[kLogScale]);
+      J = sR * q;
+    }
+    if (want_jaw) {
+      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kJaw]);
+      J = sR * dq_dtheta;
+    }
+    return true;
+  }
+
+ private:
+  const MeshBasis* basis_;
+  std::array<int, 3> vertices_;
+  Eigen::Vector3d bary_;
+  int count_;
+  Eigen::Vector3d target_;
+  Eigen::Matrix3d metric_;
+};
+
+}  // namespace headcast::mesh_fit_internal

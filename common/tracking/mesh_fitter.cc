@@ -1,0 +1,632 @@
+// Fitting the head model to a polygonal head: weighted residual, analytic
+// Jacobians in Ceres, closest points with nanoflann for other topologies.
+#include "common/tracking/mesh_fitter.h"
+
+#include <ceres/ceres.h>
+#include <ceres/normal_prior.h>
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <fstream>
+#include <nanoflann.hpp>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <thread>
+
+#include "common/core/options.h"
+#include "common/core/rotation.h"
+#include "common/tracking/mesh_fit_cost.h"
+
+namespace headcast {
+
+void MeshFitOptions::Check() const {
+  OptionsCheck c("MeshFitOptions");
+  c.InRange("num_shape", num_shape, 0, 100000).InRange("num_expression", num_expression, 0, 100000);
+  c.Positive("loss_scale_m", loss_scale_m).NonNegative("shape_prior", shape_prior);
+  c.NonNegative("expression_prior", expression_prior).NonNegative("jaw_prior", jaw_prior);
+  c.InRange("max_iterations", max_iterations, 1, 10000).InRange("closest_point_rounds", closest_point_rounds, 1, 1000);
+  c.Positive("max_correspondence_m", max_correspondence_m);
+  for (const auto& [index, point] : target_landmarks) {
+    c.InRange("target_landmarks index", index, 0, kNumLandmarks - 1);
+    c.That(point.allFinite(), "target_landmarks: landmark " + std::to_string(index) + " is not finite");
+  }
+  c.That(importance.allFinite(), "importance has non-finite values");
+  c.That(importance.size() == 0 || importance.minCoeff() >= 0, "importance has negative values");
+  c.ThrowIfErrors();
+}
+
+void BlackBoxFitOptions::Check() const {
+  OptionsCheck c("BlackBoxFitOptions");
+  c.Positive("step", step).Positive("loss_scale_m", loss_scale_m).NonNegative("prior", prior);
+  c.InRange("reweight_rounds", reweight_rounds, 1, 1000).InRange("max_iterations", max_iterations, 1, 10000);
+  c.ThrowIfErrors();
+}
+
+namespace {
+
+using mesh_fit_internal::kCoefficients;
+using mesh_fit_internal::kJaw;
+using mesh_fit_internal::kLogScale;
+using mesh_fit_internal::MeshBasis;
+using mesh_fit_internal::SurfacePointCost;
+
+// The fit's unknowns, stored as Ceres parameter blocks.
+struct FitState {
+  Eigen::VectorXd coefficients;
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), translation = Eigen::Vector3d::Zero(), jaw = Eigen::Vector3d::Zero();
+  double log_scale = 0;
+};
+
+// All model vertices posed by `state`, in the mesh frame.
+RowMatrixX3f PoseAll(const MeshBasis& b, const FitState& st) {
+  const MeshBasis::Jaw jaw = b.MakeJaw(st.coefficients.data(), st.jaw.data());
+  const Eigen::Matrix3d sR = std::exp(st.log_scale) * AxisAngleToMatrix(st.rotation);
+  RowMatrixX3f out(b.n, 3);
+  for (int i = 0; i < b.n; ++i) {
+    Eigen::Vector3d q = Eigen::Vector3d::Zero();
+    b.Vertex(i, st.coefficients.data(), jaw, 1.0, &q, nullptr, nullptr);
+    out.row(i) = (sR * q + st.translation).cast<float>().transpose();
+  }
+  return out;
+}
+
+struct Correspondence {
+  std::array<int, 3> vertices{};
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();
+  int count = 1;
+  Eigen::Vector3d target;
+  Eigen::Matrix3d metric = Eigen::Matrix3d::Identity();
+  double weight = 1;
+  bool face = false;
+};
+
+// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5), as barycentrics.
+Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                   const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return {1 - v, v, 0};
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double w = d2 / (d2 - d6);
+    return {1 - w, 0, w};
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return {0, 1 - w, w};
+  }
+  const double denom = 1 / (va + vb + vc);
+  const double v = vb * denom, w = vc * denom;
+  return {1 - v - w, v, w};
+}
+
+// nanoflann adaptor over a row-major N x 3 float matrix.
+struct CloudAdaptor {
+  const RowMatrixX3f& points;
+  size_t kdtree_get_point_count() const { return static_cast<size_t>(points.rows()); }
+  float kdtree_get_pt(size_t i, size_t d) const { return points(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
+
+// For every target vertex: the closest point on the posed model surface
+// (searching the faces around its 8 nearest model vertices).
+std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
+                                          const std::vector<std::vector<int>>& vertex_faces, const TriangleMesh& target,
+                                          const RowMatrixX3f& target_normals, const Eigen::VectorXf& omega,
+                                          const Eigen::VectorXf& nu, double max_distance) {
+  // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
+  constexpr double kTangential = 0.1;
+  CloudAdaptor cloud{posed};
+  KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+  tree.buildIndex();
+  const auto& faces = model.data().faces;
+  std::vector<Correspondence> out;
+  constexpr int kNeighbours = 8;
+  for (Eigen::Index j = 0; j < target.vertices.rows(); ++j) {
+    const Eigen::Vector3f tf = target.vertices.row(j).transpose();
+    unsigned index[kNeighbours];
+    float dist2[kNeighbours];
+    const size_t found = tree.knnSearch(tf.data(), kNeighbours, index, dist2);
+    const Eigen::Vector3d t = tf.cast<double>();
+    double best = INFINITY;
+    Correspondence c;
+    for (size_t m = 0; m < found; ++m)
+      for (int f : vertex_faces[index[m]]) {
+        const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
+        const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
+        const Eigen::Vector3d cc = posed.row(faces(f, 2)).cast<double>().transpose();
+        const Eigen::Vector3d bary = ClosestBarycentric(t, a, b, cc);
+        const double d = (bary[0] * a + bary[1] * b + bary[2] * cc - t).squaredNorm();
+        if (d < best) {
+          best = d;
+          c.vertices = {faces(f, 0), faces(f, 1), faces(f, 2)};
+          c.bary = bary;
+        }
+      }
+    if (!(best <= max_distance * max_distance)) continue;
+    c.count = 3;
+    c.target = t;
+    const Eigen::Vector3d normal = target_normals.row(j).cast<double>().transpose();
+    if (normal.squaredNorm() > 0.5) {
+      const Eigen::Matrix3d nn = normal * normal.transpose();
+      c.metric = nn + kTangential * (Eigen::Matrix3d::Identity() - nn);
+    }
+    c.weight = 0;
+    double importance = 0;
+    for (int k = 0; k < 3; ++k) {
+      c.weight += c.bary[k] * omega[c.vertices[k]];
+      importance += c.bary[k] * nu[c.vertices[k]];
+    }
+    c.face = importance >= 0.999;
+    out.push_back(c);
+  }
+  return out;
+}
+
+Eigen::Matrix4d Umeyama(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to, bool scale) {
+  Eigen::Matrix3Xd a(3, from.size()), b(3, to.size());
+  for (size_t i = 0; i < from.size(); ++i) {
+    a.col(static_cast<Eigen::Index>(i)) = from[i];
+    b.col(static_cast<Eigen::Index>(i)) = to[i];
+  }
+  return Eigen::umeyama(a, b, scale);
+}
+
+void SetRigid(const Eigen::Matrix4d& T, FitState* st) {
+  const Eigen::Matrix3d sR = T.topLeftCorner<3, 3>();
+  const double s = std::cbrt(sR.determinant());
+  st->log_scale = std::log(s);
+  st->rotation = MatrixToAxisAngle(sR / s);
+  st->translation = T.topRightCorner<3, 1>();
+}
+
+// One Ceres solve over `pairs`; returns the LM iterations used.
+int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, const MeshFitOptions& o,
+              const HeadModel& model, bool rigid_only, FitState* st) {
+  ceres::Problem::Options po;
+  po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
+  ceres::Problem problem(po);
+  std::unique_ptr<ceres::LossFunction> base;
+  if (o.loss == MeshLoss::kNorm) base = std::make_unique<ceres::SoftLOneLoss>(o.loss_scale_m);
+  if (o.loss == MeshLoss::kCauchy) base = std::make_unique<ceres::CauchyLoss>(o.loss_scale_m);
+  double* blocks[] = {st->coefficients.data(), st->rotation.data(), st->translation.data(), &st->log_scale,
+                      st->jaw.data()};
+  for (const Correspondence& c : pairs) {
+    if (c.weight <= 0) continue;
+    problem.AddResidualBlock(new SurfacePointCost(&basis, c.vertices, c.bary, c.count, c.target, c.metric),
+                             new ceres::ScaledLoss(base.get(), c.weight, ceres::DO_NOT_TAKE_OWNERSHIP), blocks, 5);
+  }
+  if (problem.NumResidualBlocks() == 0) throw std::runtime_error("mesh fit: no usable correspondences");
+  // Priors keep components the mesh does not constrain at zero. They are
+  // scaled by the number of residuals so their strength does not depend on the mesh density.
+  const double count = static_cast<double>(pairs.size());
+  Eigen::VectorXd prior_weights = Eigen::VectorXd::Zero(basis.k);
+  prior_weights.head(basis.ns).setConstant(std::sqrt(o.shape_prior * count));
+  prior_weights.segment(basis.ns, basis.ne).setConstant(std::sqrt(o.expression_prior * count));
+  if (basis.ns + basis.ne > 0)
+    problem.AddResidualBlock(new ceres::NormalPrior(prior_weights.asDiagonal().toDenseMatrix(),
+                                                    Eigen::VectorXd::Zero(basis.k)),
+                             nullptr, blocks[kCoefficients]);
+  problem.AddResidualBlock(
+      new ceres::NormalPrior(std::sqrt(o.jaw_prior * count) * Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()),
+      nullptr, blocks[kJaw]);
+  if (rigid_only || basis.ns + basis.ne == 0) problem.SetParameterBlockConstant(blocks[kCoefficients]);
+  if (rigid_only || !o.fit_jaw || !model.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(blocks[kJaw]);
+  if (!o.fit_scale) problem.SetParameterBlockConstant(blocks[kLogScale]);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = o.max_iterations;
+  so.num_threads = std::max(1u, std::min(2u, std::thread::hardware_concurrency()));
+  so.function_tolerance = 1e-9;
+  so.parameter_tolerance = 1e-10;
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  if (summary.termination_type == ceres::FAILURE) throw std::runtime_error("mesh fit: " + summary.message);
+  return static_cast<int>(summary.iterations.size());
+}
+
+void MeasureRms(const RowMatrixX3f& posed, const std::vector<Correspondence>& pairs, MeshFitResult* r) {
+  double all = 0, face = 0;
+  int n_face = 0;
+  for (const Correspondence& c : pairs) {
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    for (int k = 0; k < c.count; ++k) x += c.bary[k] * posed.row(c.vertices[k]).cast<double>().transpose();
+    const double d2 = (x - c.target).squaredNorm();
+    all += d2;
+    if (c.face) {
+      face += d2;
+      ++n_face;
+    }
+  }
+  r->correspondences = static_cast<int>(pairs.size());
+  r->rms_m = pairs.empty() ? 0 : std::sqrt(all / pairs.size());
+  r->rms_face_m = n_face == 0 ? 0 : std::sqrt(face / n_face);
+}
+
+int FittedCount(int requested, int available, bool enabled) {
+  if (!enabled) return 0;
+  return requested > 0 ? std::min(requested, available) : available;
+}
+
+bool SameTopology(const HeadModel& model, const TriangleMesh& target) {
+  return target.vertices.rows() == model.num_vertices() && target.faces.rows() == model.num_faces() &&
+         target.faces == model.data().faces;
+}
+
+}  // namespace
+
+Eigen::VectorXf DefaultImportance(const HeadModel& model) {
+  const HeadModelOutput rest = model.Forward(HeadModelParams{});
+  const auto& L = rest.landmarks;
+  const int n = model.num_vertices();
+  const float iod = (L.row(36) - L.row(45)).norm();
+  // Face outline in the frontal (x, y) plane: jaw contour 0..16, then the brows 26..17 lifted to the hairline.
+  std::vector<Eigen::Vector2f> outline;
+  for (int k = 0; k <= 16; ++k) outline.emplace_back(L(k, 0), L(k, 1));
+  for (int k = 26; k >= 17; --k) outline.emplace_back(L(k, 0), L(k, 1) + 0.45f * iod);
+  auto inside = [&](float x, float y) {
+    bool in = false;
+    for (size_t a = 0, b = outline.size() - 1; a < outline.size(); b = a++) {
+      const Eigen::Vector2f& p = outline[a];
+      const Eigen::Vector2f& q = outline[b];
+      if ((p.y() > y) != (q.y() > y) && x < (q.x() - p.x()) * (y - p.y()) / (q.y() - p.y()) + p.x()) in = !in;
+    }
+    return in;
+  };
+  float contour_z = INFINITY;
+  for (int k = 0; k <= 16; ++k) contour_z = std::min(contour_z, L(k, 2));
+  const float front_z = contour_z - 0.2f * iod;
+  const float centre_z = rest.vertices.col(2).mean();
+  Eigen::VectorXf nu(n);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3f v = rest.vertices.row(i).transpose();
+    float near_nose = INFINITY;
+    for (int k = 27; k <= 35; ++k) near_nose = std::min(near_nose, (v - L.row(k).transpose()).norm());
+    const bool face = v.z() > front_z && inside(v.x(), v.y());
+    if (face && near_nose < 0.25f * iod) nu[i] = 2;
+    else if (face) nu[i] = 1;
+    else if (v.z() > centre_z) nu[i] = 0.3f;
+    else nu[i] = 0.1f;
+  }
+  return nu;
+}
+
+Eigen::VectorXf ParameterCountWeights(const HeadModel& model, int num_shape, int num_expression, bool jaw) {
+  const int n = model.num_vertices();
+  Eigen::VectorXi count = Eigen::VectorXi::Zero(n);
+  auto add = [&](const Eigen::MatrixXf& dirs, int columns) {
+    for (int k = 0; k < columns; ++k) {
+      Eigen::VectorXf m(n);
+      for (int i = 0; i < n; ++i) m[i] = dirs.block(3 * i, k, 3, 1).norm();
+      const float threshold = 0.05f * m.maxCoeff();
+      if (threshold <= 0) continue;
+      for (int i = 0; i < n; ++i) count[i] += m[i] > threshold;
+    }
+  };
+  add(model.data().shapedirs, std::min(num_shape, model.num_shape()));
+  add(model.data().expressiondirs, std::min(num_expression, model.num_expression()));
+  if (jaw && model.JointIsArticulated(kJawJoint))
+    for (int i = 0; i < n; ++i) count[i] += model.data().weights(i, kJawJoint) > 0.05f;
+  Eigen::VectorXf phi = (count.cast<float>().array() + 1).inverse();
+  return phi / phi.mean();
+}
+
+Eigen::VectorXf MeshFitWeights(const HeadModel& model, const MeshFitOptions& o) {
+  const int n = model.num_vertices();
+  if (o.weighting == MeshWeighting::kUniform) return Eigen::VectorXf::Ones(n);
+  if (o.importance.size() > 0 && o.importance.size() != n)
+    throw std::invalid_argument("importance map has " + std::to_string(o.importance.size()) +
+                                " values; the head model has " + std::to_string(n) + " vertices");
+  Eigen::VectorXf w = o.importance.size() > 0 ? o.importance : DefaultImportance(model);
+  if (o.weighting == MeshWeighting::kImportanceAndCount)
+    w = w.cwiseProduct(ParameterCountWeights(model, FittedCount(o.num_shape, model.num_shape(), o.fit_shape),
+                                             FittedCount(o.num_expression, model.num_expression(), o.fit_expression),
+                                             o.fit_jaw));
+  if (!(w.sum() > 0)) throw std::invalid_argument("mesh-fit weights are all zero");
+  return w / w.mean();
+}
+
+void CheckMeshForFit(const HeadModel& model, const TriangleMesh& target, const MeshFitOptions& o) {
+  o.Check();
+  if (target.vertices.rows() == 0 || target.faces.rows() == 0)
+    throw std::invalid_argument("the mesh is empty (" + std::to_string(target.vertices.rows()) + " vertices, " +
+                                std::to_string(target.faces.rows()) + " faces)");
+  if (target.faces.minCoeff() < 0 || target.faces.maxCoeff() >= target.vertices.rows())
+    throw std::invalid_argument("the mesh has face indices out of range");
+  const MeshDiagnostics d = Diagnose(target);
+  if (d.non_finite_vertices > 0)
+    throw std::invalid_argument("the mesh has " + std::to_string(d.non_finite_vertices) +
+                                " vertices with NaN or infinite coordinates");
+  if (d.non_manifold_edges > 0 && !o.allow_non_manifold)
+    throw std::invalid_argument("the mesh is non-manifold: " + std::to_string(d.non_manifold_edges) +
+                                " edges are shared by more than two faces (repair it, or allow non-manifold meshes)");
+  const double model_radius = Diagnose(TriangleMesh{model.data().v_template, model.data().faces}).rms_radius;
+  const double ratio = d.rms_radius / model_radius;
+  auto unit_hint = [&](const std::string& unit) {
+    return "the mesh looks like it is in " + unit + " (RMS radius " + std::to_string(d.rms_radius) +
+           " units; the head model's is " + std::to_string(model_radius) + " m): convert it to metres (--unit " +
+           (unit == "centimetres" ? "cm" : "mm") + ")";
+  };
+  if (ratio > 30 && ratio < 300) throw std::invalid_argument(unit_hint("centimetres"));
+  if (ratio >= 300 && ratio < 3000) throw std::invalid_argument(unit_hint("millimetres"));
+  const double tolerance = o.fit_scale ? 5.0 : 2.0;
+  if (ratio > tolerance || ratio < 1 / tolerance)
+    throw std::invalid_argument("the mesh's size is " + std::to_string(ratio) +
+                                " times the head model's; check its unit (metres expected)" +
+                                (o.fit_scale ? "" : " or fit a scale"));
+  if (o.correspondence == MeshCorrespondence::kSameTopology && !SameTopology(model, target))
+    throw std::invalid_argument("same-topology fit asked for, but the mesh has " +
+                                std::to_string(target.vertices.rows()) + " vertices and " +
+                                std::to_string(target.faces.rows()) + " faces against the model's " +
+                                std::to_string(model.num_vertices()) + " and " + std::to_string(model.num_faces()) +
+                                (target.vertices.rows() == model.num_vertices() ? " (the faces differ)" : ""));
+}
+
+MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& target, const MeshFitOptions& o) {
+  CheckMeshForFit(model, target, o);
+  MeshFitResult r;
+  r.same_topology = o.correspondence == MeshCorrespondence::kSameTopology ||
+                    (o.correspondence == MeshCorrespondence::kAuto && SameTopology(model, target));
+  const MeshBasis basis(model, FittedCount(o.num_shape, model.num_shape(), o.fit_shape),
+                        FittedCount(o.num_expression, model.num_expression(), o.fit_expression));
+  const Eigen::VectorXf nu = o.importance.size() > 0 ? o.importance : DefaultImportance(model);
+  const Eigen::VectorXf omega = MeshFitWeights(model, o);
+  FitState st;
+  st.coefficients = Eigen::VectorXd::Zero(basis.k);
+  const RowMatrixX3f& rest = model.data().v_template;
+
+  if (r.same_topology) {
+    // Rigid pre-alignment on the face region, then rigid-only, then everything.
+    std::vector<Eigen::Vector3d> from, to;
+    for (int i = 0; i < model.num_vertices(); ++i)
+      if (nu[i] >= 1) {
+        from.push_back(rest.row(i).cast<double>().transpose());
+        to.push_back(target.vertices.row(i).cast<double>().transpose());
+      }
+    SetRigid(Umeyama(from, to, o.fit_scale), &st);
+    std::vector<Correspondence> pairs(model.num_vertices());
+    for (int i = 0; i < model.num_vertices(); ++i) {
+      pairs[i].vertices = {i, 0, 0};
+      pairs[i].bary = {1, 0, 0};
+      pairs[i].count = 1;
+      pairs[i].target = target.vertices.row(i).cast<double>().transpose();
+      pairs[i].weight = omega[i];
+      pairs[i].face = nu[i] >= 1;
+    }
+    r.iterations += SolveOnce(basis, pairs, o, model, true, &st);
+    r.iterations += SolveOnce(basis, pairs, o, model, false, &st);
+    r.rounds = 1;
+    MeasureRms(PoseAll(basis, st), pairs, &r);
+    r.round_rms_m.push_back(r.rms_m);
+  } else {
+    if (!o.prealigned) {
+      if (o.target_landmarks.size() < 4)
+        throw std::invalid_argument(
+            "a mesh in another topology needs at least 4 landmarks on it for the rigid pre-alignment (have " +
+            std::to_string(o.target_landmarks.size()) + "), or a mesh already in the model's frame");
+      std::vector<Eigen::Vector3d> from, to;
+      const HeadModelOutput out = model.Forward(HeadModelParams{});
+      for (const auto& [index, point] : o.target_landmarks) {
+        from.push_back(out.landmarks.row(index).cast<double>().transpose());
+        to.push_back(point);
+      }
+      Eigen::Matrix3Xd centred(3, to.size());
+      for (size_t i = 0; i < to.size(); ++i) centred.col(static_cast<Eigen::Index>(i)) = to[i];
+      centred.colwise() -= centred.rowwise().mean();
+      const Eigen::JacobiSVD<Eigen::Matrix3Xd> svd(centred);
+      if (svd.singularValues()[1] < 1e-3 * svd.singularValues()[0])
+        throw std::invalid_argument("the mesh landmarks are (nearly) collinear: no rigid alignment from them");
+      SetRigid(Umeyama(from, to, o.fit_scale), &st);
+    }
+    std::vector<std::vector<int>> vertex_faces(model.num_vertices());
+    for (int f = 0; f < model.num_faces(); ++f)
+      for (int k = 0; k < 3; ++k) vertex_faces[model.data().faces(f, k)].push_back(f);
+    const RowMatrixX3f target_normals = VertexNormals(target.vertices, target.faces);
+    double previous = INFINITY;
+    std::vector<Correspondence> pairs;
+    for (int round = 0; round < o.closest_point_rounds; ++round) {
+      // Wider gates while the alignment is rough.
+      const double gate = o.max_correspondence_m * (round < 2 ? 3.0 : 1.0);
+      pairs = ClosestPoints(model, PoseAll(basis, st), vertex_faces, target, target_normals, omega, nu, gate);
+      r.iterations += SolveOnce(basis, pairs, o, model, round == 0, &st);
+      ++r.rounds;
+      MeasureRms(PoseAll(basis, st), pairs, &r);
+      r.round_rms_m.push_back(r.rms_m);
+      spdlog::debug("mesh fit round {}: {} pairs, rms {:.3f} mm", round, pairs.size(), 1e3 * r.rms_m);
+      if (round >= 2 && std::abs(previous - r.rms_m) < 1e-3 * previous) break;
+      previous = r.rms_m;
+    }
+  }
+  r.params.shape = Eigen::VectorXd::Zero(model.num_shape());
+  r.params.expression = Eigen::VectorXd::Zero(model.num_expression());
+  r.params.shape.head(basis.ns) = st.coefficients.head(basis.ns);
+  r.params.expression.head(basis.ne) = st.coefficients.segment(basis.ns, basis.ne);
+  r.params.pose.segment<3>(3 * kJawJoint) = st.jaw;
+  r.scale = std::exp(st.log_scale);
+  r.rotation = AxisAngleToMatrix(st.rotation);
+  r.translation = st.translation;
+  return r;
+}
+
+RowMatrixX3f FittedVertices(const HeadModel& model, const MeshFitResult& fit) {
+  const RowMatrixX3f v = model.Forward(fit.params).vertices;
+  const Eigen::Matrix3f sR = (fit.scale * fit.rotation).cast<float>();
+  RowMatrixX3f out = v * sR.transpose();
+  out.rowwise() += fit.translation.cast<float>().transpose();
+  return out;
+}
+
+void WriteMeshFitJson(const std::string& path, const HeadModel& model, const MeshFitResult& fit,
+                      const std::string& extra_json_object) {
+  auto vec = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
+  nlohmann::json rotation = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) rotation.push_back({fit.rotation(r, 0), fit.rotation(r, 1), fit.rotation(r, 2)});
+  nlohmann::json j = {
+      {"format", "headcast mesh fit 1"},
+      {"head_model", model.data().name},
+      {"head_model_fingerprint", model.fingerprint()},
+      {"shape", vec(fit.params.shape)},
+      {"expression", vec(fit.params.expression)},
+      {"pose", vec(fit.params.pose)},
+      {"mesh_from_model",
+       {{"scale", fit.scale},
+        {"rotation", rotation},
+        {"translation", {fit.translation.x(), fit.translation.y(), fit.translation.z()}},
+        {"what", "mesh = scale * rotation * model(shape, expression, pose) + translation, metres"}}},
+      {"same_topology", fit.same_topology},
+      {"correspondences", fit.correspondences},
+      {"rms_mm", 1e3 * fit.rms_m},
+      {"rms_face_mm", 1e3 * fit.rms_face_m},
+      {"rounds", fit.rounds},
+      {"iterations", fit.iterations}};
+  j.update(nlohmann::json::parse(extra_json_object));
+  std::ofstream out(path);
+  out << j.dump(2) << "\n";
+  if (!out) throw std::runtime_error(path + ": cannot write");
+}
+
+Eigen::VectorXd ReadIdentityFromMeshFit(const std::string& path, const HeadModel& model) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": not JSON (" + e.what() + ")");
+  }
+  if (!j.is_object() || j.value("format", "") != "headcast mesh fit 1" || !j.contains("shape") ||
+      !j["shape"].is_array())
+    throw std::runtime_error(path + ": not a headcast-fit-mesh result (no format/shape)");
+  const std::string fingerprint = j.value("head_model_fingerprint", "");
+  if (fingerprint != model.fingerprint())
+    throw std::runtime_error(path + ": fitted with head model '" + j.value("head_model", "?") + "' (" + fingerprint +
+                             "), not '" + model.data().name + "' (" + model.fingerprint() + ")");
+  Eigen::VectorXd shape = Eigen::VectorXd::Zero(model.num_shape());
+  const auto& values = j["shape"];
+  if (static_cast<int>(values.size()) > model.num_shape())
+    throw std::runtime_error(path + ": " + std::to_string(values.size()) + " shape values for a model with " +
+                             std::to_string(model.num_shape()));
+  for (size_t k = 0; k < values.size(); ++k) {
+    if (!values[k].is_number() || !std::isfinite(values[k].get<double>()))
+      throw std::runtime_error(path + ": shape[" + std::to_string(k) + "] is not a finite number");
+    shape[static_cast<Eigen::Index>(k)] = values[k].get<double>();
+  }
+  return shape;
+}
+
+namespace {
+
+// All vertices' weighted residuals of a black-box generator; Jacobian by central differences.
+class BlackBoxCost final : public ceres::CostFunction {
+ public:
+  BlackBoxCost(const MeshGenerator& generator, const RowMatrixX3f& target, const Eigen::VectorXd& sqrt_weights,
+               double step, int* calls)
+      : generator_(generator), target_(target), sqrt_weights_(sqrt_weights), step_(step), calls_(calls) {
+    set_num_residuals(static_cast<int>(3 * target.rows()));
+  }
+  void SetSize(int k) { mutable_parameter_block_sizes()->assign(1, k); }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
+    const int k = parameter_block_sizes()[0];
+    const Eigen::Index n = target_.rows();
+    Eigen::VectorXd x = Eigen::Map<const Eigen::VectorXd>(p[0], k);
+    RowMatrixX3f v;
+    if (!Generate(x, &v)) return false;
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) residuals[3 * i + c] = sqrt_weights_[i] * (v(i, c) - target_(i, c));
+    if (!jacobians || !jacobians[0]) return true;
+    Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[0], 3 * n, k);
+    RowMatrixX3f plus, minus;
+    for (int j = 0; j < k; ++j) {
+      const double h = step_ * std::max(1.0, std::abs(x[j]));
+      Eigen::VectorXd xp = x, xm = x;
+      xp[j] += h;
+      xm[j] -= h;
+      if (!Generate(xp, &plus) || !Generate(xm, &minus)) return false;
+      for (Eigen::Index i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c)
+          J(3 * i + c, j) = sqrt_weights_[i] * (static_cast<double>(plus(i, c)) - minus(i, c)) / (2 * h);
+    }
+    return true;
+  }
+
+ private:
+  bool Generate(const Eigen::VectorXd& x, RowMatrixX3f* v) const {
+    ++*calls_;
+    generator_(x, v);
+    return v->rows() == target_.rows() && v->allFinite();
+  }
+  const MeshGenerator& generator_;
+  const RowMatrixX3f& target_;
+  const Eigen::VectorXd& sqrt_weights_;
+  double step_;
+  int* calls_;
+};
+
+}  // namespace
+
+BlackBoxFitResult FitBlackBoxToMesh(const MeshGenerator& generator, const Eigen::VectorXd& initial,
+                                    const RowMatrixX3f& target, const Eigen::VectorXf& weights,
+                                    const BlackBoxFitOptions& o) {
+  o.Check();
+  if (target.rows() == 0 || !target.allFinite()) throw std::invalid_argument("black-box fit: empty or non-finite target");
+  if (weights.size() != target.rows())
+    throw std::invalid_argument("black-box fit: " + std::to_string(weights.size()) + " weights for " +
+                                std::to_string(target.rows()) + " vertices");
+  if (initial.size() == 0) throw std::invalid_argument("black-box fit: no parameters");
+  BlackBoxFitResult r;
+  r.params = initial;
+  Eigen::VectorXd sqrt_w = weights.cast<double>().cwiseSqrt();
+  RowMatrixX3f v;
+  for (int round = 0; round < o.reweight_rounds; ++round) {
+    ceres::Problem::Options po;
+    po.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    ceres::Problem problem(po);
+    BlackBoxCost cost(generator, target, sqrt_w, o.step, &r.generator_calls);
+    cost.SetSize(static_cast<int>(r.params.size()));
+    problem.AddResidualBlock(&cost, nullptr, r.params.data());
+    std::unique_ptr<ceres::CostFunction> prior(new ceres::NormalPrior(
+        std::sqrt(o.prior * target.rows()) * Eigen::MatrixXd::Identity(r.params.size(), r.params.size()),
+        Eigen::VectorXd::Zero(r.params.size())));
+    problem.AddResidualBlock(prior.get(), nullptr, r.params.data());
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::DENSE_QR;
+    so.max_num_iterations = o.max_iterations;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+    if (summary.termination_type == ceres::FAILURE) throw std::runtime_error("black-box fit: " + summary.message);
+    // Reweight so the squared problem minimises sum w_i * sqrt(|d_i|^2 + delta^2), the paper's norm.
+    generator(r.params, &v);
+    ++r.generator_calls;
+    for (Eigen::Index i = 0; i < target.rows(); ++i) {
+      const double d = (v.row(i) - target.row(i)).cast<double>().norm();
+      sqrt_w[i] = std::sqrt(weights[i] * o.loss_scale_m / std::sqrt(d * d + o.loss_scale_m * o.loss_scale_m));
+    }
+  }
+  double ss = 0;
+  for (Eigen::Index i = 0; i < target.rows(); ++i) ss += (v.row(i) - target.row(i)).cast<double>().squaredNorm();
+  r.rms_m = std::sqrt(ss / target.rows());
+  return r;
+}
+
+}  // namespace headcast
