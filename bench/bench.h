@@ -33,5 +33,6 @@ nlohmann::json RunRenderSuite(const BenchOptions& options);
 nlohmann::json RunQualitySuite(const BenchOptions& options);
 nlohmann::json RunCodecSuite(const BenchOptions& options);
 nlohmann::json RunTrackSuite(const BenchOptions& options);
+nlohmann::json RunMeshFitSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -54,6 +54,10 @@ int main(int argc, char** argv) {
   add_common(track);
   track->add_option("--video", options.video, "video to track")->required();
   track->add_option("--head-model", options.head_model, "builtin or a model .npz");
+  auto* meshfit = app.add_subcommand("meshfit", "head model fitted to synthetic scans: weights vs uniform, topologies");
+  meshfit->add_option("--trials", options.repeats, "scans per figure")->check(CLI::Range(1, 1000));
+  meshfit->add_option("--json", options.json_path, "write the results to this JSON file");
+  meshfit->add_option("--head-model", options.head_model, "builtin or a model .npz");
   codec->add_option("--avatar", options.avatar,
                     "an .hcavatar for the built-in head: also report the PSNR the codec costs");
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
@@ -72,6 +76,7 @@ int main(int argc, char** argv) {
                             : render->parsed()  ? bench::RunRenderSuite(options)
                             : codec->parsed()   ? bench::RunCodecSuite(options)
                             : track->parsed()   ? bench::RunTrackSuite(options)
+                            : meshfit->parsed() ? bench::RunMeshFitSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

@@ -15,6 +15,7 @@
 #include "common/headmodel/mesh_io.h"
 #include "common/tracking/mesh_fit_cost.h"
 #include "common/tracking/mesh_fitter.h"
+#include "common/tracking/synthetic_scan.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -25,50 +26,17 @@ const HeadModel& Builtin() {
   return m;
 }
 
-// A known head: shape and expression in [-1, 1], the jaw a little open, a
-// rigid transform of up to ~20 degrees and 5 cm; Gaussian vertex noise.
-struct KnownHead {
-  HeadModelParams params;
-  Eigen::Matrix3d rotation;
-  Eigen::Vector3d translation;
-  RowMatrixX3f clean, noisy;  // mesh-frame vertices
-};
+using KnownHead = SyntheticScan;
 
 KnownHead MakeKnownHead(const HeadModel& model, unsigned seed, double noise_m) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1, 1);
-  std::normal_distribution<float> gauss(0, static_cast<float>(noise_m));
-  KnownHead k;
-  k.params.shape = Eigen::VectorXd(model.num_shape());
-  k.params.expression = Eigen::VectorXd(model.num_expression());
-  for (auto& v : k.params.shape) v = u(rng);
-  for (auto& v : k.params.expression) v = 0.5 * (u(rng) + 1);  // blendshape-style models want >= 0
-  if (model.JointIsArticulated(kJawJoint)) k.params.pose[3 * kJawJoint] = 0.1 + 0.1 * u(rng);
-  k.rotation = AxisAngleToMatrix(Eigen::Vector3d(0.3 * u(rng), 0.3 * u(rng), 0.2 * u(rng)));
-  k.translation = Eigen::Vector3d(0.05 * u(rng), 0.05 * u(rng), 0.05 * u(rng));
-  MeshFitResult truth;
-  truth.params = k.params;
-  truth.rotation = k.rotation;
-  truth.translation = k.translation;
-  k.clean = FittedVertices(model, truth);
-  k.noisy = k.clean;
-  for (Eigen::Index i = 0; i < k.noisy.rows(); ++i)
-    for (int c = 0; c < 3; ++c) k.noisy(i, c) += gauss(rng);
-  return k;
+  SyntheticScanOptions o;
+  o.seed = seed;
+  o.noise_m = noise_m;
+  return MakeSyntheticScan(model, o);
 }
 
-// RMS distance between the fitted model and the clean truth over vertices with importance >= 1 (the face).
 double FaceRmsMm(const HeadModel& model, const MeshFitResult& fit, const RowMatrixX3f& clean) {
-  const Eigen::VectorXf nu = DefaultImportance(model);
-  const RowMatrixX3f v = FittedVertices(model, fit);
-  double ss = 0;
-  int n = 0;
-  for (int i = 0; i < model.num_vertices(); ++i)
-    if (nu[i] >= 1) {
-      ss += (v.row(i) - clean.row(i)).squaredNorm();
-      ++n;
-    }
-  return 1e3 * std::sqrt(ss / n);
+  return FaceRmsAgainstTruthMm(model, fit, clean);
 }
 
 TEST(MeshIo, RoundTripsObjAndPlyAndReadsPolygonsAndBinaryPly) {
@@ -251,11 +219,7 @@ TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
     KnownHead neutral = k;
     neutral.params.expression.setZero();
     neutral.params.pose.setZero();
-    MeshFitResult truth;
-    truth.params = neutral.params;
-    truth.rotation = k.rotation;
-    truth.translation = k.translation;
-    neutral.clean = FittedVertices(model, truth);
+    neutral.clean = FittedVertices(model, neutral.Truth());
     neutral.noisy = neutral.clean + (k.noisy - k.clean);
     MeshFitOptions shape_only;
     shape_only.fit_expression = shape_only.fit_jaw = false;
@@ -267,25 +231,19 @@ TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
   }
 }
 
-// Scans carry hair and clothing the model cannot represent. Adds hair-like
-// bulges (up to 12 mm outwards, smoothly varying) where nu < 1 above the
-// ears, fits with each weighting (squared loss: the weights alone make the
-// difference) and returns the mean face RMS against the truth, mm.
+// Scans carry hair and clothing the model cannot represent: with 12 mm of
+// hair, fits with each weighting (squared loss: the weights alone make the
+// difference); the mean face RMS against the truth, mm.
 std::array<double, 3> FaceErrorWithHair(const HeadModel& model, int trials) {
-  const Eigen::VectorXf nu = DefaultImportance(model);
-  const RowMatrixX3f normals = model.VertexNormals(model.data().v_template);
-  const float top = model.rest_landmark_centroid().y();
   std::array<double, 3> mean = {0, 0, 0};
   const MeshWeighting weightings[3] = {MeshWeighting::kUniform, MeshWeighting::kImportance,
                                        MeshWeighting::kImportanceAndCount};
   for (int t = 0; t < trials; ++t) {
-    KnownHead k = MakeKnownHead(model, 10 + t, 0.3e-3);
-    for (int i = 0; i < model.num_vertices(); ++i) {
-      if (nu[i] < 1 && model.data().v_template(i, 1) > top) {
-        const float amount = 0.012f * (0.6f + 0.4f * std::sin(40.0f * model.data().v_template(i, 0) + t));
-        k.noisy.row(i) += amount * (k.rotation.cast<float>() * normals.row(i).transpose()).transpose();
-      }
-    }
+    SyntheticScanOptions so;
+    so.seed = 10 + t;
+    so.noise_m = 0.3e-3;
+    so.hair_m = 0.012;
+    const SyntheticScan k = MakeSyntheticScan(model, so);
     for (int w = 0; w < 3; ++w) {
       MeshFitOptions o;
       o.weighting = weightings[w];
@@ -311,10 +269,6 @@ TEST(MeshFitter, ImportanceWeightsPayOffOnTheFace) {
 }
 
 std::vector<std::pair<int, Eigen::Vector3d>> LandmarksOf(const HeadModel& model, const KnownHead& k) {
-  MeshFitResult truth;
-  truth.params = k.params;
-  truth.rotation = k.rotation;
-  truth.translation = k.translation;
   const HeadModelOutput out = model.Forward(k.params);
   std::vector<std::pair<int, Eigen::Vector3d>> l;
   for (int i : {36, 39, 42, 45, 30, 33, 48, 54, 8})  // eye corners, nose, mouth corners, chin
