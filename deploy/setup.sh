@@ -14,7 +14,9 @@ packages=(
   # neural networks on the CPU; OpenBLAS makes libtorch's matrix products ~12x faster
   libtorch-dev libopenblas0-pthread libopenblas-dev
   # images, video, faces
-  libopencv-dev libdlib-dev libdlib-data ffmpeg
+  libopencv-dev libopencv-contrib-dev libdlib-dev libdlib-data ffmpeg
+  # the stereo test pair (aloe) for the depth check
+  opencv-doc
   # networking
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # display: real window and headless rendering
@@ -26,7 +28,7 @@ packages=(
   # converters, the Python test client, plots
   python3 python3-numpy python3-scipy python3-grpcio python3-protobuf python3-matplotlib
   # fuzzing (libFuzzer ships with clang's runtime), TLS certificates, network lab
-  clang libclang-rt-14-dev openssl iproute2
+  clang libclang-rt-14-dev openssl iproute2 tcpdump
 )
 
 missing=()

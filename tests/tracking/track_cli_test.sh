@@ -22,4 +22,8 @@ grep -q '"unreadable_frames": 1' "$tmp/y.json" && grep -q '"frames": 1' "$tmp/y.
 mkdir "$tmp/empty"
 out=$("$bin/headcast-track" --input "$tmp/empty" --out "$tmp/z.hcrec" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "no images" <<<"$out" && ok "empty folder refused" || bad "empty: $out"
+out=$("$bin/headcast-track" --input /dev/video97 --out "$tmp/c.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "no such device" <<<"$out" && ok "missing camera refused clearly" || bad "camera: $out"
+out=$("$bin/headcast-track" --input zed:/dev/video97 --out "$tmp/c.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "needs a calibration" <<<"$out" && ok "stereo without calibration refused" || bad "zed: $out"
 checks_summary "track cli"
