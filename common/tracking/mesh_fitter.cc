@@ -136,6 +136,8 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
                                           const Eigen::VectorXf& nu, double max_distance) {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
+  constexpr double kMinNormalAgreement = 0.5;  // cos 60 degrees
+  const RowMatrixX3f model_normals = VertexNormals(posed, model.data().faces);
   CloudAdaptor cloud{posed};
   KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
   tree.buildIndex();
@@ -167,6 +169,13 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
     c.count = 3;
     c.target = t;
     const Eigen::Vector3d normal = target_normals.row(j).cast<double>().transpose();
+    // Surfaces facing another way are other parts (an eyelid over an eyeball,
+    // lips over teeth, the inside of a scan): no pair.
+    Eigen::Vector3d model_normal = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) model_normal += c.bary[k] * model_normals.row(c.vertices[k]).cast<double>().transpose();
+    if (normal.squaredNorm() > 0.5 && model_normal.squaredNorm() > 1e-6 &&
+        normal.dot(model_normal.normalized()) < kMinNormalAgreement)
+      continue;
     if (normal.squaredNorm() > 0.5) {
       const Eigen::Matrix3d nn = normal * normal.transpose();
       c.metric = nn + kTangential * (Eigen::Matrix3d::Identity() - nn);

@@ -40,7 +40,7 @@ struct MeshFitOptions {
   // keep components the mesh does not constrain at zero.
   double shape_prior = 1e-9, expression_prior = 1e-9, jaw_prior = 1e-9;
   int max_iterations = 50;          // Levenberg-Marquardt iterations per solve
-  int closest_point_rounds = 10;    // correspondence updates (other topology)
+  int closest_point_rounds = 30;    // correspondence updates at most (other topology); stops on convergence
   double max_correspondence_m = 0.01;  // pairs farther apart are ignored (hair, shoulders, scan noise)
   // Other topology: target landmark positions (model landmark index 0..67 ->
   // point on the mesh) for the rigid pre-alignment; at least 4, not collinear.
