@@ -16,6 +16,18 @@ PoseVector FrameParams::HeadPose() const {
   return p;
 }
 
+PoseVector FrameParams::ViewPose() const {
+  PoseVector p = HeadPose();
+  p.segment<3>(0) = ViewRotation(AxisAngleToMatrix(cam_rotation.cast<double>()));
+  return p;
+}
+
+Eigen::Vector3d ViewRotation(const Eigen::Matrix3d& cam_from_head_rotation) {
+  // The camera has y down and z forward; the head y up and z out of the face.
+  // A head facing the camera has cam_from_head = diag(1, -1, -1).
+  return MatrixToAxisAngle(Eigen::Vector3d(1, -1, -1).asDiagonal() * cam_from_head_rotation);
+}
+
 RigidTransform FrameParams::CamFromHead() const {
   return {AxisAngleToMatrix(cam_rotation.cast<double>()), cam_translation.cast<double>()};
 }

@@ -29,12 +29,19 @@ struct FrameParams {
 
   // The model pose vector: root zero (the head's placement is cam_from_head), then neck, jaw, eyes.
   PoseVector HeadPose() const;
+  // HeadPose with the root set to the head's rotation as seen by the camera
+  // (a frontal view is zero): what view-dependent landmarks (FLAME's dynamic
+  // contour) are chosen by.
+  PoseVector ViewPose() const;
   RigidTransform CamFromHead() const;
   void SetCamFromHead(const RigidTransform& cam_from_head);
   // Finite values, |rotations| <= pi, |expression| <= max_abs_expression,
   // the head in front of the camera (0.05 .. 20 m). `why` names the first problem.
   bool IsValid(std::string* why, float max_abs_expression = 5.f) const;
 };
+
+// The head's rotation relative to a frontal camera, axis-angle (see FrameParams::ViewPose).
+Eigen::Vector3d ViewRotation(const Eigen::Matrix3d& cam_from_head_rotation);
 
 // Per-person constants, sent once or baked into the avatar.
 struct SubjectParams {

@@ -134,7 +134,7 @@ class PriorCost : public ceres::CostFunction {
 }  // namespace
 
 Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& cam) const {
-  const LandmarkBasis b = MakeBasis(frame.HeadPose());
+  const LandmarkBasis b = MakeBasis(frame.ViewPose());
   const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
   const Eigen::Matrix3d J = AxisAngleToMatrix(frame.jaw.cast<double>());
   Landmarks2d out;
@@ -151,7 +151,7 @@ Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& c
 FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame) const {
   if (frame->expression.size() != model_.num_expression())
     frame->expression = Eigen::VectorXf::Zero(model_.num_expression());
-  const LandmarkBasis b = MakeBasis(frame->HeadPose());
+  const LandmarkBasis b = MakeBasis(frame->ViewPose());
   if (!(frame->cam_translation.z() > 0)) {
     // Initial pose from the rigid inner-face landmarks with OpenCV's PnP.
     std::vector<cv::Point3d> object;

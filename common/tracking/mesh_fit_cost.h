@@ -8,6 +8,7 @@
 
 #include "common/core/rotation.h"
 #include "common/headmodel/head_model.h"
+#include "common/tracking/mesh_fitter.h"
 
 namespace headcast::mesh_fit_internal {
 
@@ -159,5 +160,58 @@ class SurfacePointCost final : public ceres::CostFunction {
   Eigen::Vector3d target_;
   Eigen::Matrix3d metric_;
 };
+
+// The fit's unknowns, stored as Ceres parameter blocks.
+struct FitState {
+  Eigen::VectorXd coefficients;
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), translation = Eigen::Vector3d::Zero(),
+                  jaw = Eigen::Vector3d::Zero();
+  double log_scale = 0;
+};
+
+// A target point and the model surface point (1..3 vertices) it pairs with.
+struct Correspondence {
+  std::array<int, 3> vertices{};
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();
+  int count = 1;
+  Eigen::Vector3d target;
+  Eigen::Matrix3d metric = Eigen::Matrix3d::Identity();
+  double weight = 1;
+  bool face = false;
+};
+
+struct SolveSettings {
+  MeshLoss loss = MeshLoss::kNorm;
+  double loss_scale_m = 5e-4;
+  double shape_prior = 1e-9, expression_prior = 1e-9, jaw_prior = 1e-9;
+  int max_iterations = 50;
+  static SolveSettings From(const MeshFitOptions& options);
+};
+
+// Which unknowns one solve may change.
+struct FreeBlocks {
+  bool shape = true, expression = true, rigid = true, jaw = true, scale = false;
+  static FreeBlocks RigidOnly() { return {false, false, true, false, false}; }
+};
+
+// All model vertices posed by `state`, in the target's frame.
+RowMatrixX3f PoseAll(const MeshBasis& basis, const FitState& state);
+std::vector<std::vector<int>> VertexFaces(const HeadModel& model);
+// For every point: the closest point on the posed model surface within
+// `max_distance`, mostly point-to-plane along the point's normal (when it has
+// one), skipped when the surfaces face different ways.
+std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
+                                          const std::vector<std::vector<int>>& vertex_faces, const RowMatrixX3f& points,
+                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
+                                          const Eigen::VectorXf& nu, double max_distance);
+// One Ceres solve over `pairs` (weighted, robust loss, priors); returns the iterations used.
+int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, const SolveSettings& settings,
+              const FreeBlocks& free, FitState* state);
+struct PairRms {
+  double all_m = 0, face_m = 0;
+};
+PairRms MeasurePairs(const RowMatrixX3f& posed, const std::vector<Correspondence>& pairs);
+Eigen::Matrix4d Umeyama(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to, bool scale);
+void SetRigid(const Eigen::Matrix4d& T, FitState* state);
 
 }  // namespace headcast::mesh_fit_internal

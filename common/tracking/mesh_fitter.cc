@@ -46,20 +46,7 @@ void BlackBoxFitOptions::Check() const {
   c.ThrowIfErrors();
 }
 
-namespace {
-
-using mesh_fit_internal::kCoefficients;
-using mesh_fit_internal::kJaw;
-using mesh_fit_internal::kLogScale;
-using mesh_fit_internal::MeshBasis;
-using mesh_fit_internal::SurfacePointCost;
-
-// The fit's unknowns, stored as Ceres parameter blocks.
-struct FitState {
-  Eigen::VectorXd coefficients;
-  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), translation = Eigen::Vector3d::Zero(), jaw = Eigen::Vector3d::Zero();
-  double log_scale = 0;
-};
+namespace mesh_fit_internal {
 
 // All model vertices posed by `state`, in the mesh frame.
 RowMatrixX3f PoseAll(const MeshBasis& b, const FitState& st) {
@@ -73,16 +60,6 @@ RowMatrixX3f PoseAll(const MeshBasis& b, const FitState& st) {
   }
   return out;
 }
-
-struct Correspondence {
-  std::array<int, 3> vertices{};
-  Eigen::Vector3d bary = Eigen::Vector3d::Zero();
-  int count = 1;
-  Eigen::Vector3d target;
-  Eigen::Matrix3d metric = Eigen::Matrix3d::Identity();
-  double weight = 1;
-  bool face = false;
-};
 
 // Closest point on triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5), as barycentrics.
 Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
@@ -131,8 +108,8 @@ using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<
 // For every target vertex: the closest point on the posed model surface
 // (searching the faces around its 8 nearest model vertices).
 std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
-                                          const std::vector<std::vector<int>>& vertex_faces, const TriangleMesh& target,
-                                          const RowMatrixX3f& target_normals, const Eigen::VectorXf& omega,
+                                          const std::vector<std::vector<int>>& vertex_faces, const RowMatrixX3f& points,
+                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
                                           const Eigen::VectorXf& nu, double max_distance) {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
@@ -142,18 +119,42 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
   KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
   tree.buildIndex();
   const auto& faces = model.data().faces;
+  // Faces much larger than the typical one can hold a point's closest spot
+  // while none of their vertices is among its nearest: always checked.
+  std::vector<int> large_faces;
+  RowMatrixX3f centroids(faces.rows(), 3);
+  float threshold = 0;
+  {
+    std::vector<float> radius(faces.rows());
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+      const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
+      centroids.row(f) = c;
+      radius[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
+                            (posed.row(faces(f, 2)) - c).norm()});
+    }
+    std::vector<float> sorted = radius;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    threshold = 3 * sorted[sorted.size() / 2];
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+      if (radius[f] > threshold) large_faces.push_back(static_cast<int>(f));
+  }
+  // Every other face lies within `threshold` of its centroid: a radius search
+  // on centroids around the first candidate finds the true closest face.
+  CloudAdaptor centroid_cloud{centroids};
+  KdTree centroid_tree(3, centroid_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+  centroid_tree.buildIndex();
+  std::vector<std::pair<unsigned, float>> nearby;
   std::vector<Correspondence> out;
   constexpr int kNeighbours = 8;
-  for (Eigen::Index j = 0; j < target.vertices.rows(); ++j) {
-    const Eigen::Vector3f tf = target.vertices.row(j).transpose();
+  for (Eigen::Index j = 0; j < points.rows(); ++j) {
+    const Eigen::Vector3f tf = points.row(j).transpose();
     unsigned index[kNeighbours];
     float dist2[kNeighbours];
     const size_t found = tree.knnSearch(tf.data(), kNeighbours, index, dist2);
     const Eigen::Vector3d t = tf.cast<double>();
     double best = INFINITY;
     Correspondence c;
-    for (size_t m = 0; m < found; ++m)
-      for (int f : vertex_faces[index[m]]) {
+    auto try_face = [&](int f) {
         const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
         const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
         const Eigen::Vector3d cc = posed.row(faces(f, 2)).cast<double>().transpose();
@@ -164,11 +165,21 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
           c.vertices = {faces(f, 0), faces(f, 1), faces(f, 2)};
           c.bary = bary;
         }
-      }
+    };
+    for (size_t m = 0; m < found; ++m)
+      for (int f : vertex_faces[index[m]]) try_face(f);
+    for (int f : large_faces) try_face(f);
+    if (std::isfinite(best)) {
+      const float reach = static_cast<float>(std::sqrt(best)) + threshold;
+      nanoflann::SearchParams params;
+      params.sorted = false;
+      centroid_tree.radiusSearch(tf.data(), reach * reach, nearby, params);
+      for (const auto& [f, d2] : nearby) try_face(static_cast<int>(f));
+    }
     if (!(best <= max_distance * max_distance)) continue;
     c.count = 3;
     c.target = t;
-    const Eigen::Vector3d normal = target_normals.row(j).cast<double>().transpose();
+    const Eigen::Vector3d normal = point_normals.row(j).cast<double>().transpose();
     // Surfaces facing another way are other parts (an eyelid over an eyeball,
     // lips over teeth, the inside of a scan): no pair.
     Eigen::Vector3d model_normal = Eigen::Vector3d::Zero();
@@ -192,6 +203,13 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
   return out;
 }
 
+std::vector<std::vector<int>> VertexFaces(const HeadModel& model) {
+  std::vector<std::vector<int>> vertex_faces(model.num_vertices());
+  for (int f = 0; f < model.num_faces(); ++f)
+    for (int k = 0; k < 3; ++k) vertex_faces[model.data().faces(f, k)].push_back(f);
+  return vertex_faces;
+}
+
 Eigen::Matrix4d Umeyama(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to, bool scale) {
   Eigen::Matrix3Xd a(3, from.size()), b(3, to.size());
   for (size_t i = 0; i < from.size(); ++i) {
@@ -210,13 +228,25 @@ void SetRigid(const Eigen::Matrix4d& T, FitState* st) {
 }
 
 // One Ceres solve over `pairs`; returns the LM iterations used.
-int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, const MeshFitOptions& o,
-              const HeadModel& model, bool rigid_only, FitState* st) {
+SolveSettings SolveSettings::From(const MeshFitOptions& o) {
+  SolveSettings s;
+  s.loss = o.loss;
+  s.loss_scale_m = o.loss_scale_m;
+  s.shape_prior = o.shape_prior;
+  s.expression_prior = o.expression_prior;
+  s.jaw_prior = o.jaw_prior;
+  s.max_iterations = o.max_iterations;
+  return s;
+}
+
+int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, const SolveSettings& o,
+              const FreeBlocks& free, FitState* st) {
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::TAKE_OWNERSHIP;
   ceres::Problem problem(po);
   std::unique_ptr<ceres::LossFunction> base;
   if (o.loss == MeshLoss::kNorm) base = std::make_unique<ceres::SoftLOneLoss>(o.loss_scale_m);
+  if (o.loss == MeshLoss::kHuber) base = std::make_unique<ceres::HuberLoss>(o.loss_scale_m);
   if (o.loss == MeshLoss::kCauchy) base = std::make_unique<ceres::CauchyLoss>(o.loss_scale_m);
   double* blocks[] = {st->coefficients.data(), st->rotation.data(), st->translation.data(), &st->log_scale,
                       st->jaw.data()};
@@ -239,9 +269,22 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   problem.AddResidualBlock(
       new ceres::NormalPrior(std::sqrt(o.jaw_prior * count) * Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()),
       nullptr, blocks[kJaw]);
-  if (rigid_only || basis.ns + basis.ne == 0) problem.SetParameterBlockConstant(blocks[kCoefficients]);
-  if (rigid_only || !o.fit_jaw || !model.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(blocks[kJaw]);
-  if (!o.fit_scale) problem.SetParameterBlockConstant(blocks[kLogScale]);
+  // Coefficients: all free, a subset (SubsetManifold holds the rest), or none.
+  std::vector<int> fixed;
+  for (int i = 0; i < basis.ns; ++i)
+    if (!free.shape) fixed.push_back(i);
+  for (int i = basis.ns; i < basis.ns + basis.ne; ++i)
+    if (!free.expression) fixed.push_back(i);
+  if (basis.ns + basis.ne == 0 || static_cast<int>(fixed.size()) == basis.k)
+    problem.SetParameterBlockConstant(blocks[kCoefficients]);
+  else if (!fixed.empty())
+    problem.SetManifold(blocks[kCoefficients], new ceres::SubsetManifold(basis.k, fixed));
+  if (!free.rigid) {
+    problem.SetParameterBlockConstant(blocks[kRotation]);
+    problem.SetParameterBlockConstant(blocks[kTranslation]);
+  }
+  if (!free.jaw) problem.SetParameterBlockConstant(blocks[kJaw]);
+  if (!free.scale) problem.SetParameterBlockConstant(blocks[kLogScale]);
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   so.max_num_iterations = o.max_iterations;
@@ -255,6 +298,13 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
 }
 
 void MeasureRms(const RowMatrixX3f& posed, const std::vector<Correspondence>& pairs, MeshFitResult* r) {
+  const PairRms rms = MeasurePairs(posed, pairs);
+  r->correspondences = static_cast<int>(pairs.size());
+  r->rms_m = rms.all_m;
+  r->rms_face_m = rms.face_m;
+}
+
+PairRms MeasurePairs(const RowMatrixX3f& posed, const std::vector<Correspondence>& pairs) {
   double all = 0, face = 0;
   int n_face = 0;
   for (const Correspondence& c : pairs) {
@@ -267,10 +317,17 @@ void MeasureRms(const RowMatrixX3f& posed, const std::vector<Correspondence>& pa
       ++n_face;
     }
   }
-  r->correspondences = static_cast<int>(pairs.size());
-  r->rms_m = pairs.empty() ? 0 : std::sqrt(all / pairs.size());
-  r->rms_face_m = n_face == 0 ? 0 : std::sqrt(face / n_face);
+  PairRms r;
+  r.all_m = pairs.empty() ? 0 : std::sqrt(all / pairs.size());
+  r.face_m = n_face == 0 ? 0 : std::sqrt(face / n_face);
+  return r;
 }
+
+}  // namespace mesh_fit_internal
+
+namespace {
+
+using namespace mesh_fit_internal;
 
 int FittedCount(int requested, int available, bool enabled) {
   if (!enabled) return 0;
@@ -403,6 +460,10 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
   FitState st;
   st.coefficients = Eigen::VectorXd::Zero(basis.k);
   const RowMatrixX3f& rest = model.data().v_template;
+  const SolveSettings settings = SolveSettings::From(o);
+  FreeBlocks all_free;
+  all_free.jaw = o.fit_jaw && model.JointIsArticulated(kJawJoint);
+  all_free.scale = o.fit_scale;
 
   if (r.same_topology) {
     // Rigid pre-alignment on the face region, then rigid-only, then everything.
@@ -422,8 +483,8 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
       pairs[i].weight = omega[i];
       pairs[i].face = nu[i] >= 1;
     }
-    r.iterations += SolveOnce(basis, pairs, o, model, true, &st);
-    r.iterations += SolveOnce(basis, pairs, o, model, false, &st);
+    r.iterations += SolveOnce(basis, pairs, settings, FreeBlocks::RigidOnly(), &st);
+    r.iterations += SolveOnce(basis, pairs, settings, all_free, &st);
     r.rounds = 1;
     MeasureRms(PoseAll(basis, st), pairs, &r);
     r.round_rms_m.push_back(r.rms_m);
@@ -447,17 +508,16 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
         throw std::invalid_argument("the mesh landmarks are (nearly) collinear: no rigid alignment from them");
       SetRigid(Umeyama(from, to, o.fit_scale), &st);
     }
-    std::vector<std::vector<int>> vertex_faces(model.num_vertices());
-    for (int f = 0; f < model.num_faces(); ++f)
-      for (int k = 0; k < 3; ++k) vertex_faces[model.data().faces(f, k)].push_back(f);
+    const std::vector<std::vector<int>> vertex_faces = VertexFaces(model);
     const RowMatrixX3f target_normals = VertexNormals(target.vertices, target.faces);
     double previous = INFINITY;
     std::vector<Correspondence> pairs;
     for (int round = 0; round < o.closest_point_rounds; ++round) {
       // Wider gates while the alignment is rough.
       const double gate = o.max_correspondence_m * (round < 2 ? 3.0 : 1.0);
-      pairs = ClosestPoints(model, PoseAll(basis, st), vertex_faces, target, target_normals, omega, nu, gate);
-      r.iterations += SolveOnce(basis, pairs, o, model, round == 0, &st);
+      pairs =
+          ClosestPoints(model, PoseAll(basis, st), vertex_faces, target.vertices, target_normals, omega, nu, gate);
+      r.iterations += SolveOnce(basis, pairs, settings, round == 0 ? FreeBlocks::RigidOnly() : all_free, &st);
       ++r.rounds;
       MeasureRms(PoseAll(basis, st), pairs, &r);
       r.round_rms_m.push_back(r.rms_m);

@@ -25,7 +25,7 @@ namespace headcast {
 
 enum class MeshCorrespondence { kAuto, kSameTopology, kClosestPoint };
 enum class MeshWeighting { kImportanceAndCount, kImportance, kUniform };
-enum class MeshLoss { kNorm, kSquared, kCauchy };
+enum class MeshLoss { kNorm, kSquared, kCauchy, kHuber };
 
 struct MeshFitOptions {
   bool fit_shape = true, fit_expression = true;

@@ -1,0 +1,80 @@
+// RgbdFitter: the head model fitted to one RGB-D frame (METHOD §3, the
+// thesis's contribution). 2D landmarks + aligned metric depth give 3D
+// landmarks and a face point cloud; then
+//   block 1: pose (and jaw) from the 3D landmarks,
+//   block 2: 3D landmarks + point-to-mesh distances (nanoflann closest
+//            points) over shape, expression, jaw and pose,
+//   block 3: the point-to-mesh term alone over shape.
+// The 3D reconstruction accuracy is sqrt of the final mean squared
+// point-to-mesh distance, metres.
+//
+// Stereo depth at the face border often lies on the background, so contour
+// landmarks (0..16) get background depth: they are left out of block 1, and
+// afterwards kept only when their depth agrees with the posed model; cloud
+// points are limited to the landmarks' span and depth range and paired only
+// within a distance gate, with surfaces facing the same way.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "common/core/camera.h"
+#include "common/headmodel/head_model.h"
+#include "common/tracking/head_fitter.h"
+
+namespace headcast {
+
+struct RgbdFitOptions {
+  int num_expression = 0;  // expression components fitted (0: all the model has)
+  bool fit_shape = true;   // false once the identity is calibrated (SetIdentity)
+  // w1 (3D landmark term) and w2 (point-to-mesh term). Landmark depth is read
+  // where the surface may turn (lips, eyelids), so the cloud leads.
+  double landmark_weight = 0.1, point_weight = 1.0;
+  double max_point_distance_m = 0.01;  // cloud points farther from the model are not paired
+  double robust_scale_m = 0.002;       // Huber: quadratic below this, linear above
+  int block2_rounds = 6, block3_rounds = 3;
+  int cloud_stride = 2;            // every n-th pixel in x and y
+  double cloud_margin_m = 0.015;   // around the landmarks' image span
+  double head_depth_m = 0.15;      // points this far behind the nearest landmark at most
+  double contour_tolerance_m = 0.005;  // contour landmark depth against the posed model after block 1
+  double contour_weight = 0.25;        // of a contour landmark against an inner one
+  bool reject_background_contour = true;
+  double shape_prior = 1e-9, expression_prior = 1e-9;  // m^2 per unit^2 per point: only keeps unobserved components at zero
+  int max_iterations = 30;  // per solve
+  void Check() const;
+};
+
+struct RgbdFitResult {
+  bool ok = false;
+  std::string problem;     // why not, when !ok
+  HeadModelParams params;  // shape, expression, jaw (root zero: the placement is the rotation/translation below)
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // cam_from_head
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  double accuracy_m = 0;        // sqrt(mean squared point-to-mesh distance) after the last block
+  double landmark_rmse_m = 0;   // 3D landmarks used, after the fit
+  int cloud_points = 0, paired_points = 0, landmarks_3d = 0, contour_rejected = 0;
+};
+
+class RgbdFitter {
+ public:
+  RgbdFitter(const HeadModel& model, const RgbdFitOptions& options = {});
+  ~RgbdFitter();
+  // Identity used from now on (and frozen when fit_shape is false).
+  void SetIdentity(const Eigen::VectorXd& shape);
+  // `depth_m`: CV_32F metres aligned to the image the landmarks are in, 0 unknown.
+  // `previous`: warm start from the last frame's result (skips the landmark pose initialisation).
+  RgbdFitResult Fit(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
+                    const RgbdFitResult* previous = nullptr) const;
+  const RgbdFitOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  const HeadModel& model_;
+  RgbdFitOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The depth at a pixel: median of the valid values in a (2r+1)^2 window, 0 if none.
+float DepthAt(const cv::Mat& depth_m, const Eigen::Vector2d& pixel, int radius = 2);
+
+}  // namespace headcast
