@@ -3,6 +3,7 @@
 // parameter recording, an overlay video and a JSON report.
 #include <CLI/CLI.hpp>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -15,15 +16,28 @@
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/mesh_fitter.h"
+#include "common/tracking/rgbd_fitter.h"
 #include "proto/recording.h"
 #include "sender/capture/frame_source.h"
+
+namespace {
+
+// An RGB-D fit as the frame parameters the sender streams.
+void ApplyRgbdFit(const headcast::RgbdFitResult& r, headcast::FrameParams* f) {
+  f->expression = r.params.expression.cast<float>();
+  f->jaw = r.params.pose.segment<3>(3 * headcast::kJawJoint).cast<float>();
+  f->SetCamFromHead({r.rotation, r.translation});
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
   std::string input, head_model_spec = "builtin", out, report_path, overlay, log_level, predictor, identity_from;
   int max_frames = 0;
-  std::string camera_size = "640x480";
+  std::string camera_size = "640x480", intrinsics;
+  int calibration_frames = 15;
   double fov_deg = 40;
   app.add_option("--input", input,
                  "video file, image folder, RGB-D folder (with associations.txt), /dev/videoN (V4L2 camera), or "
@@ -48,6 +62,10 @@ int main(int argc, char** argv) {
   app.add_option("--stereo-resolution", source_options.stereo_resolution, "section of a ZED .conf: 2K, FHD, HD, VGA")
       ->capture_default_str();
   app.add_flag("--realtime", source_options.realtime, "pace recorded inputs to their frame rate");
+  app.add_option("--intrinsics", intrinsics, "camera intrinsics fx,fy,cx,cy in pixels (else --fov, or the stereo calibration)");
+  app.add_option("--calibration-frames", calibration_frames,
+                 "RGB-D: frames whose fitted shapes give the identity (median), unless --identity-from")
+      ->capture_default_str();
   app.add_option("--camera-size", camera_size, "cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
   app.add_option("--camera-fps", source_options.fps, "cameras: frame rate to ask for; image folders: their rate")
       ->capture_default_str();
@@ -75,12 +93,69 @@ int main(int argc, char** argv) {
     std::unique_ptr<RecordingWriter> writer;
     std::unique_ptr<VideoWriter> overlay_writer;
     if (!overlay.empty()) overlay_writer = std::make_unique<VideoWriter>(overlay, fps);
+    PinholeCamera camera;
+    auto MakeInfo = [&] {
+      RecordingInfo info;
+      info.head_model_name = model.data().name;
+      info.head_model_fingerprint = model.fingerprint();
+      info.num_expression = model.num_expression();
+      info.fps = fps;
+      info.subject.shape = identity.cast<float>();
+      info.subject.texture = Eigen::VectorXf::Zero(model.num_texture());
+      info.subject.intrinsics = camera;
+      info.source = "headcast-track " + input;
+      return info;
+    };
+    // RGB-D: one fitter that also fits the shape (calibration), one with it frozen.
+    RgbdFitOptions calibrating_options, frozen_options;
+    frozen_options.fit_shape = false;
+    RgbdFitter rgbd_calibrating(model, calibrating_options), rgbd(model, frozen_options);
+    rgbd.SetIdentity(identity);
+    bool identity_frozen = !identity_from.empty();
+    struct Pending {
+      Landmarks2d landmarks;
+      cv::Mat depth;
+      uint64_t sequence;
+      double time;
+    };
+    std::vector<Pending> pending;
+    std::vector<Eigen::VectorXd> calibration_shapes;
+    RgbdFitResult last_rgbd;
+    SampleStats accuracy_mm;
+    int contour_rejected = 0;
+    // The identity: per-component median of the calibration frames' shapes;
+    // those frames are fitted again with it and written.
+    auto freeze = [&](const std::function<void(const FrameParams&)>& write) {
+      for (int k = 0; k < model.num_shape(); ++k) {
+        std::vector<double> v;
+        for (const auto& shape : calibration_shapes) v.push_back(shape[k]);
+        std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+        identity[k] = v[v.size() / 2];
+      }
+      rgbd.SetIdentity(identity);
+      fitter.SetIdentity(identity);
+      identity_frozen = true;
+      spdlog::info("identity frozen from {} RGB-D frames", calibration_shapes.size());
+      RgbdFitResult previous;
+      for (const Pending& p : pending) {
+        const RgbdFitResult r = rgbd.Fit(p.landmarks, p.depth, camera, previous.ok ? &previous : nullptr);
+        if (!r.ok) continue;
+        FrameParams f;
+        ApplyRgbdFit(r, &f);
+        f.sequence = p.sequence;
+        f.capture_time_s = p.time;
+        f.confidence = 1.f;
+        write(f);
+        previous = r;
+      }
+      pending.clear();
+      last_rgbd = previous.ok ? previous : last_rgbd;
+    };
     SampleStats ms, error_iod;
     int frames = 0, fitted = 0, unreadable = 0, with_depth = 0;
     std::map<std::string, int> statuses;
     FrameParams params;
     params.cam_translation.setZero();  // cold start
-    PinholeCamera camera;
     for (;;) {
       if (max_frames > 0 && frames >= max_frames) break;
       CapturedFrame captured;
@@ -98,25 +173,44 @@ int main(int argc, char** argv) {
       const cv::Mat& frame = captured.bgr;
       with_depth += !captured.depth_m.empty();
       ++frames;
-      if (!writer) {
-        // Calibrated intrinsics when the source has them (stereo), else the field of view given.
+      if (frames == 1) {
+        // Calibrated intrinsics when the source has them (stereo) or were given, else the field of view.
         camera = captured.camera ? *captured.camera : PinholeCamera::FromFovY(frame.cols, frame.rows, fov_deg);
-        RecordingInfo info;
-        info.head_model_name = model.data().name;
-        info.head_model_fingerprint = model.fingerprint();
-        info.num_expression = model.num_expression();
-        info.fps = fps;
-        info.subject.shape = identity.cast<float>();
-        info.subject.texture = Eigen::VectorXf::Zero(model.num_texture());
-        info.subject.intrinsics = camera;
-        info.source = "headcast-track " + input;
-        writer = std::make_unique<RecordingWriter>(out, info);
+        if (!intrinsics.empty()) {
+          if (std::sscanf(intrinsics.c_str(), "%lf,%lf,%lf,%lf", &camera.fx, &camera.fy, &camera.cx, &camera.cy) != 4)
+            throw std::invalid_argument("--intrinsics wants fx,fy,cx,cy in pixels");
+          camera.Check();
+        }
       }
+      auto write = [&](const FrameParams& f) {
+        if (!writer) writer = std::make_unique<RecordingWriter>(out, MakeInfo());
+        writer->Write(f);
+      };
       const double t = captured.capture_time_s;
       Stopwatch watch;
       const FaceObservation obs = tracker.Track(frame, t);
       FitResult fit;
-      if (obs.status != FaceStatus::kNoFace) {
+      bool hold = false;  // RGB-D identity calibration: written once the identity is frozen
+      if (obs.status != FaceStatus::kNoFace && !captured.depth_m.empty()) {
+        // RGB-D (METHOD §3): shape fitted on the first frames, then frozen at their median.
+        const RgbdFitResult r = identity_frozen ? rgbd.Fit(obs.landmarks, captured.depth_m, camera,
+                                                           last_rgbd.ok ? &last_rgbd : nullptr)
+                                                : rgbd_calibrating.Fit(obs.landmarks, captured.depth_m, camera);
+        if (r.ok) {
+          ApplyRgbdFit(r, &params);
+          fit.ok = true;
+          accuracy_mm.Add(1e3 * r.accuracy_m);
+          contour_rejected += r.contour_rejected;
+          if (!identity_frozen) {
+            calibration_shapes.push_back(r.params.shape);
+            pending.push_back({obs.landmarks, captured.depth_m.clone(), static_cast<uint64_t>(frames - 1), t});
+            hold = true;
+          }
+        } else {
+          spdlog::debug("frame {}: RGB-D fit: {}", frames - 1, r.problem);
+        }
+        last_rgbd = r;
+      } else if (obs.status != FaceStatus::kNoFace) {
         if (obs.status == FaceStatus::kDetected && !(params.cam_translation.z() > 0)) params.expression.resize(0);
         fit = fitter.Fit(obs.landmarks, camera, &params);
       }
@@ -128,7 +222,8 @@ int main(int argc, char** argv) {
         params.sequence = static_cast<uint64_t>(frames - 1);
         params.capture_time_s = t;
         params.confidence = 1.f;
-        writer->Write(params);
+        if (!hold) write(params);
+        if (!identity_frozen && static_cast<int>(calibration_shapes.size()) >= calibration_frames) freeze(write);
         const Landmarks2d model_landmarks = fitter.Project(params, camera);
         error_iod.Add(LandmarkErrorIod(model_landmarks, obs.raw));
         for (int l = 0; l < kNumLandmarks; ++l) {
@@ -144,8 +239,14 @@ int main(int argc, char** argv) {
                   cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
       if (overlay_writer) overlay_writer->Write(shown);
     }
+    if (!identity_frozen && !calibration_shapes.empty()) {
+      auto write = [&](const FrameParams& f) {
+        if (!writer) writer = std::make_unique<RecordingWriter>(out, MakeInfo());
+        writer->Write(f);
+      };
+      freeze(write);
+    }
     if (frames == 0) throw std::runtime_error(input + ": no readable frames (corrupt or empty?)");
-    if (with_depth > 0) spdlog::info("{} frames had depth; RGB-D fitting is not wired in yet, landmarks only", with_depth);
     nlohmann::json report = {{"input", input},
                              {"head_model", model.data().name},
                              {"frames", frames},
@@ -155,8 +256,18 @@ int main(int argc, char** argv) {
                              {"landmark_error_iod_mean", error_iod.empty() ? -1.0 : error_iod.Mean()},
                              {"ms_per_frame_median", ms.Median()},
                              {"ms_per_frame_p95", ms.Percentile(95)},
-                             {"identity", identity_from.empty() ? "neutral (beta = 0)" : identity_from},
-                             {"note", "identity is not calibrated from the video yet; focal from --fov"}};
+                             {"frames_with_depth", with_depth},
+                             {"identity", !identity_from.empty() ? identity_from
+                                          : with_depth > 0     ? "RGB-D: median shape of the first fitted frames"
+                                                               : "neutral (beta = 0)"},
+                             {"camera", camera.ToString()}};
+    if (!accuracy_mm.empty()) {
+      report["rgbd_accuracy_mm_median"] = accuracy_mm.Median();
+      report["rgbd_accuracy_mm_p95"] = accuracy_mm.Percentile(95);
+      report["rgbd_contour_landmarks_rejected"] = contour_rejected;
+      report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
+    }
+    if (with_depth == 0) report["note"] = "RGB only: identity is not calibrated from the video yet; focal from --fov";
     std::cout << report.dump(2) << "\n";
     if (!report_path.empty()) std::ofstream(report_path) << report.dump(2) << "\n";
   } catch (const std::exception& e) {

@@ -19,6 +19,7 @@ void RgbdFitOptions::Check() const {
   c.Positive("point_weight", point_weight).Positive("max_point_distance_m", max_point_distance_m);
   c.Positive("robust_scale_m", robust_scale_m).InRange("block2_rounds", block2_rounds, 1, 100);
   c.InRange("block3_rounds", block3_rounds, 0, 100).InRange("cloud_stride", cloud_stride, 1, 64);
+  c.InRange("warm_rounds", warm_rounds, 1, 100);
   c.NonNegative("cloud_margin_m", cloud_margin_m).Positive("head_depth_m", head_depth_m);
   c.Positive("contour_tolerance_m", contour_tolerance_m).NonNegative("shape_prior", shape_prior);
   c.NonNegative("contour_weight", contour_weight);
@@ -244,10 +245,12 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   FreeBlocks shape_only{options_.fit_shape, false, false, false, false};
   std::vector<Correspondence> points;
   const Eigen::VectorXf ones = Eigen::VectorXf::Ones(model_.num_vertices());
-  const int rounds = options_.block2_rounds + (options_.fit_shape ? options_.block3_rounds : 0);
+  const bool warm = previous && previous->ok;
+  const int block2 = warm ? options_.warm_rounds : options_.block2_rounds;
+  const int rounds = block2 + (options_.fit_shape ? options_.block3_rounds : 0);
   for (int round = 0; round < rounds; ++round) {
-    const bool block3 = round >= options_.block2_rounds;
-    const double gate = options_.max_point_distance_m * (round == 0 ? 2.0 : 1.0);
+    const bool block3 = round >= block2;
+    const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
     points = ClosestPoints(model_, PoseAll(basis, st), impl_->vertex_faces, cloud, cloud_normals, ones, impl_->nu,
                            gate);
     if (points.size() < 50) {

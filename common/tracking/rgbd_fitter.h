@@ -33,7 +33,8 @@ struct RgbdFitOptions {
   double max_point_distance_m = 0.01;  // cloud points farther from the model are not paired
   double robust_scale_m = 0.002;       // Huber: quadratic below this, linear above
   int block2_rounds = 6, block3_rounds = 3;
-  int cloud_stride = 2;            // every n-th pixel in x and y
+  int warm_rounds = 2;  // block 2 rounds when warm-started from the previous frame
+  int cloud_stride = 3;            // every n-th pixel in x and y
   double cloud_margin_m = 0.015;   // around the landmarks' image span
   double head_depth_m = 0.15;      // points this far behind the nearest landmark at most
   double contour_tolerance_m = 0.005;  // contour landmark depth against the posed model after block 1

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# RGB-D tracking end to end: a rendered RGB-D sequence with known parameters
+# (headcast-headmodel render-rgbd) through headcast-track (dlib landmarks,
+# RGB-D fit, identity calibration), compared with the truth.
+set -u
+bin=$1 src=$2 python=${3:-/usr/bin/python3}
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
+trap 'rm -rf "$tmp"' EXIT
+
+"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 12 --shape 0=0.8 --depth-noise 0.5 > /dev/null &&
+  [ -s "$tmp/seq/associations.txt" ] && ok "render-rgbd writes a sequence" || bad "render-rgbd"
+fx=$("$python" -c "import json; print(json.load(open('$tmp/seq/truth.json'))['camera']['fx'])")
+"$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 \
+  --out "$tmp/t.hcrec" --report "$tmp/r.json" > /dev/null 2> "$tmp/log" && grep -q '"fitted_frames": 12' "$tmp/r.json" &&
+  ok "12 of 12 RGB-D frames fitted" || bad "track: $(cat "$tmp/r.json" "$tmp/log" 2>/dev/null | tail -5)"
+acc=$("$python" -c "import json; print(json.load(open('$tmp/r.json'))['rgbd_accuracy_mm_median'])" 2>/dev/null)
+awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || bad "accuracy: $acc"
+"$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/t.hcrec" \
+  --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/cmp.json" &&
+  "$python" -c "import json,sys; j=json.load(open('$tmp/cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
+  ok "head position within 10 mm, depth within 2 mm of the truth" || bad "truth: $(cat "$tmp/cmp.json")"
+# Unreadable depth is a per-frame status.
+printf 'junk' > "$tmp/seq/depth/00003.png"
+"$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --max-frames 6 \
+  --out "$tmp/u.hcrec" --report "$tmp/u.json" > /dev/null 2>&1 && grep -q '"unreadable_frames": 1' "$tmp/u.json" &&
+  ok "unreadable depth is a status, the run completes" || bad "bad depth: $(cat "$tmp/u.json" 2>/dev/null)"
+checks_summary "rgbd track cli"
