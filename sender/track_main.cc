@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -11,6 +12,7 @@
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
+#include "common/core/rotation.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/face_tracker.h"
@@ -38,6 +40,7 @@ int main(int argc, char** argv) {
   int max_frames = 0;
   std::string camera_size = "640x480", intrinsics;
   int calibration_frames = 15;
+  bool calibrate = false;
   double fov_deg = 40;
   app.add_option("--input", input,
                  "video file, image folder, RGB-D folder (with associations.txt), /dev/videoN (V4L2 camera), or "
@@ -64,8 +67,11 @@ int main(int argc, char** argv) {
   app.add_flag("--realtime", source_options.realtime, "pace recorded inputs to their frame rate");
   app.add_option("--intrinsics", intrinsics, "camera intrinsics fx,fy,cx,cy in pixels (else --fov, or the stereo calibration)");
   app.add_option("--calibration-frames", calibration_frames,
-                 "RGB-D: frames whose fitted shapes give the identity (median), unless --identity-from")
+                 "RGB-D: frames whose fitted shapes give the identity (median); with --calibrate: key frames at most")
       ->capture_default_str();
+  app.add_flag("--calibrate", calibrate,
+               "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
+               "head's yaw in a first pass, then track with them (METHOD §2)");
   app.add_option("--camera-size", camera_size, "cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
   app.add_option("--camera-fps", source_options.fps, "cameras: frame rate to ask for; image folders: their rate")
       ->capture_default_str();
@@ -86,6 +92,58 @@ int main(int argc, char** argv) {
     Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
     if (!identity_from.empty()) identity = ReadIdentityFromMeshFit(identity_from, model);
     fitter.SetIdentity(identity);
+    // Identity calibration (RGB, recorded input): a first pass collects landmarks,
+    // key frames spread over the head's yaw give shape and focal length.
+    std::optional<PinholeCamera> calibrated_camera;
+    nlohmann::json calibration_report;
+    if (calibrate) {
+      if (input.rfind("/dev/", 0) == 0 || input.find(":/dev/") != std::string::npos)
+        throw std::invalid_argument("--calibrate needs a recorded input (a live camera cannot be read twice)");
+      auto pass = OpenFrameSource(input, source_options);
+      FaceTracker first_tracker(tracker_options);
+      HeadFitter first_fitter(model);
+      first_fitter.SetIdentity(identity);
+      FrameParams p;
+      p.cam_translation.setZero();
+      std::vector<std::pair<double, Landmarks2d>> seen;  // (yaw, landmarks)
+      PinholeCamera initial;
+      bool have_initial = false;
+      for (int n = 0; max_frames <= 0 || n < max_frames; ++n) {
+        CapturedFrame c;
+        std::string why;
+        const ReadStatus st = pass->Read(&c, &why);
+        if (st == ReadStatus::kEnd) break;
+        if (st == ReadStatus::kSkipped) continue;
+        if (!have_initial) {
+          initial = c.camera ? *c.camera : PinholeCamera::FromFovY(c.bgr.cols, c.bgr.rows, fov_deg);
+          have_initial = true;
+        }
+        const FaceObservation obs = first_tracker.Track(c.bgr, c.capture_time_s);
+        if (obs.status == FaceStatus::kNoFace || !first_fitter.Fit(obs.landmarks, initial, &p).ok) {
+          p.cam_translation.setZero();
+          continue;
+        }
+        seen.emplace_back(ViewRotation(AxisAngleToMatrix(p.cam_rotation.cast<double>())).y(), obs.landmarks);
+      }
+      if (seen.size() < 3) throw std::runtime_error(input + ": too few frames with a face to calibrate the identity");
+      std::sort(seen.begin(), seen.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+      // Key frames: evenly spaced over the sorted yaws (the extremes included), at most a quarter of the frames.
+      const int keys = std::max(3, std::min(calibration_frames, static_cast<int>(seen.size()) / 4));
+      std::vector<Landmarks2d> key_frames;
+      for (int k = 0; k < keys; ++k)
+        key_frames.push_back(seen[static_cast<size_t>(std::lround(k * (seen.size() - 1.0) / (keys - 1)))].second);
+      const HeadFitter::Calibration cal = fitter.CalibrateIdentity(key_frames, initial);
+      if (!cal.ok) throw std::runtime_error(input + ": identity calibration failed");
+      identity = cal.shape;
+      calibrated_camera = cal.camera;
+      calibration_report = {{"key_frames", cal.frames},
+                            {"yaw_range_deg", {seen.front().first * 180 / M_PI, seen.back().first * 180 / M_PI}},
+                            {"focal_px", cal.camera.fx},
+                            {"focal_px_from_fov", initial.fx},
+                            {"rms_px", cal.rms_px}};
+      spdlog::info("identity calibrated over {} key frames: focal {:.1f} px, rms {:.2f} px", cal.frames, cal.camera.fx,
+                   cal.rms_px);
+    }
     // Frames from a camera, a video, an image or RGB-D folder, or side-by-side stereo.
     std::unique_ptr<FrameSource> source = OpenFrameSource(input, source_options);
     spdlog::info("source: {}", source->Describe());
@@ -175,7 +233,9 @@ int main(int argc, char** argv) {
       ++frames;
       if (frames == 1) {
         // Calibrated intrinsics when the source has them (stereo) or were given, else the field of view.
-        camera = captured.camera ? *captured.camera : PinholeCamera::FromFovY(frame.cols, frame.rows, fov_deg);
+        camera = calibrated_camera ? *calibrated_camera
+                 : captured.camera ? *captured.camera
+                                   : PinholeCamera::FromFovY(frame.cols, frame.rows, fov_deg);
         if (!intrinsics.empty()) {
           if (std::sscanf(intrinsics.c_str(), "%lf,%lf,%lf,%lf", &camera.fx, &camera.fy, &camera.cx, &camera.cy) != 4)
             throw std::invalid_argument("--intrinsics wants fx,fy,cx,cy in pixels");
@@ -258,6 +318,7 @@ int main(int argc, char** argv) {
                              {"ms_per_frame_p95", ms.Percentile(95)},
                              {"frames_with_depth", with_depth},
                              {"identity", !identity_from.empty() ? identity_from
+                                          : calibrate          ? "calibrated over key frames (shape, focal)"
                                           : with_depth > 0     ? "RGB-D: median shape of the first fitted frames"
                                                                : "neutral (beta = 0)"},
                              {"camera", camera.ToString()}};
@@ -267,7 +328,7 @@ int main(int argc, char** argv) {
       report["rgbd_contour_landmarks_rejected"] = contour_rejected;
       report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
     }
-    if (with_depth == 0) report["note"] = "RGB only: identity is not calibrated from the video yet; focal from --fov";
+    if (calibrate) report["calibration"] = calibration_report;
     std::cout << report.dump(2) << "\n";
     if (!report_path.empty()) std::ofstream(report_path) << report.dump(2) << "\n";
   } catch (const std::exception& e) {

@@ -8,6 +8,7 @@
 
 #include "common/core/options.h"
 #include "common/core/rotation.h"
+#include "common/tracking/landmark_costs.h"
 
 namespace headcast {
 
@@ -16,6 +17,7 @@ void HeadFitterOptions::Check() const {
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
+  c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.ThrowIfErrors();
 }
 
@@ -60,55 +62,6 @@ HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose) const {
 }
 
 namespace {
-
-struct LandmarkResidual {
-  LandmarkResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
-                   const Eigen::Vector3d& jaw_joint, const Eigen::Vector2d& observed, const PinholeCamera& cam,
-                   double weight)
-      : base(base),
-        dirs(dirs),
-        jaw_weight(jaw_weight),
-        jaw_joint(jaw_joint),
-        observed(observed),
-        cam(cam),
-        weight(weight) {}
-
-  // DynamicAutoDiffCostFunction's form: the blocks are rotation, translation, expression, jaw.
-  template <typename T>
-  bool operator()(T const* const* blocks, T* residual) const {
-    return (*this)(blocks[0], blocks[1], blocks[2], blocks[3], residual);
-  }
-
-  template <typename T>
-  bool operator()(const T* cam_rotation, const T* cam_translation, const T* expression, const T* jaw,
-                  T* residual) const {
-    T p[3];
-    for (int c = 0; c < 3; ++c) {
-      p[c] = T(base[c]);
-      for (int k = 0; k < dirs.cols(); ++k) p[c] += T(dirs(c, k)) * expression[k];
-    }
-    if (jaw_weight > 0) {
-      // Linear blend skinning between the head (identity) and the jaw joint's rotation.
-      T rel[3] = {p[0] - T(jaw_joint[0]), p[1] - T(jaw_joint[1]), p[2] - T(jaw_joint[2])}, rotated[3];
-      ceres::AngleAxisRotatePoint(jaw, rel, rotated);
-      for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + T(jaw_joint[c]));
-    }
-    T x[3];
-    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
-    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
-    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
-    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
-    return true;
-  }
-
-  Eigen::Vector3d base;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dirs;
-  double jaw_weight;
-  Eigen::Vector3d jaw_joint;
-  Eigen::Vector2d observed;
-  PinholeCamera cam;
-  double weight;
-};
 
 // w * x for a whole parameter block, with its (diagonal) Jacobian.
 class PriorCost : public ceres::CostFunction {
@@ -217,6 +170,109 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
   for (int l = 0; l < kNumLandmarks; ++l) sq += (fitted[l] - observed[l]).squaredNorm();
   r.rms_px = std::sqrt(sq / kNumLandmarks);
   return r;
+}
+
+HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmarks2d>& key_frames,
+                                                      const PinholeCamera& initial, std::vector<FrameParams>* frames) {
+  Calibration result;
+  const int S = model_.num_shape(), E = num_expression_;
+  const auto& d = model_.data();
+  // Per-frame starts with the current identity.
+  std::vector<FrameParams> params(key_frames.size());
+  std::vector<bool> usable(key_frames.size(), false);
+  for (size_t f = 0; f < key_frames.size(); ++f) {
+    params[f].cam_translation.setZero();
+    usable[f] = Fit(key_frames[f], initial, &params[f]).ok;
+  }
+  // Template-relative landmark bases (shape is an unknown now).
+  const HeadIdentity zero = model_.MakeIdentity(Eigen::VectorXd::Zero(S));
+  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_shape_dirs = Eigen::MatrixXd::Zero(3, S);
+  for (int i = 0; i < model_.num_vertices(); ++i) {
+    const double w = d.j_regressor(kJawJoint, i);
+    if (w != 0) jaw_shape_dirs += w * d.shapedirs.block(3 * i, 0, 3, S).cast<double>();
+  }
+  const Eigen::Vector3d jaw_joint = zero.joints.row(kJawJoint).cast<double>().transpose();
+  Eigen::VectorXd shape = identity_.shape.cast<double>();
+  if (shape.size() != S) shape = Eigen::VectorXd::Zero(S);
+  double log_focal = 0;
+  std::vector<std::array<double, 9>> pose(key_frames.size());  // rotation, translation, jaw
+  std::vector<std::vector<double>> expression(key_frames.size(), std::vector<double>(std::max(E, 1), 0.0));
+  ceres::Problem problem;
+  for (size_t f = 0; f < key_frames.size(); ++f) {
+    if (!usable[f]) continue;
+    ++result.frames;
+    for (int i = 0; i < 3; ++i) {
+      pose[f][i] = params[f].cam_rotation[i];
+      pose[f][3 + i] = params[f].cam_translation[i];
+      pose[f][6 + i] = params[f].jaw[i];
+    }
+    for (int k = 0; k < E; ++k) expression[f][k] = params[f].expression[k];
+    Eigen::VectorXi faces;
+    RowMatrixX3f bary;
+    model_.LandmarkEmbedding(params[f].ViewPose(), &faces, &bary);
+    for (int l = 0; l < kNumLandmarks; ++l) {
+      Eigen::Vector3d base = Eigen::Vector3d::Zero();
+      Eigen::Matrix<double, 3, Eigen::Dynamic> edirs = Eigen::MatrixXd::Zero(3, std::max(E, 1)),
+                                               sdirs = Eigen::MatrixXd::Zero(3, S);
+      double jw = 0;
+      for (int k = 0; k < 3; ++k) {
+        const int v = d.faces(faces[l], k);
+        const double w = bary(l, k);
+        base += w * zero.v_shaped.segment<3>(3 * v).cast<double>();
+        if (E > 0) edirs.leftCols(E) += w * d.expressiondirs.block(3 * v, 0, 3, E).cast<double>();
+        sdirs += w * d.shapedirs.block(3 * v, 0, 3, S).cast<double>();
+        jw += w * d.weights(v, kJawJoint);
+      }
+      const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<CalibrationResidual, 8>(new CalibrationResidual(
+          base, edirs, sdirs, model_.JointIsArticulated(kJawJoint) ? jw : 0.0, jaw_joint, jaw_shape_dirs,
+          key_frames[f][l], initial, weight));
+      for (int size : {3, 3, std::max(E, 1), 3, S, 1}) cost->AddParameterBlock(size);
+      cost->SetNumResiduals(2);
+      problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
+                               {pose[f].data(), pose[f].data() + 3, expression[f].data(), pose[f].data() + 6,
+                                shape.data(), &log_focal});
+    }
+    problem.AddResidualBlock(new PriorCost(std::max(E, 1), std::sqrt(options_.expression_prior)), nullptr,
+                             expression[f].data());
+    problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, pose[f].data() + 6);
+    if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(pose[f].data() + 6);
+    if (E == 0) problem.SetParameterBlockConstant(expression[f].data());
+  }
+  if (result.frames < 2) return result;
+  problem.AddResidualBlock(new PriorCost(S, std::sqrt(options_.shape_prior * kNumLandmarks * result.frames)), nullptr,
+                           shape.data());
+  problem.SetParameterLowerBound(&log_focal, 0, -std::log(options_.max_focal_change));
+  problem.SetParameterUpperBound(&log_focal, 0, std::log(options_.max_focal_change));
+  ceres::Solver::Options solver;
+  solver.linear_solver_type = ceres::DENSE_SCHUR;
+  solver.max_num_iterations = 100;
+  solver.num_threads = 2;
+  ceres::Solver::Summary summary;
+  ceres::Solve(solver, &problem, &summary);
+  if (!summary.IsSolutionUsable()) return result;
+  result.shape = shape;
+  result.camera = initial;
+  result.camera.fx *= std::exp(log_focal);
+  result.camera.fy *= std::exp(log_focal);
+  SetIdentity(shape);
+  double sq = 0;
+  int n = 0;
+  for (size_t f = 0; f < key_frames.size(); ++f) {
+    if (!usable[f]) continue;
+    FrameParams& p = params[f];
+    p.cam_rotation = Eigen::Vector3d(pose[f][0], pose[f][1], pose[f][2]).cast<float>();
+    p.cam_translation = Eigen::Vector3d(pose[f][3], pose[f][4], pose[f][5]).cast<float>();
+    p.jaw = Eigen::Vector3d(pose[f][6], pose[f][7], pose[f][8]).cast<float>();
+    for (int k = 0; k < E; ++k) p.expression[k] = static_cast<float>(expression[f][k]);
+    const Landmarks2d fitted = Project(p, result.camera);
+    for (int l = 0; l < kNumLandmarks; ++l) sq += (fitted[l] - key_frames[f][l]).squaredNorm();
+    n += kNumLandmarks;
+  }
+  result.rms_px = std::sqrt(sq / std::max(1, n));
+  result.ok = true;
+  if (frames) *frames = params;
+  return result;
 }
 
 double LandmarkErrorIod(const Landmarks2d& a, const Landmarks2d& b) {

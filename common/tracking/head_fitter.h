@@ -23,6 +23,8 @@ struct HeadFitterOptions {
   double contour_weight = 0.5;     // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;         // Levenberg-Marquardt iterations per frame
   double huber_px = 3;             // robust loss scale on landmark residuals, pixels
+  double shape_prior = 1e-2;       // calibration: weight of sum(beta^2) against squared pixels per landmark
+  double max_focal_change = 2;     // calibration: the focal length stays within this factor of the initial one
   void Check() const;
 };
 
@@ -41,6 +43,21 @@ class HeadFitter {
   // its current values. A frame whose cam_translation.z <= 0 is initialised
   // from the landmarks (PnP on a neutral face) first.
   FitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame) const;
+  // Identity calibration over key frames of one person and one fixed camera
+  // (METHOD §2): shape and focal length shared by all frames, pose,
+  // expression and jaw per frame, starting from per-frame fits with the
+  // current identity. Key frames should span head turns (the focal length is
+  // only observable through perspective changes). On success the identity is
+  // set, *frames holds the frames' parameters and the calibrated camera is returned.
+  struct Calibration {
+    bool ok = false;
+    Eigen::VectorXd shape;
+    PinholeCamera camera;
+    double rms_px = 0;
+    int frames = 0;
+  };
+  Calibration CalibrateIdentity(const std::vector<Landmarks2d>& key_frames, const PinholeCamera& initial,
+                                std::vector<FrameParams>* frames = nullptr);
   // Model landmarks of `frame` projected with `camera`.
   Landmarks2d Project(const FrameParams& frame, const PinholeCamera& camera) const;
   const HeadFitterOptions& options() const { return options_; }

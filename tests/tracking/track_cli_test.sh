@@ -11,6 +11,11 @@ trap 'rm -rf "$tmp"' EXIT
 grep -q '"fitted_frames": 60' "$tmp/r.json" && ok "60 of 60 real frames fitted" || bad "fit: $(cat "$tmp/r.json")"
 err=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/r.json" | awk '{print $2}')
 awk "BEGIN{exit !($err < 0.03)}" && ok "landmark error $err IOD < 0.03" || bad "landmark error $err"
+"$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 --calibrate \
+  --out "$tmp/c14.hcrec" --report "$tmp/c.json" > /dev/null 2>&1
+cerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/c.json" | awk '{print $2}')
+grep -q '"focal_px"' "$tmp/c.json" && awk "BEGIN{exit !($cerr < 0.03)}" &&
+  ok "identity + focal calibrated over key frames (error $cerr IOD)" || bad "calibrate: $(cat "$tmp/c.json")"
 "$bin/headcast-avatar" render --help > /dev/null  # (the recording format is shared with the avatar tools)
 head -c 20000 "$data/video/talking_d14.mp4" > "$tmp/cut.mp4"
 out=$("$bin/headcast-track" --input "$tmp/cut.mp4" --out "$tmp/x.hcrec" 2>&1); rc=$?

@@ -1,0 +1,125 @@
+// Landmark reprojection residuals of the head fitter (Ceres autodiff), in a
+// header so tests can check them with ceres::GradientChecker.
+#pragma once
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Core>
+
+#include "common/core/camera.h"
+
+namespace headcast {
+
+// One landmark of one frame: expression-linear position, jaw skinning, cam_from_head, pinhole projection.
+struct LandmarkResidual {
+  LandmarkResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
+                   const Eigen::Vector3d& jaw_joint, const Eigen::Vector2d& observed, const PinholeCamera& cam,
+                   double weight)
+      : base(base),
+        dirs(dirs),
+        jaw_weight(jaw_weight),
+        jaw_joint(jaw_joint),
+        observed(observed),
+        cam(cam),
+        weight(weight) {}
+
+  // DynamicAutoDiffCostFunction's form: the blocks are rotation, translation, expression, jaw.
+  template <typename T>
+  bool operator()(T const* const* blocks, T* residual) const {
+    return (*this)(blocks[0], blocks[1], blocks[2], blocks[3], residual);
+  }
+
+  template <typename T>
+  bool operator()(const T* cam_rotation, const T* cam_translation, const T* expression, const T* jaw,
+                  T* residual) const {
+    T p[3];
+    for (int c = 0; c < 3; ++c) {
+      p[c] = T(base[c]);
+      for (int k = 0; k < dirs.cols(); ++k) p[c] += T(dirs(c, k)) * expression[k];
+    }
+    if (jaw_weight > 0) {
+      // Linear blend skinning between the head (identity) and the jaw joint's rotation.
+      T rel[3] = {p[0] - T(jaw_joint[0]), p[1] - T(jaw_joint[1]), p[2] - T(jaw_joint[2])}, rotated[3];
+      ceres::AngleAxisRotatePoint(jaw, rel, rotated);
+      for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + T(jaw_joint[c]));
+    }
+    T x[3];
+    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
+    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
+    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    return true;
+  }
+
+  Eigen::Vector3d base;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dirs;
+  double jaw_weight;
+  Eigen::Vector3d jaw_joint;
+  Eigen::Vector2d observed;
+  PinholeCamera cam;
+  double weight;
+};
+
+
+// The same landmark during identity calibration: shape (and the jaw joint's
+// dependence on it) and a log focal-length scale are unknowns too. Blocks:
+// rotation, translation, expression, jaw, shape, log focal scale.
+struct CalibrationResidual {
+  CalibrationResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& expression_dirs,
+                      const Eigen::Matrix<double, 3, Eigen::Dynamic>& shape_dirs, double jaw_weight,
+                      const Eigen::Vector3d& jaw_joint, const Eigen::Matrix<double, 3, Eigen::Dynamic>& jaw_shape_dirs,
+                      const Eigen::Vector2d& observed, const PinholeCamera& cam, double weight)
+      : base(base),
+        expression_dirs(expression_dirs),
+        shape_dirs(shape_dirs),
+        jaw_weight(jaw_weight),
+        jaw_joint(jaw_joint),
+        jaw_shape_dirs(jaw_shape_dirs),
+        observed(observed),
+        cam(cam),
+        weight(weight) {}
+
+  template <typename T>
+  bool operator()(T const* const* blocks, T* residual) const {
+    const T* rotation = blocks[0];
+    const T* translation = blocks[1];
+    const T* expression = blocks[2];
+    const T* jaw = blocks[3];
+    const T* shape = blocks[4];
+    const T* log_focal = blocks[5];
+    T p[3], joint[3];
+    for (int c = 0; c < 3; ++c) {
+      p[c] = T(base[c]);
+      joint[c] = T(jaw_joint[c]);
+      for (int k = 0; k < expression_dirs.cols(); ++k) p[c] += T(expression_dirs(c, k)) * expression[k];
+      for (int k = 0; k < shape_dirs.cols(); ++k) {
+        p[c] += T(shape_dirs(c, k)) * shape[k];
+        joint[c] += T(jaw_shape_dirs(c, k)) * shape[k];
+      }
+    }
+    if (jaw_weight > 0) {
+      T rel[3] = {p[0] - joint[0], p[1] - joint[1], p[2] - joint[2]}, rotated[3];
+      ceres::AngleAxisRotatePoint(jaw, rel, rotated);
+      for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + joint[c]);
+    }
+    T x[3];
+    ceres::AngleAxisRotatePoint(rotation, p, x);
+    for (int c = 0; c < 3; ++c) x[c] += translation[c];
+    const T scale = exp(log_focal[0]);
+    residual[0] = T(weight) * (scale * T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+    residual[1] = T(weight) * (scale * T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    return true;
+  }
+
+  Eigen::Vector3d base;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> expression_dirs, shape_dirs;
+  double jaw_weight;
+  Eigen::Vector3d jaw_joint;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_shape_dirs;
+  Eigen::Vector2d observed;
+  PinholeCamera cam;
+  double weight;
+};
+
+}  // namespace headcast
