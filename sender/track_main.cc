@@ -17,6 +17,7 @@
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/head_mask.h"
 #include "common/tracking/mesh_fitter.h"
 #include "common/tracking/rgbd_fitter.h"
 #include "proto/recording.h"
@@ -41,6 +42,7 @@ int main(int argc, char** argv) {
   std::string camera_size = "640x480", intrinsics;
   int calibration_frames = 15;
   bool calibrate = false;
+  std::string masks_dir;
   double fov_deg = 40;
   app.add_option("--input", input,
                  "video file, image folder, RGB-D folder (with associations.txt), /dev/videoN (V4L2 camera), or "
@@ -69,6 +71,7 @@ int main(int argc, char** argv) {
   app.add_option("--calibration-frames", calibration_frames,
                  "RGB-D: frames whose fitted shapes give the identity (median); with --calibrate: key frames at most")
       ->capture_default_str();
+  app.add_option("--masks", masks_dir, "also write a head mask (face, hair, neck) per fitted frame here, NNNNN.png");
   app.add_flag("--calibrate", calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
                "head's yaw in a first pass, then track with them (METHOD §2)");
@@ -146,6 +149,7 @@ int main(int argc, char** argv) {
     }
     // Frames from a camera, a video, an image or RGB-D folder, or side-by-side stereo.
     std::unique_ptr<FrameSource> source = OpenFrameSource(input, source_options);
+    if (!masks_dir.empty()) std::filesystem::create_directories(masks_dir);
     spdlog::info("source: {}", source->Describe());
     const double fps = source->fps();
     std::unique_ptr<RecordingWriter> writer;
@@ -284,6 +288,11 @@ int main(int argc, char** argv) {
         params.confidence = 1.f;
         if (!hold) write(params);
         if (!identity_frozen && static_cast<int>(calibration_shapes.size()) >= calibration_frames) freeze(write);
+        if (!masks_dir.empty()) {
+          char name[32];
+          std::snprintf(name, sizeof(name), "/%05d.png", frames - 1);
+          WriteImage(masks_dir + name, HeadMask(frame, obs.raw));
+        }
         const Landmarks2d model_landmarks = fitter.Project(params, camera);
         error_iod.Add(LandmarkErrorIod(model_landmarks, obs.raw));
         for (int l = 0; l < kNumLandmarks; ++l) {

@@ -1,0 +1,28 @@
+// A head mask (face, hair, ears, neck) for training losses: GrabCut seeded by
+// the 68 landmarks — the face hull is certain foreground, a head-shaped region
+// around it (hair above, neck below) probable foreground, the rest background.
+#pragma once
+
+#include <opencv2/core.hpp>
+
+#include "common/tracking/head_fitter.h"
+
+namespace headcast {
+
+struct HeadMaskOptions {
+  int iterations = 3;           // GrabCut iterations
+  int working_size = 200;       // the head region is segmented at about this many pixels across (speed)
+  double hair_height = 0.75;    // probable hair above the brows, in face heights (brow to chin)
+  double head_width = 1.35;     // probable head width, in jaw widths
+  double neck_height = 0.45;    // probable neck below the chin, in face heights
+  double turn_shift = 1.0, turn_widen = 1.5;  // how far the region follows the back of a turned head
+  void Check() const;
+};
+
+// CV_8U, 255 on the head. Throws std::invalid_argument on an empty image or non-finite landmarks.
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {});
+
+// Intersection over union of two binary masks (non-zero = inside).
+double MaskIou(const cv::Mat& a, const cv::Mat& b);
+
+}  // namespace headcast

@@ -1,0 +1,70 @@
+// The head mask against renders whose mask is known: the built-in head at
+// several turns over a cluttered background, seeded with exact projected
+// landmarks and with the face tracker's own.
+#include "common/tracking/head_mask.h"
+
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+#include "common/tracking/face_tracker.h"
+
+namespace headcast {
+namespace {
+
+TEST(HeadMask, IouOnRendersWithKnownMasks) {
+  const HeadModel model = MakeBuiltinHead();
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
+  cv::RNG rng(3);
+  FaceTracker tracker;
+  double sum_exact = 0, sum_tracked = 0;
+  int tracked = 0;
+  const double yaws[] = {-30, -10, 0, 15, 30};
+  for (double yaw : yaws) {
+    HeadModelParams p;
+    p.pose[3 * kJawJoint] = 0.1;
+    const HeadModelOutput out = model.Forward(p);
+    const RigidTransform cam_from_head = FrontalCamFromHead(0.7, yaw, 0, model.rest_landmark_centroid());
+    const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
+    // Clutter: blurred coloured blobs behind the head.
+    cv::Mat background(480, 640, CV_8UC3);
+    rng.fill(background, cv::RNG::UNIFORM, 0, 255);
+    cv::GaussianBlur(background, background, {0, 0}, 9);
+    cv::normalize(background, background, 0, 255, cv::NORM_MINMAX);
+    cv::Mat image = background.clone();
+    r.image_bgr.copyTo(image, r.mask);
+    Landmarks2d exact;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      exact[l] = cam.Project(cam_from_head.Apply(out.landmarks.row(l).cast<double>().transpose()));
+    const double iou = MaskIou(HeadMask(image, exact), r.mask);
+    sum_exact += iou;
+    const FaceObservation obs = tracker.Track(image, 0);
+    double iou_tracked = -1;
+    if (obs.status != FaceStatus::kNoFace) {
+      iou_tracked = MaskIou(HeadMask(image, obs.raw), r.mask);
+      sum_tracked += iou_tracked;
+      ++tracked;
+    }
+    std::printf("yaw %+.0f: IoU %.3f with exact landmarks, %.3f with tracked ones\n", yaw, iou, iou_tracked);
+  }
+  const double mean_exact = sum_exact / std::size(yaws);
+  std::printf("mean IoU: %.3f exact landmarks, %.3f tracked (%d of %zu found)\n", mean_exact,
+              tracked ? sum_tracked / tracked : 0.0, tracked, std::size(yaws));
+  EXPECT_GT(mean_exact, 0.9);
+  ASSERT_GE(tracked, 3);
+  EXPECT_GT(sum_tracked / tracked, 0.85);
+}
+
+TEST(HeadMask, BadInputIsRefused) {
+  Landmarks2d l;
+  for (auto& p : l) p = Eigen::Vector2d(10, 10);
+  EXPECT_THROW(HeadMask(cv::Mat(), l), std::invalid_argument);
+  l[3] = Eigen::Vector2d(NAN, 0);
+  EXPECT_THROW(HeadMask(cv::Mat(100, 100, CV_8UC3, cv::Scalar(0, 0, 0)), l), std::invalid_argument);
+  EXPECT_THROW(MaskIou(cv::Mat(10, 10, CV_8U), cv::Mat(5, 5, CV_8U)), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace headcast
