@@ -16,10 +16,11 @@ Prints a JSON summary; exits non-zero if the receiver refused the session.
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+import hcrec  # noqa: E402  (tests/testing/hcrec.py: the generated proto module, .hcrec reading)
 
 
 def varint(v):
@@ -29,17 +30,6 @@ def varint(v):
         v >>= 7
     out.append(v)
     return bytes(out)
-
-
-def read_varint(data, pos):
-    shift = value = 0
-    while True:
-        b = data[pos]
-        pos += 1
-        value |= (b & 0x7F) << shift
-        if not b & 0x80:
-            return value, pos
-        shift += 7
 
 
 class Bits:
@@ -87,24 +77,10 @@ def main():
     ap.add_argument("--fps", type=float, default=30)
     args = ap.parse_args()
 
-    gen = tempfile.mkdtemp(prefix="headcast_py_")
-    subprocess.run(["protoc", f"--python_out={gen}", "-I", args.proto_dir, "headcast.proto"], check=True)
-    sys.path.insert(0, gen)
+    pb = hcrec.load_proto(args.proto_dir)
     import grpc  # noqa: E402  (python3-grpcio)
-    import headcast_pb2 as pb  # noqa: E402
 
-    data = open(args.recording, "rb").read()
-    if data[:8] != b"HCASTREC":
-        sys.exit(f"{args.recording}: not a headcast recording")
-    pos = 8
-    length, pos = read_varint(data, pos)
-    header = pb.RecordingHeader.FromString(data[pos:pos + length])
-    pos += length
-    frames = []
-    while pos < len(data):
-        length, pos = read_varint(data, pos)
-        frames.append(pb.FrameParams.FromString(data[pos:pos + length]))
-        pos += length
+    header, frames = hcrec.read_recording(args.recording, pb)
 
     components = list(range(header.num_expression))
     steps = [0.01] * len(components) + [0.001] * 15 + [0.0002] * 3

@@ -5,22 +5,13 @@ and the identity. Prints JSON; exits 1 when --max-translation-mm is exceeded.
 """
 import argparse
 import json
-import subprocess
+import os
 import sys
-import tempfile
 
 import numpy as np
 
-
-def read_varint(data, pos):
-    shift = result = 0
-    while True:
-        b = data[pos]
-        pos += 1
-        result |= (b & 0x7F) << shift
-        if not b & 0x80:
-            return result, pos
-        shift += 7
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
+import hcrec  # noqa: E402
 
 
 def rotation(w):
@@ -40,22 +31,7 @@ def main():
     ap.add_argument("--truth", required=True)
     ap.add_argument("--max-translation-mm", type=float, default=float("inf"))
     args = ap.parse_args()
-    gen = tempfile.mkdtemp(prefix="headcast_py_")
-    subprocess.run(["protoc", f"--python_out={gen}", "-I", args.proto_dir, "headcast.proto"], check=True)
-    sys.path.insert(0, gen)
-    import headcast_pb2 as pb  # noqa: E402
-
-    data = open(args.recording, "rb").read()
-    if data[:8] != b"HCASTREC":
-        sys.exit(f"{args.recording}: not a headcast recording")
-    length, pos = read_varint(data, 8)
-    header = pb.RecordingHeader.FromString(data[pos:pos + length])
-    pos += length
-    frames = []
-    while pos < len(data):
-        length, pos = read_varint(data, pos)
-        frames.append(pb.FrameParams.FromString(data[pos:pos + length]))
-        pos += length
+    header, frames = hcrec.read_recording(args.recording, hcrec.load_proto(args.proto_dir))
     truth = json.load(open(args.truth))
     t_err, z_err, r_err = [], [], []
     for f in frames:
