@@ -64,14 +64,17 @@ TEST(HeadFitter, RecoversPoseAndExpressionFromNoisyLandmarks) {
     for (int l = 0; l < kNumLandmarks; ++l) mean += (reprojected[l] - clean[l]).norm() / kNumLandmarks;
     worst_reprojection = std::max(worst_reprojection, mean);  // mean over the 68, worst frame
   }
+  std::printf("worst: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px\n", worst_angle,
+              1e3 * worst_lateral, 1e3 * worst_depth, worst_reprojection);
   RecordProperty("worst_angle_deg", std::to_string(worst_angle));
   RecordProperty("worst_lateral_m", std::to_string(worst_lateral));
   RecordProperty("worst_depth_m", std::to_string(worst_depth));
   RecordProperty("worst_reprojection_px", std::to_string(worst_reprojection));
   EXPECT_LT(worst_angle, 1.0);
   EXPECT_LT(worst_lateral, 0.001);
-  // Depth is the weak direction of a monocular fit (scale trades against
-  // expression under 1 px noise): measured ~6 mm at 0.6 m; the 5 mm goal is not met yet.
+  // Depth is the weak direction of a monocular fit: measured 6.2 mm worst at
+  // 0.6 m, insensitive to the expression prior (0.01..1) and the Huber scale;
+  // the 5 mm goal is not met yet.
   EXPECT_LT(worst_depth, 0.008);
   EXPECT_LT(worst_reprojection, 1.5);
 }
