@@ -12,6 +12,7 @@
 #include "common/core/rotation.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "common/headmodel/ict_converter.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/landmark_costs.h"
@@ -30,53 +31,75 @@ double AngleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
   return MatrixToAxisAngle(R).norm() * 180 / M_PI;
 }
 
-TEST(HeadFitter, RecoversPoseAndExpressionFromNoisyLandmarks) {
+struct RecoveryErrors {
+  double angle_deg = 0, lateral_m = 0, depth_m = 0, reprojection_px = 0;
+};
+
+// Projects known heads' landmarks (+1 px noise) and fits them cold, then warm;
+// the worst errors over the trials. Blendshape models (ICT) get expressions in [0, 0.8].
+RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool blendshapes) {
   const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 45);
   HeadFitterOptions options;
   options.expression_prior = 0.1;
   options.contour_weight = 1.0;
-  HeadFitter fitter(Model(), options);
+  HeadFitter fitter(model, options);
   std::mt19937 rng(5);
   std::normal_distribution<double> noise(0, 1.0);  // 1 px
   std::uniform_real_distribution<double> u(-1, 1);
-  double worst_angle = 0, worst_lateral = 0, worst_depth = 0, worst_reprojection = 0;
-  for (int trial = 0; trial < 10; ++trial) {
+  RecoveryErrors worst;
+  for (int trial = 0; trial < trials; ++trial) {
     FrameParams truth;
-    truth.expression = Eigen::VectorXf::Zero(Model().num_expression());
-    for (int k = 0; k < truth.expression.size(); ++k) truth.expression[k] = static_cast<float>(0.8 * u(rng));
-    truth.jaw = Eigen::Vector3f(static_cast<float>(0.15 * (1 + u(rng))), 0, 0);
-    truth.SetCamFromHead(FrontalCamFromHead(0.6 + 0.1 * u(rng), 25 * u(rng), 10 * u(rng)));
+    truth.expression = Eigen::VectorXf::Zero(model.num_expression());
+    for (int k = 0; k < truth.expression.size(); ++k)
+      truth.expression[k] = static_cast<float>(blendshapes ? 0.4 * (1 + u(rng)) * (u(rng) > 0.6) : 0.8 * u(rng));
+    if (model.JointIsArticulated(kJawJoint)) truth.jaw = Eigen::Vector3f(static_cast<float>(0.15 * (1 + u(rng))), 0, 0);
+    truth.SetCamFromHead(FrontalCamFromHead(0.6 + 0.1 * u(rng), 25 * u(rng), 10 * u(rng), model.rest_landmark_centroid()));
     const Landmarks2d clean = fitter.Project(truth, cam);
     Landmarks2d observed;
     for (int l = 0; l < kNumLandmarks; ++l) observed[l] = clean[l] + Eigen::Vector2d(noise(rng), noise(rng));
     FrameParams fit;  // cold start: PnP, then the full fit
-    fit.expression = Eigen::VectorXf::Zero(Model().num_expression());
+    fit.expression = Eigen::VectorXf::Zero(model.num_expression());
     const FitResult r = fitter.Fit(observed, cam, &fit);
-    ASSERT_TRUE(r.ok);
+    EXPECT_TRUE(r.ok);
     FitResult again = fitter.Fit(observed, cam, &fit);  // a warm-started frame
-    ASSERT_TRUE(again.ok);
-    worst_angle = std::max(worst_angle, AngleDeg(fit.cam_rotation, truth.cam_rotation));
+    EXPECT_TRUE(again.ok);
+    worst.angle_deg = std::max(worst.angle_deg, AngleDeg(fit.cam_rotation, truth.cam_rotation));
     const Eigen::Vector3f dt = fit.cam_translation - truth.cam_translation;
-    worst_lateral = std::max<double>(worst_lateral, dt.head<2>().norm());
-    worst_depth = std::max<double>(worst_depth, std::abs(dt.z()));
+    worst.lateral_m = std::max<double>(worst.lateral_m, dt.head<2>().norm());
+    worst.depth_m = std::max<double>(worst.depth_m, std::abs(dt.z()));
     const Landmarks2d reprojected = fitter.Project(fit, cam);
     double mean = 0;
     for (int l = 0; l < kNumLandmarks; ++l) mean += (reprojected[l] - clean[l]).norm() / kNumLandmarks;
-    worst_reprojection = std::max(worst_reprojection, mean);  // mean over the 68, worst frame
+    worst.reprojection_px = std::max(worst.reprojection_px, mean);  // mean over the 68, worst frame
   }
-  std::printf("worst: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px\n", worst_angle,
-              1e3 * worst_lateral, 1e3 * worst_depth, worst_reprojection);
-  RecordProperty("worst_angle_deg", std::to_string(worst_angle));
-  RecordProperty("worst_lateral_m", std::to_string(worst_lateral));
-  RecordProperty("worst_depth_m", std::to_string(worst_depth));
-  RecordProperty("worst_reprojection_px", std::to_string(worst_reprojection));
-  EXPECT_LT(worst_angle, 1.0);
-  EXPECT_LT(worst_lateral, 0.001);
-  // Depth is the weak direction of a monocular fit: measured 6.2 mm worst at
+  std::printf("%s, worst of %d: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px\n",
+              model.data().name.c_str(), trials, worst.angle_deg, 1e3 * worst.lateral_m, 1e3 * worst.depth_m,
+              worst.reprojection_px);
+  return worst;
+}
+
+TEST(HeadFitter, RecoversPoseAndExpressionFromNoisyLandmarks) {
+  const RecoveryErrors worst = RecoverSyntheticHeads(Model(), 10, false);
+  EXPECT_LT(worst.angle_deg, 1.0);
+  EXPECT_LT(worst.lateral_m, 0.001);
+  // Depth is the weak direction of a monocular fit: measured 6-7 mm worst at
   // 0.6 m, insensitive to the expression prior (0.01..1) and the Huber scale;
   // the 5 mm goal is not met yet.
-  EXPECT_LT(worst_depth, 0.008);
-  EXPECT_LT(worst_reprojection, 1.5);
+  EXPECT_LT(worst.depth_m, 0.008);
+  EXPECT_LT(worst.reprojection_px, 1.5);
+}
+
+TEST(HeadFitter, RecoversIctFaceKitHeads) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  IctConvertOptions io;
+  io.folder = testing::DataDir() + "/head-models/ict-facekit";
+  const HeadModel ict = ConvertIctFaceKit(io);
+  const RecoveryErrors worst = RecoverSyntheticHeads(ict, 10, true);
+  // Measured 1.5 deg and 6 mm depth (worst of 10): the 1 deg / 5 mm goals are not met for ICT yet.
+  EXPECT_LT(worst.angle_deg, 2.0);
+  EXPECT_LT(worst.lateral_m, 0.002);
+  EXPECT_LT(worst.depth_m, 0.015);
+  EXPECT_LT(worst.reprojection_px, 1.5);
 }
 
 // Identity calibration over key frames: a known shape and focal length, the
