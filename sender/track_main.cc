@@ -16,6 +16,7 @@
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/face_tracker.h"
+#include "common/tracking/appearance_fit.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/head_mask.h"
 #include "common/tracking/mesh_fitter.h"
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
   int calibration_frames = 15;
   bool calibrate = false;
   std::string masks_dir;
+  bool fit_appearance = true;
   double fov_deg = 40;
   app.add_option("--input", input,
                  "video file, image folder, RGB-D folder (with associations.txt), /dev/videoN (V4L2 camera), or "
@@ -72,6 +74,7 @@ int main(int argc, char** argv) {
                  "RGB-D: frames whose fitted shapes give the identity (median); with --calibrate: key frames at most")
       ->capture_default_str();
   app.add_option("--masks", masks_dir, "also write a head mask (face, hair, neck) per fitted frame here, NNNNN.png");
+  app.add_flag("!--no-appearance", fit_appearance, "skip the texture/light fit (stored in the recording's header)");
   app.add_flag("--calibrate", calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
                "head's yaw in a first pass, then track with them (METHOD §2)");
@@ -152,10 +155,14 @@ int main(int argc, char** argv) {
     if (!masks_dir.empty()) std::filesystem::create_directories(masks_dir);
     spdlog::info("source: {}", source->Describe());
     const double fps = source->fps();
-    std::unique_ptr<RecordingWriter> writer;
+    // Frames are kept and written at the end, when the subject's constants
+    // (identity, camera, texture, light) that head the recording are known.
+    std::vector<FrameParams> recorded;
     std::unique_ptr<VideoWriter> overlay_writer;
     if (!overlay.empty()) overlay_writer = std::make_unique<VideoWriter>(overlay, fps);
     PinholeCamera camera;
+    AppearanceFit appearance;
+    std::vector<AppearanceSample> appearance_samples;
     auto MakeInfo = [&] {
       RecordingInfo info;
       info.head_model_name = model.data().name;
@@ -164,6 +171,10 @@ int main(int argc, char** argv) {
       info.fps = fps;
       info.subject.shape = identity.cast<float>();
       info.subject.texture = Eigen::VectorXf::Zero(model.num_texture());
+      if (appearance.ok) {
+        info.subject.texture.head(appearance.texture.size()) = appearance.texture.cast<float>();
+        info.subject.light = appearance.light;
+      }
       info.subject.intrinsics = camera;
       info.source = "headcast-track " + input;
       return info;
@@ -247,8 +258,7 @@ int main(int argc, char** argv) {
         }
       }
       auto write = [&](const FrameParams& f) {
-        if (!writer) writer = std::make_unique<RecordingWriter>(out, MakeInfo());
-        writer->Write(f);
+        recorded.push_back(f);
       };
       const double t = captured.capture_time_s;
       Stopwatch watch;
@@ -288,6 +298,9 @@ int main(int argc, char** argv) {
         params.confidence = 1.f;
         if (!hold) write(params);
         if (!identity_frozen && static_cast<int>(calibration_shapes.size()) >= calibration_frames) freeze(write);
+        // Every 15th fitted frame, up to 8, for the texture and light fit.
+        if (fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8)
+          appearance_samples.push_back({frame.clone(), HeadMask(frame, obs.raw), params, camera});
         if (!masks_dir.empty()) {
           char name[32];
           std::snprintf(name, sizeof(name), "/%05d.png", frames - 1);
@@ -310,12 +323,19 @@ int main(int argc, char** argv) {
     }
     if (!identity_frozen && !calibration_shapes.empty()) {
       auto write = [&](const FrameParams& f) {
-        if (!writer) writer = std::make_unique<RecordingWriter>(out, MakeInfo());
-        writer->Write(f);
+        recorded.push_back(f);
       };
       freeze(write);
     }
     if (frames == 0) throw std::runtime_error(input + ": no readable frames (corrupt or empty?)");
+    if (!appearance_samples.empty()) {
+      appearance = FitAppearance(model, identity, appearance_samples);
+      if (!appearance.ok) spdlog::warn("texture/light fit: {}", appearance.problem);
+    }
+    {
+      RecordingWriter writer(out, MakeInfo());
+      for (const FrameParams& f : recorded) writer.Write(f);
+    }
     nlohmann::json report = {{"input", input},
                              {"head_model", model.data().name},
                              {"frames", frames},
@@ -338,6 +358,11 @@ int main(int argc, char** argv) {
       report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
     }
     if (calibrate) report["calibration"] = calibration_report;
+    if (appearance.ok)
+      report["appearance"] = {{"frames", appearance_samples.size()},
+                              {"pixels", appearance.pixels},
+                              {"rms", appearance.rms},
+                              {"what", "texture tau and SH light lambda by the masked photometric fit; rms in 0..1"}};
     std::cout << report.dump(2) << "\n";
     if (!report_path.empty()) std::ofstream(report_path) << report.dump(2) << "\n";
   } catch (const std::exception& e) {
