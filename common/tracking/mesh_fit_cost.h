@@ -5,6 +5,9 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <atomic>
+#include <cstdint>
+#include <vector>
 
 #include "common/core/rotation.h"
 #include "common/headmodel/head_model.h"
@@ -25,6 +28,13 @@ struct MeshBasis {
   Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_dirs;  // 3 x k
   Eigen::VectorXd jaw_weight;                         // N
   Eigen::Matrix<double, Eigen::Dynamic, 9, Eigen::RowMajor> jaw_posedirs;  // 3N x 9, or empty
+
+  // Unique per basis (addresses are reused), for CachedJaw.
+  const uint64_t id = NextId();
+  static uint64_t NextId() {
+    static std::atomic<uint64_t> next{1};
+    return next++;
+  }
 
   MeshBasis(const HeadModel& model, int num_shape, int num_expression) : n(model.num_vertices()) {
     const auto& d = model.data();
@@ -54,6 +64,23 @@ struct MeshBasis {
     Eigen::Vector3d joint;
     Eigen::Matrix<double, 3, Eigen::Dynamic> RmI_jaw_dirs;  // (R - I) jaw_dirs
   };
+  // MakeJaw for the parameters of the current evaluation: every residual of a
+  // Ceres iteration sees the same values, so each thread recomputes only when they change.
+  const Jaw& CachedJaw(const double* c, const double* theta) const {
+    thread_local uint64_t owner = 0;
+    thread_local std::vector<double> key;
+    thread_local Jaw cached;
+    const size_t n = static_cast<size_t>(k) + 3;
+    bool same = owner == id && key.size() == n;
+    for (size_t i = 0; same && i < n; ++i) same = key[i] == (i < static_cast<size_t>(k) ? c[i] : theta[i - k]);
+    if (!same) {
+      cached = MakeJaw(c, theta);
+      owner = id;
+      key.assign(c, c + k);
+      key.insert(key.end(), theta, theta + 3);
+    }
+    return cached;
+  }
   Jaw MakeJaw(const double* c, const double* theta) const {
     Jaw j;
     j.R = AxisAngleToMatrix(Eigen::Vector3d(theta[0], theta[1], theta[2]), &j.dR);
@@ -111,7 +138,7 @@ class SurfacePointCost final : public ceres::CostFunction {
 
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const MeshBasis& b = *basis_;
-    const MeshBasis::Jaw jaw = b.MakeJaw(p[kCoefficients], p[kJaw]);
+    const MeshBasis::Jaw& jaw = b.CachedJaw(p[kCoefficients], p[kJaw]);
     std::array<Eigen::Matrix3d, 3> dRr;
     const Eigen::Matrix3d Rr = AxisAngleToMatrix(Eigen::Vector3d(p[kRotation][0], p[kRotation][1], p[kRotation][2]), &dRr);
     const double s = std::exp(p[kLogScale][0]);

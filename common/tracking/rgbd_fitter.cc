@@ -19,7 +19,7 @@ void RgbdFitOptions::Check() const {
   c.Positive("point_weight", point_weight).Positive("max_point_distance_m", max_point_distance_m);
   c.Positive("robust_scale_m", robust_scale_m).InRange("block2_rounds", block2_rounds, 1, 100);
   c.InRange("block3_rounds", block3_rounds, 0, 100).InRange("cloud_stride", cloud_stride, 1, 64);
-  c.InRange("warm_rounds", warm_rounds, 1, 100);
+  c.InRange("warm_rounds", warm_rounds, 1, 100).InRange("warm_max_iterations", warm_max_iterations, 1, 1000);
   c.NonNegative("cloud_margin_m", cloud_margin_m).Positive("head_depth_m", head_depth_m);
   c.Positive("contour_tolerance_m", contour_tolerance_m).NonNegative("shape_prior", shape_prior);
   c.NonNegative("contour_weight", contour_weight);
@@ -170,6 +170,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   settings.shape_prior = options_.shape_prior;
   settings.expression_prior = options_.expression_prior;
   settings.max_iterations = options_.max_iterations;
+  if (previous && previous->ok) settings.max_iterations = options_.warm_max_iterations;
   const bool jaw = model_.JointIsArticulated(kJawJoint);
   auto landmark_pairs = [&](bool contour, double weight) {
     Eigen::VectorXi faces;
