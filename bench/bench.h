@@ -34,5 +34,6 @@ nlohmann::json RunQualitySuite(const BenchOptions& options);
 nlohmann::json RunCodecSuite(const BenchOptions& options);
 nlohmann::json RunTrackSuite(const BenchOptions& options);
 nlohmann::json RunMeshFitSuite(const BenchOptions& options);
+nlohmann::json RunRgbdSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

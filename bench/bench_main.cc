@@ -58,6 +58,9 @@ int main(int argc, char** argv) {
   meshfit->add_option("--trials", options.repeats, "scans per figure")->check(CLI::Range(1, 1000));
   meshfit->add_option("--json", options.json_path, "write the results to this JSON file");
   meshfit->add_option("--head-model", options.head_model, "builtin or a model .npz");
+  auto* rgbd = app.add_subcommand("rgbd", "RGB-D fit per frame on a rendered sequence: ms, accuracy, position error");
+  rgbd->add_option("--frames", options.repeats, "frames per noise level")->check(CLI::Range(2, 100000));
+  rgbd->add_option("--json", options.json_path, "write the results to this JSON file");
   codec->add_option("--avatar", options.avatar,
                     "an .hcavatar for the built-in head: also report the PSNR the codec costs");
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
@@ -77,6 +80,7 @@ int main(int argc, char** argv) {
                             : codec->parsed()   ? bench::RunCodecSuite(options)
                             : track->parsed()   ? bench::RunTrackSuite(options)
                             : meshfit->parsed() ? bench::RunMeshFitSuite(options)
+                            : rgbd->parsed()    ? bench::RunRgbdSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];
