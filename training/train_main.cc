@@ -1,7 +1,8 @@
 // headcast-train: builds avatars. So far: `pretrain`, fitting the networks to
 // synthetic head-model renders made on the fly (METHOD §5, synthetic part only;
-// real-image mixing, the perceptual term, learnable offsets, the p(n) schedule
-// and checkpoint/resume belong to the training issue and are not here yet).
+// real-image mixing, the perceptual term, learnable offsets and the p(n)
+// schedule belong to the training issue and are not here yet). Checkpoints and
+// resume: --checkpoint-dir, --resume.
 #include <CLI/CLI.hpp>
 #include <fstream>
 #include <iostream>
@@ -28,7 +29,7 @@ struct PretrainArgs {
 cv::Mat Preview(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count) {
   std::vector<cv::Mat> rows;
   for (int i = 0; i < count; ++i) {
-    const SyntheticSample s = data.At(2000000 + i);
+    const SyntheticSample s = data.At((uint64_t{1} << 41) + i);  // neither training nor evaluation
     cv::Mat row;
     cv::hconcat(s.image_bgr, RenderSampleBgr(avatar, model, s), row);
     rows.push_back(row);
@@ -54,17 +55,35 @@ int Pretrain(PretrainArgs& a) {
   SyntheticData data(model, data_options, base, a.fit.seed + 100);
   std::ofstream log;
   if (!a.log_csv.empty()) {
-    log.open(a.log_csv);
+    // A resumed run appends: the curve continues where the checkpoint left it.
+    const bool append = a.fit.resume && std::ifstream(a.log_csv).good();
+    log.open(a.log_csv, append ? std::ios::app : std::ios::trunc);
     if (!log) throw std::runtime_error(a.log_csv + ": cannot write");
-    log << "step,loss\n";
+    if (!append) log << "step,loss\n";
   }
   Stopwatch watch;
+  int first_step = -1;
   const FitResult fit = FitOnSynthetic(avatar, model, data, a.fit, [&](int step, float loss) {
-    if (log.is_open()) log << step << "," << loss << "\n";
+    if (first_step < 0) {
+      first_step = step;  // after a resume, not 0
+      if (log.is_open() && a.fit.resume) {
+        // Rows written after the checkpoint by the interrupted run are redone: drop them.
+        log.close();
+        std::ifstream in(a.log_csv);
+        std::string line, kept;
+        while (std::getline(in, line))
+          if (line.rfind("step", 0) == 0 || std::atoi(line.c_str()) < first_step) kept += line + "\n";
+        in.close();
+        std::ofstream(a.log_csv, std::ios::trunc) << (kept.empty() ? "step,loss\n" : kept);
+        log.open(a.log_csv, std::ios::app);
+      }
+    }
+    if (log.is_open()) log << step << "," << loss << std::endl;  // flushed: a kill loses no logged step
+
     if (step % 50 == 0 || step + 1 == a.fit.iterations) {
-      const double done = (step + 1.0) / a.fit.iterations;
+      const double done = (step + 1.0 - first_step) / (a.fit.iterations - first_step);
       std::fprintf(stderr, "\rstep %d/%d  loss %.5f  %.0f s, ETA %.0f s   ", step + 1, a.fit.iterations, loss,
-                   watch.ElapsedSeconds(), watch.ElapsedSeconds() * (1 - done) / done);
+                   watch.ElapsedSeconds(), watch.ElapsedSeconds() * (1 - done) / std::max(done, 1e-9));
     }
   });
   std::fprintf(stderr, "\n");
@@ -112,6 +131,9 @@ int main(int argc, char** argv) {
   pretrain->add_option("--log-csv", a.log_csv, "write the loss per step here");
   pretrain->add_option("--preview", a.preview, "write ground truth | avatar for 4 held-out samples (PNG)");
   pretrain->add_option("--out", a.out, "output .hcavatar")->required();
+  pretrain->add_option("--checkpoint-dir", a.fit.checkpoint_dir, "checkpoint here (atomically) every --checkpoint-every steps");
+  pretrain->add_option("--checkpoint-every", a.fit.checkpoint_every, "steps between checkpoints")->capture_default_str();
+  pretrain->add_flag("--resume", a.fit.resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);

@@ -1,9 +1,12 @@
 // Synthetic data on the fly and fitting on tiny configurations.
 #include <gtest/gtest.h>
 
+#include <fstream>
+
 #include "tests/testing/tiny_avatar.h"
 #include "common/avatar/avatar_pipeline.h"
 #include "common/headmodel/builtin_head.h"
+#include "tests/testing/test_data.h"
 #include "training/avatar_fit.h"
 
 namespace headcast {
@@ -52,6 +55,49 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   const EvalResult after = EvaluateOnSynthetic(avatar, Model(), data, 4);
   EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
   EXPECT_GT(r.samples_per_s, 0);
+}
+
+// Checkpoints: a run stopped after 3 steps and resumed (into an avatar with
+// other random weights) continues exactly where the uninterrupted run goes.
+TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
+  SyntheticDataOptions o;
+  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 2);
+  FitOptions f;
+  f.iterations = 6;
+  f.batch = 1;
+  f.checkpoint_every = 3;
+  f.checkpoint_dir = testing::TempDir("ckpt_straight");
+  Avatar straight = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  const FitResult all = FitOnSynthetic(straight, Model(), data, f);
+  ASSERT_EQ(all.loss.size(), 6u);
+
+  f.checkpoint_dir = testing::TempDir("ckpt_resumed");
+  f.iterations = 3;
+  Avatar first = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  FitOnSynthetic(first, Model(), data, f);
+  f.iterations = 6;
+  f.resume = true;
+  Avatar second = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 99);  // other weights
+  const FitResult rest = FitOnSynthetic(second, Model(), data, f);
+  EXPECT_EQ(rest.first_step, 3);
+  ASSERT_EQ(rest.loss.size(), 3u);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(rest.loss[i], all.loss[3 + i], 1e-4 * all.loss[3 + i]) << "step " << 3 + i;
+  const auto a = straight.modules().parameters(), b = second.modules().parameters();
+  double diff = 0;
+  for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
+  EXPECT_LT(diff, 1e-5);
+  // A corrupt checkpoint is refused by name.
+  std::string latest;
+  std::getline(std::ifstream(f.checkpoint_dir + "/LATEST"), latest);
+  std::ofstream(f.checkpoint_dir + "/" + latest + "/optimizer.pt") << "garbage";
+  f.iterations = 9;
+  Avatar third = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  try {
+    FitOnSynthetic(third, Model(), data, f);
+    ADD_FAILURE() << "a corrupt checkpoint was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot resume"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Avatar, RuntimeSwitchesKeepTheWeights) {
