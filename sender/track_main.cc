@@ -225,6 +225,16 @@ int main(int argc, char** argv) {
       last_rgbd = previous.ok ? previous : last_rgbd;
     };
     SampleStats ms, error_iod;
+    // Jitter: the second difference of landmark positions over consecutive
+    // fitted frames (mean over the 68, over the eye distance): what shakes.
+    SampleStats jitter_fitted, jitter_detected;
+    std::vector<Landmarks2d> last_fitted, last_detected;
+    int64_t last_fitted_frame = -2;
+    auto second_difference = [](const std::vector<Landmarks2d>& h) {
+      double sum = 0;
+      for (int l = 0; l < kNumLandmarks; ++l) sum += (h[2][l] - 2 * h[1][l] + h[0][l]).norm();
+      return sum / kNumLandmarks / std::max(1e-9, (h[1][36] - h[1][45]).norm());
+    };
     int frames = 0, fitted = 0, unreadable = 0, with_depth = 0;
     std::map<std::string, int> statuses;
     FrameParams params;
@@ -308,6 +318,21 @@ int main(int argc, char** argv) {
         }
         const Landmarks2d model_landmarks = fitter.Project(params, camera);
         error_iod.Add(LandmarkErrorIod(model_landmarks, obs.raw));
+        if (last_fitted_frame != frames - 2) {  // a gap: start the history again
+          last_fitted.clear();
+          last_detected.clear();
+        }
+        last_fitted_frame = frames - 1;
+        last_fitted.push_back(model_landmarks);
+        last_detected.push_back(obs.raw);
+        if (last_fitted.size() > 3) {
+          last_fitted.erase(last_fitted.begin());
+          last_detected.erase(last_detected.begin());
+        }
+        if (last_fitted.size() == 3) {
+          jitter_fitted.Add(second_difference(last_fitted));
+          jitter_detected.Add(second_difference(last_detected));
+        }
         for (int l = 0; l < kNumLandmarks; ++l) {
           cv::circle(shown, cv::Point2d(obs.raw[l].x(), obs.raw[l].y()), 2, cv::Scalar(0, 200, 255), cv::FILLED,
                      cv::LINE_AA);
@@ -343,6 +368,8 @@ int main(int argc, char** argv) {
                              {"unreadable_frames", unreadable},
                              {"statuses", statuses},
                              {"landmark_error_iod_mean", error_iod.empty() ? -1.0 : error_iod.Mean()},
+                             {"jitter_iod_median", jitter_fitted.empty() ? -1.0 : jitter_fitted.Median()},
+                             {"jitter_iod_median_raw_landmarks", jitter_detected.empty() ? -1.0 : jitter_detected.Median()},
                              {"ms_per_frame_median", ms.Median()},
                              {"ms_per_frame_p95", ms.Percentile(95)},
                              {"frames_with_depth", with_depth},

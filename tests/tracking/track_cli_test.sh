@@ -11,6 +11,10 @@ trap 'rm -rf "$tmp"' EXIT
 grep -q '"fitted_frames": 60' "$tmp/r.json" && ok "60 of 60 real frames fitted" || bad "fit: $(cat "$tmp/r.json")"
 err=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/r.json" | awk '{print $2}')
 awk "BEGIN{exit !($err < 0.03)}" && ok "landmark error $err IOD < 0.03" || bad "landmark error $err"
+jit=$(grep -o '"jitter_iod_median": [0-9.]*' "$tmp/r.json" | awk '{print $2}')
+raw=$(grep -o '"jitter_iod_median_raw_landmarks": [0-9.]*' "$tmp/r.json" | awk '{print $2}')
+awk "BEGIN{exit !($jit < $raw && $jit < 0.015)}" && ok "fitted landmarks shake less than dlib's ($jit vs $raw IOD)" ||
+  bad "jitter $jit vs raw $raw"
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 --calibrate \
   --out "$tmp/c14.hcrec" --report "$tmp/c.json" > /dev/null 2>&1
 cerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/c.json" | awk '{print $2}')
