@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
 #include <atomic>
 #include <cstdint>
 #include <vector>
@@ -139,8 +140,15 @@ class SurfacePointCost final : public ceres::CostFunction {
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const MeshBasis& b = *basis_;
     const MeshBasis::Jaw& jaw = b.CachedJaw(p[kCoefficients], p[kJaw]);
-    std::array<Eigen::Matrix3d, 3> dRr;
-    const Eigen::Matrix3d Rr = AxisAngleToMatrix(Eigen::Vector3d(p[kRotation][0], p[kRotation][1], p[kRotation][2]), &dRr);
+    // The root rotation and its derivatives, once per parameter state and thread.
+    thread_local Eigen::Vector3d cached_w(NAN, NAN, NAN);
+    thread_local Eigen::Matrix3d Rr;
+    thread_local std::array<Eigen::Matrix3d, 3> dRr;
+    const Eigen::Vector3d w(p[kRotation][0], p[kRotation][1], p[kRotation][2]);
+    if (!(w == cached_w)) {
+      Rr = AxisAngleToMatrix(w, &dRr);
+      cached_w = w;
+    }
     const double s = std::exp(p[kLogScale][0]);
     const bool want = jacobians != nullptr;
     const bool want_c = want && jacobians[kCoefficients], want_jaw = want && jacobians[kJaw];
