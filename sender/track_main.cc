@@ -3,7 +3,6 @@
 // parameter recording, an overlay video and a JSON report.
 #include <CLI/CLI.hpp>
 #include <filesystem>
-#include <functional>
 #include <optional>
 #include <fstream>
 #include <iostream>
@@ -198,7 +197,7 @@ int main(int argc, char** argv) {
     int contour_rejected = 0;
     // The identity: per-component median of the calibration frames' shapes;
     // those frames are fitted again with it and written.
-    auto freeze = [&](const std::function<void(const FrameParams&)>& write) {
+    auto freeze = [&] {
       for (int k = 0; k < model.num_shape(); ++k) {
         std::vector<double> v;
         for (const auto& shape : calibration_shapes) v.push_back(shape[k]);
@@ -218,7 +217,7 @@ int main(int argc, char** argv) {
         f.sequence = p.sequence;
         f.capture_time_s = p.time;
         f.confidence = 1.f;
-        write(f);
+        recorded.push_back(f);
         previous = r;
       }
       pending.clear();
@@ -267,9 +266,6 @@ int main(int argc, char** argv) {
           camera.Check();
         }
       }
-      auto write = [&](const FrameParams& f) {
-        recorded.push_back(f);
-      };
       const double t = captured.capture_time_s;
       Stopwatch watch;
       const FaceObservation obs = tracker.Track(frame, t);
@@ -306,15 +302,18 @@ int main(int argc, char** argv) {
         params.sequence = static_cast<uint64_t>(frames - 1);
         params.capture_time_s = t;
         params.confidence = 1.f;
-        if (!hold) write(params);
-        if (!identity_frozen && static_cast<int>(calibration_shapes.size()) >= calibration_frames) freeze(write);
+        if (!hold) recorded.push_back(params);
+        if (!identity_frozen && static_cast<int>(calibration_shapes.size()) >= calibration_frames) freeze();
         // Every 15th fitted frame, up to 8, for the texture and light fit.
-        if (fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8)
-          appearance_samples.push_back({frame.clone(), HeadMask(frame, obs.raw), params, camera});
-        if (!masks_dir.empty()) {
-          char name[32];
-          std::snprintf(name, sizeof(name), "/%05d.png", frames - 1);
-          WriteImage(masks_dir + name, HeadMask(frame, obs.raw));
+        const bool sample = fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8;
+        if (sample || !masks_dir.empty()) {
+          const cv::Mat mask = HeadMask(frame, obs.raw);
+          if (sample) appearance_samples.push_back({frame.clone(), mask, params, camera});
+          if (!masks_dir.empty()) {
+            char name[32];
+            std::snprintf(name, sizeof(name), "/%05d.png", frames - 1);
+            WriteImage(masks_dir + name, mask);
+          }
         }
         const Landmarks2d model_landmarks = fitter.Project(params, camera);
         error_iod.Add(LandmarkErrorIod(model_landmarks, obs.raw));
@@ -346,12 +345,7 @@ int main(int argc, char** argv) {
                   cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
       if (overlay_writer) overlay_writer->Write(shown);
     }
-    if (!identity_frozen && !calibration_shapes.empty()) {
-      auto write = [&](const FrameParams& f) {
-        recorded.push_back(f);
-      };
-      freeze(write);
-    }
+    if (!identity_frozen && !calibration_shapes.empty()) freeze();
     if (frames == 0) throw std::runtime_error(input + ": no readable frames (corrupt or empty?)");
     if (!appearance_samples.empty()) {
       appearance = FitAppearance(model, identity, appearance_samples);

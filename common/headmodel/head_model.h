@@ -115,6 +115,14 @@ class HeadModel {
   // Faces and barycentrics actually used for the 68 landmarks at this pose.
   void LandmarkEmbedding(const PoseVector& pose, Eigen::VectorXi* faces, RowMatrixX3f* bary) const;
 
+  // A joint's rest position for the template and how it moves per shape and
+  // expression unit (the joint regressor applied to the template and the bases).
+  Eigen::Vector3f RestJoint(int joint) const { return j_template_.row(joint).transpose(); }
+  Eigen::Matrix<float, 3, Eigen::Dynamic> JointShapeDirs(int joint) const { return j_shapedirs_.middleRows(3 * joint, 3); }
+  Eigen::Matrix<float, 3, Eigen::Dynamic> JointExpressionDirs(int joint) const {
+    return j_expressiondirs_.middleRows(3 * joint, 3);
+  }
+
   // Mean of the 68 landmarks in the rest pose (head frame): where to aim a camera.
   const Eigen::Vector3d& rest_landmark_centroid() const { return rest_landmark_centroid_; }
 

@@ -2,6 +2,7 @@
 #include "common/tracking/appearance_fit.h"
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <opencv2/imgproc.hpp>
 
 #include "common/core/options.h"
@@ -35,18 +36,23 @@ AppearanceFit FitAppearance(const HeadModel& model, const Eigen::VectorXd& shape
   AppearanceFit fit;
   const auto& d = model.data();
   const int T = model.has_texture() ? model.num_texture() : 0;
-  // The mean albedo and each basis column as textures, sampled per pixel by the rasteriser's UVs.
+  // The mean albedo (unclipped: AlbedoTexture clips to [0, 1]) and each basis
+  // column as textures, sampled per pixel by the rasteriser's UVs; a flat
+  // albedo when the model has no texture model.
   std::vector<cv::Mat> textures;
-  textures.push_back(AlbedoTexture(model));
-  for (int t = 0; t < T; ++t) {
+  auto as_texture = [&](const float* values) {
     cv::Mat tex(d.texture_height, d.texture_width, CV_32FC3);
-    Eigen::Map<Eigen::VectorXf>(tex.ptr<float>(), static_cast<Eigen::Index>(d.texture_mean.size())) =
-        d.texture_basis.col(t);
-    textures.push_back(tex);
-  }
-  if (T > 0) {  // the unclipped mean (AlbedoTexture clips to [0, 1])
-    Eigen::Map<Eigen::VectorXf>(textures[0].ptr<float>(), static_cast<Eigen::Index>(d.texture_mean.size())) =
-        Eigen::Map<const Eigen::VectorXf>(d.texture_mean.data(), static_cast<Eigen::Index>(d.texture_mean.size()));
+    std::copy(values, values + d.texture_mean.size(), tex.ptr<float>());
+    return tex;
+  };
+  if (T > 0) {
+    textures.push_back(as_texture(d.texture_mean.data()));
+    for (int t = 0; t < T; ++t) {
+      const Eigen::VectorXf column = d.texture_basis.col(t);
+      textures.push_back(as_texture(column.data()));
+    }
+  } else {
+    textures.push_back(AlbedoTexture(model));
   }
   const HeadIdentity identity = model.MakeIdentity(shape);
   std::vector<PixelTerms> pixels;

@@ -140,10 +140,7 @@ int main(int argc, char** argv) {
       // vertices (shape, expression, jaw, rotation, translation).
       o.correspondence = MeshCorrespondence::kSameTopology;
       CheckMeshForFit(model, mesh, o);
-      const int ns = o.fit_shape ? (o.num_shape > 0 ? std::min(o.num_shape, model.num_shape()) : model.num_shape()) : 0;
-      const int ne = o.fit_expression
-                         ? (o.num_expression > 0 ? std::min(o.num_expression, model.num_expression()) : model.num_expression())
-                         : 0;
+      const int ns = o.ShapeCount(model), ne = o.ExpressionCount(model);
       const int nj = o.fit_jaw && model.JointIsArticulated(kJawJoint) ? 3 : 0;
       auto unpack = [&](const Eigen::VectorXd& x, MeshFitResult* r) {
         r->params.shape = Eigen::VectorXd::Zero(model.num_shape());

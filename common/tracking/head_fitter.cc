@@ -25,7 +25,8 @@ void HeadFitterOptions::Check() const {
 // how much of each follows the jaw joint (skinning weights at the landmark).
 struct HeadFitter::LandmarkBasis {
   Eigen::Matrix<double, kNumLandmarks, 3, Eigen::RowMajor> base;
-  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> dirs;  // per landmark: 3 x E
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> dirs;        // per landmark: 3 x E
+  std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> shape_dirs;  // per landmark: 3 x S (shape_free only)
   Eigen::Matrix<double, kNumLandmarks, 1> jaw_weight;
   Eigen::Vector3d jaw_joint;
 };
@@ -39,13 +40,15 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
 
 void HeadFitter::SetIdentity(const Eigen::VectorXd& shape) { identity_ = model_.MakeIdentity(shape); }
 
-HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose) const {
+HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose, bool shape_free) const {
   LandmarkBasis b;
   Eigen::VectorXi faces;
   RowMatrixX3f bary;
   model_.LandmarkEmbedding(pose, &faces, &bary);
   const auto& d = model_.data();
+  const int S = model_.num_shape();
   b.dirs.assign(kNumLandmarks, Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, num_expression_));
+  if (shape_free) b.shape_dirs.assign(kNumLandmarks, Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, S));
   b.base.setZero();
   b.jaw_weight.setZero();
   for (int l = 0; l < kNumLandmarks; ++l)
@@ -53,11 +56,17 @@ HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose) const {
       const int v = d.faces(faces[l], k);
       const double w = bary(l, k);
       if (w == 0) continue;
-      b.base.row(l) += w * identity_.v_shaped.segment<3>(3 * v).cast<double>().transpose();
+      if (shape_free) {
+        b.base.row(l) += w * d.v_template.row(v).cast<double>();
+        b.shape_dirs[l] += w * d.shapedirs.block(3 * v, 0, 3, S).cast<double>();
+      } else {
+        b.base.row(l) += w * identity_.v_shaped.segment<3>(3 * v).cast<double>().transpose();
+      }
       b.dirs[l] += w * d.expressiondirs.block(3 * v, 0, 3, num_expression_).cast<double>();
       b.jaw_weight[l] += w * d.weights(v, kJawJoint);
     }
-  b.jaw_joint = identity_.joints.row(kJawJoint).cast<double>().transpose();
+  b.jaw_joint = shape_free ? Eigen::Vector3d(model_.RestJoint(kJawJoint).cast<double>())
+                           : Eigen::Vector3d(identity_.joints.row(kJawJoint).cast<double>().transpose());
   return b;
 }
 
@@ -176,7 +185,6 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
                                                       const PinholeCamera& initial, std::vector<FrameParams>* frames) {
   Calibration result;
   const int S = model_.num_shape(), E = num_expression_;
-  const auto& d = model_.data();
   // Per-frame starts with the current identity.
   std::vector<FrameParams> params(key_frames.size());
   std::vector<bool> usable(key_frames.size(), false);
@@ -184,14 +192,8 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
     params[f].cam_translation.setZero();
     usable[f] = Fit(key_frames[f], initial, &params[f]).ok;
   }
-  // Template-relative landmark bases (shape is an unknown now).
-  const HeadIdentity zero = model_.MakeIdentity(Eigen::VectorXd::Zero(S));
-  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_shape_dirs = Eigen::MatrixXd::Zero(3, S);
-  for (int i = 0; i < model_.num_vertices(); ++i) {
-    const double w = d.j_regressor(kJawJoint, i);
-    if (w != 0) jaw_shape_dirs += w * d.shapedirs.block(3 * i, 0, 3, S).cast<double>();
-  }
-  const Eigen::Vector3d jaw_joint = zero.joints.row(kJawJoint).cast<double>().transpose();
+  // Landmark bases relative to the template (MakeBasis with shape_free): shape is an unknown now.
+  const Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_shape_dirs = model_.JointShapeDirs(kJawJoint).cast<double>();
   Eigen::VectorXd shape = identity_.shape.cast<double>();
   if (shape.size() != S) shape = Eigen::VectorXd::Zero(S);
   double log_focal = 0;
@@ -207,25 +209,12 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
       pose[f][6 + i] = params[f].jaw[i];
     }
     for (int k = 0; k < E; ++k) expression[f][k] = params[f].expression[k];
-    Eigen::VectorXi faces;
-    RowMatrixX3f bary;
-    model_.LandmarkEmbedding(params[f].ViewPose(), &faces, &bary);
+    const LandmarkBasis b = MakeBasis(params[f].ViewPose(), /*shape_free=*/true);
     for (int l = 0; l < kNumLandmarks; ++l) {
-      Eigen::Vector3d base = Eigen::Vector3d::Zero();
-      Eigen::Matrix<double, 3, Eigen::Dynamic> edirs = Eigen::MatrixXd::Zero(3, std::max(E, 1)),
-                                               sdirs = Eigen::MatrixXd::Zero(3, S);
-      double jw = 0;
-      for (int k = 0; k < 3; ++k) {
-        const int v = d.faces(faces[l], k);
-        const double w = bary(l, k);
-        base += w * zero.v_shaped.segment<3>(3 * v).cast<double>();
-        if (E > 0) edirs.leftCols(E) += w * d.expressiondirs.block(3 * v, 0, 3, E).cast<double>();
-        sdirs += w * d.shapedirs.block(3 * v, 0, 3, S).cast<double>();
-        jw += w * d.weights(v, kJawJoint);
-      }
       const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
       auto* cost = new ceres::DynamicAutoDiffCostFunction<CalibrationResidual, 8>(new CalibrationResidual(
-          base, edirs, sdirs, model_.JointIsArticulated(kJawJoint) ? jw : 0.0, jaw_joint, jaw_shape_dirs,
+          b.base.row(l).transpose(), b.dirs[l], b.shape_dirs[l],
+          model_.JointIsArticulated(kJawJoint) ? b.jaw_weight[l] : 0.0, b.jaw_joint, jaw_shape_dirs,
           key_frames[f][l], initial, weight));
       for (int size : {3, 3, std::max(E, 1), 3, S, 1}) cost->AddParameterBlock(size);
       cost->SetNumResiduals(2);

@@ -64,7 +64,9 @@ class HeadFitter {
 
  private:
   struct LandmarkBasis;
-  LandmarkBasis MakeBasis(const PoseVector& pose) const;
+  // For the current identity; or, with `shape_free`, for the template with the
+  // shape directions too (identity calibration, where shape is an unknown).
+  LandmarkBasis MakeBasis(const PoseVector& pose, bool shape_free = false) const;
   const HeadModel& model_;
   HeadFitterOptions options_;
   HeadIdentity identity_;

@@ -46,14 +46,10 @@ struct MeshBasis {
     dirs.setZero(3 * n, k);
     if (ns > 0) dirs.leftCols(ns) = d.shapedirs.leftCols(ns).cast<double>();
     if (ne > 0) dirs.middleCols(ns, ne) = d.expressiondirs.leftCols(ne).cast<double>();
-    const Eigen::VectorXd reg = d.j_regressor.row(kJawJoint).transpose().cast<double>();
-    jaw_mean.setZero();
+    jaw_mean = model.RestJoint(kJawJoint).cast<double>();
     jaw_dirs.setZero(3, k);
-    for (int i = 0; i < n; ++i) {
-      if (reg[i] == 0) continue;
-      jaw_mean += reg[i] * mean.segment<3>(3 * i);
-      jaw_dirs += reg[i] * dirs.middleRows(3 * i, 3);
-    }
+    if (ns > 0) jaw_dirs.leftCols(ns) = model.JointShapeDirs(kJawJoint).leftCols(ns).cast<double>();
+    if (ne > 0) jaw_dirs.middleCols(ns, ne) = model.JointExpressionDirs(kJawJoint).leftCols(ne).cast<double>();
     jaw_weight = d.weights.col(kJawJoint).cast<double>();
     if (model.has_posedirs()) jaw_posedirs = d.posedirs.middleCols(9 * (kJawJoint - 1), 9).cast<double>();
   }

@@ -329,11 +329,6 @@ namespace {
 
 using namespace mesh_fit_internal;
 
-int FittedCount(int requested, int available, bool enabled) {
-  if (!enabled) return 0;
-  return requested > 0 ? std::min(requested, available) : available;
-}
-
 bool SameTopology(const HeadModel& model, const TriangleMesh& target) {
   return target.vertices.rows() == model.num_vertices() && target.faces.rows() == model.num_faces() &&
          target.faces == model.data().faces;
@@ -397,19 +392,41 @@ Eigen::VectorXf ParameterCountWeights(const HeadModel& model, int num_shape, int
   return phi / phi.mean();
 }
 
-Eigen::VectorXf MeshFitWeights(const HeadModel& model, const MeshFitOptions& o) {
-  const int n = model.num_vertices();
-  if (o.weighting == MeshWeighting::kUniform) return Eigen::VectorXf::Ones(n);
-  if (o.importance.size() > 0 && o.importance.size() != n)
-    throw std::invalid_argument("importance map has " + std::to_string(o.importance.size()) +
-                                " values; the head model has " + std::to_string(n) + " vertices");
-  Eigen::VectorXf w = o.importance.size() > 0 ? o.importance : DefaultImportance(model);
+int MeshFitOptions::ShapeCount(const HeadModel& model) const {
+  if (!fit_shape) return 0;
+  return num_shape > 0 ? std::min(num_shape, model.num_shape()) : model.num_shape();
+}
+
+int MeshFitOptions::ExpressionCount(const HeadModel& model) const {
+  if (!fit_expression) return 0;
+  return num_expression > 0 ? std::min(num_expression, model.num_expression()) : model.num_expression();
+}
+
+Eigen::VectorXf MeshFitOptions::Importance(const HeadModel& model) const {
+  if (importance.size() == 0) return DefaultImportance(model);
+  if (importance.size() != model.num_vertices())
+    throw std::invalid_argument("importance map has " + std::to_string(importance.size()) +
+                                " values; the head model has " + std::to_string(model.num_vertices()) + " vertices");
+  return importance;
+}
+
+namespace {
+
+// omega from an importance map nu already at hand (it is also needed for the face region).
+Eigen::VectorXf WeightsFromImportance(const HeadModel& model, const MeshFitOptions& o, const Eigen::VectorXf& nu) {
+  if (o.weighting == MeshWeighting::kUniform) return Eigen::VectorXf::Ones(model.num_vertices());
+  Eigen::VectorXf w = nu;
   if (o.weighting == MeshWeighting::kImportanceAndCount)
-    w = w.cwiseProduct(ParameterCountWeights(model, FittedCount(o.num_shape, model.num_shape(), o.fit_shape),
-                                             FittedCount(o.num_expression, model.num_expression(), o.fit_expression),
-                                             o.fit_jaw));
+    w = w.cwiseProduct(ParameterCountWeights(model, o.ShapeCount(model), o.ExpressionCount(model), o.fit_jaw));
   if (!(w.sum() > 0)) throw std::invalid_argument("mesh-fit weights are all zero");
   return w / w.mean();
+}
+
+}  // namespace
+
+Eigen::VectorXf MeshFitWeights(const HeadModel& model, const MeshFitOptions& o) {
+  if (o.weighting == MeshWeighting::kUniform) return Eigen::VectorXf::Ones(model.num_vertices());
+  return WeightsFromImportance(model, o, o.Importance(model));
 }
 
 void CheckMeshForFit(const HeadModel& model, const TriangleMesh& target, const MeshFitOptions& o) {
@@ -453,10 +470,9 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
   MeshFitResult r;
   r.same_topology = o.correspondence == MeshCorrespondence::kSameTopology ||
                     (o.correspondence == MeshCorrespondence::kAuto && SameTopology(model, target));
-  const MeshBasis basis(model, FittedCount(o.num_shape, model.num_shape(), o.fit_shape),
-                        FittedCount(o.num_expression, model.num_expression(), o.fit_expression));
-  const Eigen::VectorXf nu = o.importance.size() > 0 ? o.importance : DefaultImportance(model);
-  const Eigen::VectorXf omega = MeshFitWeights(model, o);
+  const MeshBasis basis(model, o.ShapeCount(model), o.ExpressionCount(model));
+  const Eigen::VectorXf nu = o.Importance(model);
+  const Eigen::VectorXf omega = WeightsFromImportance(model, o, nu);
   FitState st;
   st.coefficients = Eigen::VectorXd::Zero(basis.k);
   const RowMatrixX3f& rest = model.data().v_template;

@@ -49,6 +49,11 @@ struct MeshFitOptions {
   Eigen::VectorXf importance;  // nu override, one value per model vertex (empty: DefaultImportance)
   bool allow_non_manifold = false;
   void Check() const;
+  // Components fitted for `model` (0 when that group is not fitted).
+  int ShapeCount(const HeadModel& model) const;
+  int ExpressionCount(const HeadModel& model) const;
+  // nu: `importance`, checked against the model, or DefaultImportance.
+  Eigen::VectorXf Importance(const HeadModel& model) const;
 };
 
 struct MeshFitResult {

@@ -172,12 +172,16 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   settings.max_iterations = options_.max_iterations;
   if (previous && previous->ok) settings.max_iterations = options_.warm_max_iterations;
   const bool jaw = model_.JointIsArticulated(kJawJoint);
+  // The landmarks' faces and barycentrics for the current view (the dynamic contour follows it).
+  auto embed = [&](Eigen::VectorXi* faces, RowMatrixX3f* bary) {
+    PoseVector pose = PoseVector::Zero();
+    pose.segment<3>(0) = ViewRotation(AxisAngleToMatrix(st.rotation));
+    model_.LandmarkEmbedding(pose, faces, bary);
+  };
   auto landmark_pairs = [&](bool contour, double weight) {
     Eigen::VectorXi faces;
     RowMatrixX3f bary;
-    PoseVector pose = PoseVector::Zero();
-    pose.segment<3>(0) = ViewRotation(AxisAngleToMatrix(st.rotation));  // the dynamic contour follows the view
-    model_.LandmarkEmbedding(pose, &faces, &bary);
+    embed(&faces, &bary);
     std::vector<Correspondence> pairs;
     for (int l = contour ? 0 : kNumContourLandmarks; l < kNumLandmarks; ++l) {
       if (!has3d[l]) continue;
@@ -219,20 +223,17 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   SolveOnce(basis, landmark_pairs(false, 1.0), settings, pose_only, &st);
 
   // Contour landmarks whose depth disagrees with the posed model lie on the background.
-  {
+  if (options_.reject_background_contour) {
     Eigen::VectorXi faces;
     RowMatrixX3f bary;
-    PoseVector pose = PoseVector::Zero();
-    pose.segment<3>(0) = ViewRotation(AxisAngleToMatrix(st.rotation));
-    model_.LandmarkEmbedding(pose, &faces, &bary);
+    embed(&faces, &bary);
     const RowMatrixX3f posed = PoseAll(basis, st);
     for (int l = 0; l < kNumContourLandmarks; ++l) {
       if (!has3d[l]) continue;
       Eigen::Vector3d model_point = Eigen::Vector3d::Zero();
       for (int k = 0; k < 3; ++k)
         model_point += bary(l, k) * posed.row(model_.data().faces(faces[l], k)).cast<double>().transpose();
-      if (options_.reject_background_contour &&
-          std::abs(model_point.z() - lmk3d[l].z()) > options_.contour_tolerance_m) {
+      if (std::abs(model_point.z() - lmk3d[l].z()) > options_.contour_tolerance_m) {
         has3d[l] = false;
         ++r.contour_rejected;
       }
