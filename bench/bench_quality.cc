@@ -50,7 +50,7 @@ nlohmann::json RunQualitySuite(const BenchOptions& options) {
                           {"psnr_db", e.psnr_mean},
                           {"inference_ms_median", e.ms_median},
                           {"train_samples_per_s", r.samples_per_s},
-                          {"final_loss", r.loss.back()}};
+                          {"final_loss", r.steps.back().loss}};
     if (&v == &variants.front()) {
       // The per-frame conditioning bias is exact: same weights, switch off, same PSNR, more time.
       AvatarConfig slow = v.config;

@@ -1,16 +1,63 @@
-// Synthetic fitting and evaluation.
+// The trainer: samples, losses, the optimiser loop, checkpoints, evaluation.
 #include "training/avatar_fit.h"
 
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_render.h"
+#include "training/image_losses.h"
 
 namespace headcast {
+
+double MixSchedule::SyntheticProbability(int step) const {
+  if (step <= m) return 1.0;
+  if (step >= n_end) return p_min;
+  return (1.0 - static_cast<double>(step - m) / (n_end - m)) * (p_max - p_min) + p_min;
+}
+
+void MixSchedule::Check() const {
+  OptionsCheck c("MixSchedule");
+  c.NonNegative("m", m).That(n_end > m, "n_end must be > m");
+  c.InRange("p_min", p_min, 0.0, 1.0).InRange("p_max", p_max, 0.0, 1.0).That(p_max >= p_min, "p_max must be >= p_min");
+  c.ThrowIfErrors();
+}
+
+void LossOptions::Check() const {
+  OptionsCheck c("LossOptions");
+  c.NonNegative("mse_weight", mse_weight).NonNegative("perceptual_weight", perceptual_weight);
+  c.NonNegative("ssim_weight", ssim_weight).NonNegative("offset_weight", offset_weight);
+  c.ThrowIfErrors();
+}
+
+void FitOptions::Check() const {
+  OptionsCheck c("FitOptions");
+  c.InRange("iterations", iterations, 0, 100000000)
+      .InRange("batch", batch, 1, 4096)
+      .Positive("learning_rate", learning_rate)
+      .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
+      .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
+      .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
+      .InRange("z_scale_min", z_scale_min, 0.3, 1.0)
+      .InRange("z_scale_max", z_scale_max, 1.0, 3.0);
+  c.That(!resume || !checkpoint_dir.empty(), "resume needs a checkpoint_dir");
+  c.ThrowIfErrors();
+  loss.Check();
+  mix.Check();
+}
+
+cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
+  const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
+  cv::Mat out(image_bgr.size(), CV_8UC3,
+              cv::Scalar(std::lround(255 * rgb[2]), std::lround(255 * rgb[1]), std::lround(255 * rgb[0])));
+  image_bgr.copyTo(out, mask);
+  return out;
+}
+
 namespace {
 
 struct PreparedSample {
@@ -20,35 +67,59 @@ struct PreparedSample {
   torch::Tensor target;
 };
 
-PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SyntheticSample& s,
-                       RaySampler* sampler, std::mt19937* rng) {
+PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
+                       const FrameParams& frame, const cv::Mat& target_bgr, RaySampler* sampler, std::mt19937* rng) {
   PreparedSample p;
-  p.cam_from_head = s.frame.CamFromHead();
+  p.cam_from_head = frame.CamFromHead();
   HeadModelOutput posed;
-  model.Forward(model.MakeIdentity(s.subject.shape.cast<double>()), s.frame.expression.cast<double>(),
-                s.frame.HeadPose(), &posed);
+  model.Forward(model.MakeIdentity(subject.shape.cast<double>()), frame.expression.cast<double>(), frame.HeadPose(),
+                &posed);
   RasterVertices v;
   TransformToCamera(posed.vertices, p.cam_from_head, &v);
   const int f = config.feature_size();
-  sampler->Sample(v, model.data().faces, s.subject.intrinsics.Resized(f, f), p.cam_from_head, rng, &p.rays);
-  p.conditioning = MakeConditioning(config, s.subject, s.frame);
-  p.target = BgrToImageTensor(s.image_bgr);
+  sampler->Sample(v, model.data().faces, subject.intrinsics.Resized(f, f), p.cam_from_head, rng, &p.rays);
+  p.conditioning = MakeConditioning(config, subject, frame);
+  if (!target_bgr.empty()) p.target = BgrToImageTensor(target_bgr);
   return p;
 }
 
-}  // namespace
-
-void FitOptions::Check() const {
-  OptionsCheck c("FitOptions");
-  c.InRange("iterations", iterations, 0, 100000000)
-      .InRange("batch", batch, 1, 4096)
-      .Positive("learning_rate", learning_rate)
-      .InRange("checkpoint_every", checkpoint_every, 1, 100000000);
-  c.That(!resume || !checkpoint_dir.empty(), "resume needs a checkpoint_dir");
-  c.ThrowIfErrors();
+// METHOD §5's z-augmentation: the head moved along its line of sight by 1/scale
+// looks (nearly) the same picture scaled by `scale` about the head's centre.
+void ChangeDistance(double scale, const PinholeCamera& camera, FrameParams* frame, cv::Mat* image, cv::Mat* mask) {
+  const Eigen::Vector2d c = camera.Project(frame->cam_translation.cast<double>());
+  const cv::Matx23d affine(scale, 0, (1 - scale) * c.x(), 0, scale, (1 - scale) * c.y());
+  cv::Mat warped_image, warped_mask;
+  cv::warpAffine(*image, warped_image, affine, image->size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+  cv::warpAffine(*mask, warped_mask, affine, mask->size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT);
+  *image = warped_image;
+  *mask = warped_mask;
+  frame->cam_translation /= static_cast<float>(scale);
 }
 
-namespace {
+// Per-frame learnable offsets of the real frames' conditioning (METHOD eq. 8).
+struct Offsets {
+  torch::Tensor geometry, appearance;            // (frames, D), trained
+  torch::Tensor geometry_mask, appearance_mask;  // (1, D), 0 where frozen (beta, tau in a fine-tune)
+  bool enabled() const { return geometry.defined(); }
+};
+
+Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity) {
+  Offsets o;
+  o.geometry = torch::zeros({frames, config.conditioning_dim()}, torch::requires_grad());
+  o.appearance = torch::zeros({frames, config.appearance_dim()}, torch::requires_grad());
+  o.geometry_mask = torch::ones({1, config.conditioning_dim()});
+  o.appearance_mask = torch::ones({1, config.appearance_dim()});
+  if (freeze_identity) {
+    o.geometry_mask.narrow(1, 0, config.num_shape).zero_();                                    // beta first
+    o.appearance_mask.narrow(1, config.appearance_dim() - config.num_texture, config.num_texture).zero_();  // tau last
+  }
+  return o;
+}
+
+// Counts every step's samples the same way (resume reproduces the run).
+std::mt19937 StepRng(uint64_t seed, int step) {
+  return std::mt19937(static_cast<unsigned>(seed * 1000003u + static_cast<uint64_t>(step)));
+}
 
 namespace fs = std::filesystem;
 
@@ -63,7 +134,8 @@ void WriteAtomically(const fs::path& path, const std::string& text) {
   fs::rename(tmp, path);
 }
 
-void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam) {
+void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam,
+                    const Offsets& offsets) {
   const fs::path staging = dir / ("staging-" + std::to_string(next_step));
   fs::remove_all(staging);
   fs::create_directories(staging);
@@ -71,6 +143,8 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   torch::serialize::OutputArchive archive;
   adam.save(archive);
   archive.save_to((staging / "optimizer.pt").string());
+  if (offsets.enabled())
+    torch::save(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance}, (staging / "offsets.pt").string());
   WriteAtomically(staging / "state.json", nlohmann::json{{"next_step", next_step}}.dump() + "\n");
   const fs::path final_dir = dir / ("step-" + std::to_string(next_step));
   fs::remove_all(final_dir);
@@ -83,7 +157,7 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
 
 // Restores weights and optimiser state; returns the step to continue from (0 without a checkpoint).
 int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, torch::optim::Adam& adam,
-                   const std::vector<torch::Tensor>& params) {
+                   Offsets* offsets) {
   std::ifstream latest(dir / "LATEST");
   if (!latest) return 0;
   std::string name;
@@ -94,12 +168,22 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
     const int next_step = state.at("next_step").get<int>();
     const Avatar saved = Avatar::Load((ckpt / "avatar.hcavatar").string(), model);
     const std::vector<torch::Tensor> from = saved.modules().parameters();
-    if (from.size() != params.size()) throw std::runtime_error("the checkpoint's networks differ from this avatar's");
+    const std::vector<torch::Tensor> to = avatar.modules().parameters();
+    auto fits = [](const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
+      if (a.size() != b.size()) return false;
+      for (size_t i = 0; i < a.size(); ++i)
+        if (!a[i].sizes().equals(b[i].sizes())) return false;
+      return true;
+    };
+    if (!fits(from, to)) throw std::runtime_error("the checkpoint's networks differ from this avatar's");
     torch::NoGradGuard no_grad;
-    for (size_t i = 0; i < params.size(); ++i) {
-      if (!from[i].sizes().equals(params[i].sizes()))
-        throw std::runtime_error("the checkpoint's networks differ from this avatar's");
-      params[i].copy_(from[i]);
+    for (size_t i = 0; i < to.size(); ++i) to[i].copy_(from[i]);
+    if (offsets->enabled()) {
+      std::vector<torch::Tensor> saved_offsets;
+      torch::load(saved_offsets, (ckpt / "offsets.pt").string());
+      const std::vector<torch::Tensor> now = {offsets->geometry, offsets->appearance};
+      if (!fits(saved_offsets, now)) throw std::runtime_error("the checkpoint's per-frame offsets are for another dataset");
+      for (size_t i = 0; i < now.size(); ++i) now[i].copy_(saved_offsets[i]);
     }
     torch::serialize::InputArchive archive;
     archive.load_from((ckpt / "optimizer.pt").string());
@@ -112,43 +196,95 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
 
 }  // namespace
 
-FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
-                         const std::function<void(int, float)>& progress) {
+FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
+                      const std::function<void(const StepInfo&)>& progress) {
   options.Check();
+  if (!data.synthetic && !data.real) throw std::invalid_argument("TrainAvatar: no training data");
+  if (data.real && data.real->train().empty()) throw std::invalid_argument("TrainAvatar: the dataset has no training frames");
   const AvatarConfig& config = avatar.config();
+  if (data.real && data.real->resolution() != config.output_size)
+    throw std::invalid_argument("TrainAvatar: dataset crops are " + std::to_string(data.real->resolution()) +
+                                " pixels, the avatar renders " + std::to_string(config.output_size));
   AvatarModules& modules = avatar.modules();
-  modules.train();
+  if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
   std::vector<torch::Tensor> params;
   for (auto& p : modules.parameters())
     if (p.requires_grad()) params.push_back(p);
+  Offsets offsets;
+  if (data.real && options.learn_offsets && options.loss.offset_weight > 0) {
+    offsets = MakeOffsets(config, data.real->size(), options.freeze_identity);
+    params.push_back(offsets.geometry);
+    params.push_back(offsets.appearance);
+  }
   torch::optim::Adam adam(params, torch::optim::AdamOptions(options.learning_rate));
-  RaySampler sampler(config);
+  std::unique_ptr<PerceptualLoss> vgg;
   FitResult result;
-  if (options.resume) result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, params);
+  result.perceptual = "ssim";
+  if (!options.loss.vgg_path.empty()) {
+    vgg = std::make_unique<PerceptualLoss>(options.loss.vgg_path);
+    result.perceptual = "vgg16 " + options.loss.vgg_path;
+  }
+  RaySampler sampler(config);
+  if (options.resume) result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets);
   if (!options.checkpoint_dir.empty()) fs::create_directories(options.checkpoint_dir);
+  const LossOptions& w = options.loss;
   Stopwatch watch;
   for (int step = result.first_step; step < options.iterations; ++step) {
-    // Samples and jitter drawn per step, so a resumed run sees what the uninterrupted one would.
-    std::mt19937 rng(static_cast<unsigned>(options.seed * 1000003u + static_cast<uint64_t>(step)));
+    modules.train();
+    // Every draw of a step comes from its own generator: a resumed run sees what the uninterrupted one would.
+    std::mt19937 rng = StepRng(options.seed, step);
+    std::uniform_real_distribution<double> u01(0, 1);
+    const double p_synthetic = !data.real ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
     adam.zero_grad();
-    float total = 0;
+    StepInfo info;
+    info.step = step;
     for (int b = 0; b < options.batch; ++b) {
-      const SyntheticSample s = data.At(static_cast<uint64_t>(step) * options.batch + b);
-      const PreparedSample p = Prepare(config, model, s, &sampler, &rng);
+      PreparedSample p;
+      int real_index = -1;
+      if (u01(rng) < p_synthetic) {
+        const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
+        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, &sampler, &rng);
+        ++info.synthetic;
+      } else {
+        const std::vector<int>& train = data.real->train();
+        real_index = train[std::uniform_int_distribution<size_t>(0, train.size() - 1)(rng)];
+        const RealSample& s = data.real->At(real_index);
+        FrameParams frame = s.params;
+        cv::Mat image = s.image_bgr, mask = s.mask;
+        if (u01(rng) < options.z_augmentation) {
+          const double scale = std::exp(std::uniform_real_distribution<double>(std::log(options.z_scale_min),
+                                                                               std::log(options.z_scale_max))(rng));
+          ChangeDistance(scale, data.real->subject().intrinsics, &frame, &image, &mask);
+        }
+        p = Prepare(config, model, data.real->subject(), frame, MaskedTarget(image, mask), &sampler, &rng);
+      }
+      torch::Tensor offset_penalty = torch::zeros({});
+      if (real_index >= 0 && offsets.enabled()) {
+        const torch::Tensor g = offsets.geometry.narrow(0, real_index, 1) * offsets.geometry_mask;
+        const torch::Tensor a = offsets.appearance.narrow(0, real_index, 1) * offsets.appearance_mask;
+        p.conditioning.geometry = p.conditioning.geometry + g;
+        p.conditioning.appearance = p.conditioning.appearance + a;
+        offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
+      }
       const AvatarOutput out = RunAvatar(modules, p.rays, p.cam_from_head, p.conditioning);
-      const torch::Tensor loss = torch::mse_loss(out.image, p.target) / options.batch;
-      loss.backward();
-      total += loss.item<float>();
+      const torch::Tensor mse = torch::mse_loss(out.image, p.target);
+      torch::Tensor loss = w.mse_weight * mse + offset_penalty;
+      if (vgg)
+        loss = loss + w.perceptual_weight * (*vgg)(out.image, p.target);
+      else if (w.ssim_weight > 0)
+        loss = loss + w.ssim_weight * (1 - Ssim(out.image, p.target));
+      (loss / options.batch).backward();
+      info.loss += loss.item<float>() / options.batch;
+      info.mse += mse.item<float>() / options.batch;
     }
     adam.step();
-    result.loss.push_back(total);
-    if (progress) progress(step, total);
+    result.steps.push_back(info);
     if (!options.checkpoint_dir.empty() &&
         ((step + 1) % options.checkpoint_every == 0 || step + 1 == options.iterations)) {
       modules.eval();
-      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam);
-      modules.train();
+      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets);
     }
+    if (progress) progress(info);
   }
   result.seconds = watch.ElapsedSeconds();
   const int steps = options.iterations - result.first_step;
@@ -157,34 +293,79 @@ FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& 
   return result;
 }
 
+FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
+                         const std::function<void(const StepInfo&)>& progress) {
+  return TrainAvatar(avatar, model, TrainingData{&data, nullptr}, options, progress);
+}
+
+namespace {
+
+// Runs the avatar on a prepared sample; adds the figures against its target to `r`.
+cv::Mat Score(Avatar& avatar, const PreparedSample& p, SampleStats* ms, EvalResult* r) {
+  Stopwatch watch;
+  const AvatarOutput out = RunAvatar(avatar.modules(), p.rays, p.cam_from_head, p.conditioning);
+  ms->Add(watch.ElapsedMs());
+  const double mse = torch::mse_loss(out.image, p.target).item<double>();
+  r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
+  r->ssim.push_back(Ssim(out.image, p.target).item<double>());
+  r->mse_mean += mse;
+  cv::Mat bgr;
+  ImageTensorToBgr(out.image, &bgr);
+  return bgr;
+}
+
+void Finish(const SampleStats& ms, EvalResult* r) {
+  r->count = static_cast<int>(r->psnr.size());
+  if (r->count == 0) return;
+  for (int i = 0; i < r->count; ++i) {
+    r->psnr_mean += r->psnr[i] / r->count;
+    r->ssim_mean += r->ssim[i] / r->count;
+  }
+  r->mse_mean /= r->count;
+  r->ms_median = ms.Median();
+}
+
+}  // namespace
+
 EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count,
                                uint64_t first) {
-  AvatarModules& modules = avatar.modules();
-  modules.eval();
+  avatar.modules().eval();
   torch::InferenceMode inference;
   RaySampler sampler(avatar.config());
   SampleStats ms;
   EvalResult r;
   for (int i = 0; i < count; ++i) {
     const SyntheticSample s = data.At(first + i);
-    const PreparedSample p = Prepare(avatar.config(), model, s, &sampler, nullptr);
-    Stopwatch watch;
-    const AvatarOutput out = RunAvatar(modules, p.rays, p.cam_from_head, p.conditioning);
-    ms.Add(watch.ElapsedMs());
-    const double mse = torch::mse_loss(out.image, p.target).item<double>();
-    r.mse_mean += mse / count;
-    r.psnr_mean += 10 * std::log10(1.0 / std::max(mse, 1e-12)) / count;
+    Score(avatar, Prepare(avatar.config(), model, s.subject, s.frame, s.image_bgr, &sampler, nullptr), &ms, &r);
   }
-  r.ms_median = ms.Median();
-  r.count = count;
+  Finish(ms, &r);
   return r;
 }
 
-cv::Mat RenderSampleBgr(Avatar& avatar, const HeadModel& model, const SyntheticSample& sample) {
+EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
+                             const std::vector<int>& positions,
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render) {
   avatar.modules().eval();
   torch::InferenceMode inference;
   RaySampler sampler(avatar.config());
-  const PreparedSample p = Prepare(avatar.config(), model, sample, &sampler, nullptr);
+  SampleStats ms;
+  EvalResult r;
+  for (int i : positions) {
+    const RealSample& s = data.At(i);
+    const cv::Mat target = MaskedTarget(s.image_bgr, s.mask);
+    const cv::Mat bgr =
+        Score(avatar, Prepare(avatar.config(), model, data.subject(), s.params, target, &sampler, nullptr), &ms, &r);
+    if (render) render(i, target, bgr);
+  }
+  Finish(ms, &r);
+  return r;
+}
+
+cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame) {
+  avatar.modules().eval();
+  torch::InferenceMode inference;
+  RaySampler sampler(avatar.config());
+  const PreparedSample p = Prepare(avatar.config(), model, subject, frame, cv::Mat(), &sampler, nullptr);
   cv::Mat bgr;
   ImageTensorToBgr(RunAvatar(avatar.modules(), p.rays, p.cam_from_head, p.conditioning).image, &bgr);
   return bgr;

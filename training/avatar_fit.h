@@ -1,56 +1,123 @@
-// Fitting an avatar's networks to synthetic head-model renders (the first step
-// of pretraining the general model, METHOD §5), and evaluating it.
+// Training an avatar's networks (METHOD §4–§6): synthetic head-model renders
+// made on the fly mixed with real frames of prepared datasets by the p(n)
+// schedule of METHOD eq. 9; masked MSE + an SSIM or VGG16 perceptual term +
+// learnable per-frame offsets on real samples; z-augmentation; Adam;
+// checkpoints and resume. Evaluation on held-out synthetic samples or a test split.
 #pragma once
 
 #include <functional>
 #include <vector>
 
 #include "common/avatar/avatar.h"
+#include "training/dataset.h"
 #include "training/synthetic_data.h"
 
 namespace headcast {
+
+// METHOD eq. 9: the probability that step n trains on a synthetic sample.
+// 1 up to step m; then falls linearly from p_max at m to p_min at n_end.
+// A subject fine-tune uses m = 0, n_end = iterations, p_min = 0 (decay to 0).
+struct MixSchedule {
+  int m = 0;
+  int n_end = 1;
+  double p_min = 0, p_max = 0.25;
+  double SyntheticProbability(int step) const;
+  void Check() const;
+};
+
+struct LossOptions {
+  double mse_weight = 1;  // masked MSE (background replaced by the renders' background colour)
+  // The perceptual term: VGG16 features from a TorchScript file when given,
+  // otherwise 1 - SSIM as the substitute (the report says which).
+  std::string vgg_path;
+  double perceptual_weight = 0.1;
+  double ssim_weight = 0.1;
+  // sum_k w ||offset_k||^2 over the learnable per-frame offsets of real samples
+  // (METHOD eq. 8); 0 on synthetic ones, which have exact parameters.
+  double offset_weight = 1.0;
+  void Check() const;
+};
 
 struct FitOptions {
   int iterations = 500;         // optimiser steps
   int batch = 4;                // samples per step (gradients accumulated)
   double learning_rate = 2e-3;  // Adam
-  uint64_t seed = 1;            // ray jitter
+  uint64_t seed = 1;            // ray jitter, mixing, augmentation
+  LossOptions loss;
+  MixSchedule mix;               // used when both synthetic and real data are given
+  bool learn_offsets = true;     // per-frame offsets on beta, theta, psi, tau, lambda of real frames
+  bool freeze_identity = false;  // subject fine-tune: no offsets on beta and tau (frozen, METHOD §6)
+  int freeze_cnerf_layers = 0;   // subject fine-tune: 4 (METHOD §6)
+  // z-augmentation of real frames (METHOD §5): with this probability the head's
+  // distance is changed by a factor drawn in [1/z_scale_max, 1/z_scale_min]
+  // (the picture scaled about the head's centre, the translation with it).
+  double z_augmentation = 0.5;
+  double z_scale_min = 0.8, z_scale_max = 1.25;
   // Checkpoints: every `checkpoint_every` steps the weights, the optimiser
-  // state and the step go to CHECKPOINT_DIR/step-N/, then CHECKPOINT_DIR/LATEST
-  // is switched to it (a rename: a crash or kill -9 loses at most one interval).
-  // With `resume`, training continues from LATEST: samples and ray jitter are
-  // drawn per step, so the run continues as if never stopped.
+  // state, the offsets and the step go to CHECKPOINT_DIR/step-N/, then
+  // CHECKPOINT_DIR/LATEST is switched to it (a rename: a crash or kill -9 loses
+  // at most one interval). With `resume`, training continues from LATEST:
+  // samples and random draws are made per step, so the run continues as if never stopped.
   std::string checkpoint_dir;
   int checkpoint_every = 100;
   bool resume = false;
   void Check() const;
 };
 
+// Where samples come from; either may be null, not both.
+struct TrainingData {
+  const SyntheticData* synthetic = nullptr;
+  const PreparedDataset* real = nullptr;  // its train() frames
+};
+
+struct StepInfo {
+  int step = 0;
+  float loss = 0;  // the whole objective, mean over the batch
+  float mse = 0;   // the masked MSE part (RGB in [0, 1])
+  int synthetic = 0;  // samples of the batch that were synthetic
+};
+
 struct FitResult {
-  int first_step = 0;       // where this run started (after a resume)
-  std::vector<float> loss;  // per step from first_step, mean over the batch (MSE on RGB in [0, 1])
+  int first_step = 0;  // where this run started (after a resume)
+  std::vector<StepInfo> steps;
+  std::string perceptual;  // "vgg16 PATH" or "ssim"
   double seconds = 0;
   double samples_per_s = 0;
 };
 
-// Trains every parameter of `avatar` on samples data.At(step * batch + b);
-// `progress(step, loss)` after each step. Throws naming the file when a checkpoint
-// to resume from is corrupt or made for another avatar.
+// Trains `avatar` (every parameter not frozen). `progress(info)` after each
+// step, with the avatar in its state after the step. Throws naming the file
+// when a checkpoint to resume from is corrupt or made for another avatar.
+FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
+                      const std::function<void(const StepInfo&)>& progress = nullptr);
+
+// Synthetic only (the first stage of pretraining, benchmarks, tests).
 FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
-                         const std::function<void(int, float)>& progress = nullptr);
+                         const std::function<void(const StepInfo&)>& progress = nullptr);
 
 struct EvalResult {
   double psnr_mean = 0;  // dB, RGB in [0, 1]
+  double ssim_mean = 0;
   double mse_mean = 0;
   double ms_median = 0;  // inference per image (network part), ms
   int count = 0;
+  std::vector<double> psnr, ssim;  // per image
 };
 
-// PSNR of the avatar against held-out samples data.At(first .. first + count).
+// PSNR/SSIM of the avatar against held-out samples data.At(first .. first + count).
 EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count,
                                uint64_t first = uint64_t{1} << 40);  // far from the training indices
 
-// The avatar's picture (BGR) for a sample's parameters, e.g. beside its ground truth.
-cv::Mat RenderSampleBgr(Avatar& avatar, const HeadModel& model, const SyntheticSample& sample);
+// PSNR/SSIM on dataset frames (positions; default its test split), the
+// ground truth with its background replaced as in training. `render(i, avatar_bgr)` per frame if given.
+EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
+                             const std::vector<int>& positions,
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render = nullptr);
+
+// The avatar's picture (BGR) for a subject and frame, e.g. beside its ground truth.
+cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame);
+
+// A real frame's target: the masked image on the renders' background colour (BGR).
+cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask);
 
 }  // namespace headcast

@@ -1,145 +1,130 @@
-// headcast-train: builds avatars. So far: `pretrain`, fitting the networks to
-// synthetic head-model renders made on the fly (METHOD §5, synthetic part only;
-// real-image mixing, the perceptual term, learnable offsets and the p(n)
-// schedule belong to the training issue and are not here yet). Checkpoints and
-// resume: --checkpoint-dir, --resume.
+// headcast-train: builds avatars.
+//   prep      video -> head crops, masks, per-frame parameters (the sender's tracker), split
+//   pretrain  the general model on synthetic renders (optionally mixed with real frames)
+//   subject   a person's avatar, fine-tuned from the general model
+//   eval      PSNR/SSIM on the test split, side-by-side, orbit and transfer videos
 #include <CLI/CLI.hpp>
-#include <fstream>
 #include <iostream>
-#include <opencv2/imgproc.hpp>
 
-#include "common/core/image_io.h"
 #include "common/core/log.h"
-#include "common/core/timer.h"
-#include "common/headmodel/head_model_io.h"
-#include "training/avatar_fit.h"
+#include "training/runs.h"
 
-namespace headcast {
 namespace {
 
-struct PretrainArgs {
-  std::string head_model = "builtin", out, log_csv, preview, init;
-  int resolution = 128, eval = 20;
-  double neck_deg = 20;
-  FitOptions fit;
-  AvatarConfig config;
-};
+using namespace headcast;
 
-// Ground truth | avatar for a few held-out samples, stacked.
-cv::Mat Preview(Avatar& avatar, const HeadModel& model, const SyntheticData& data, int count) {
-  std::vector<cv::Mat> rows;
-  for (int i = 0; i < count; ++i) {
-    const SyntheticSample s = data.At((uint64_t{1} << 41) + i);  // neither training nor evaluation
-    cv::Mat row;
-    cv::hconcat(s.image_bgr, RenderSampleBgr(avatar, model, s), row);
-    rows.push_back(row);
-  }
-  cv::Mat sheet;
-  cv::vconcat(rows, sheet);
-  return sheet;
-}
-
-int Pretrain(PretrainArgs& a) {
-  const HeadModel model = LoadHeadModelSpec(a.head_model);
-  a.config.output_size = a.resolution;
-  a.config.num_shape = std::min(a.config.num_shape, model.num_shape());
-  a.config.num_expression = std::min(a.config.num_expression, model.num_expression());
-  a.config.num_texture = std::min(a.config.num_texture, model.num_texture());
-  const SubjectParams base = DefaultSubject(model, a.resolution);
-  Avatar avatar =
-      a.init.empty() ? Avatar::CreateRandom(a.config, model, base, a.fit.seed) : Avatar::Load(a.init, model);
-  SyntheticDataOptions data_options;
-  data_options.image_size = a.resolution;
-  data_options.neck_x_deg = data_options.neck_z_deg = a.neck_deg;
-  data_options.neck_y_deg = a.neck_deg;
-  SyntheticData data(model, data_options, base, a.fit.seed + 100);
-  std::ofstream log;
-  if (!a.log_csv.empty()) {
-    // A resumed run appends: the curve continues where the checkpoint left it.
-    const bool append = a.fit.resume && std::ifstream(a.log_csv).good();
-    log.open(a.log_csv, append ? std::ios::app : std::ios::trunc);
-    if (!log) throw std::runtime_error(a.log_csv + ": cannot write");
-    if (!append) log << "step,loss\n";
-  }
-  Stopwatch watch;
-  int first_step = -1;
-  const FitResult fit = FitOnSynthetic(avatar, model, data, a.fit, [&](int step, float loss) {
-    if (first_step < 0) {
-      first_step = step;  // after a resume, not 0
-      if (log.is_open() && a.fit.resume) {
-        // Rows written after the checkpoint by the interrupted run are redone: drop them.
-        log.close();
-        std::ifstream in(a.log_csv);
-        std::string line, kept;
-        while (std::getline(in, line))
-          if (line.rfind("step", 0) == 0 || std::atoi(line.c_str()) < first_step) kept += line + "\n";
-        in.close();
-        std::ofstream(a.log_csv, std::ios::trunc) << (kept.empty() ? "step,loss\n" : kept);
-        log.open(a.log_csv, std::ios::app);
-      }
-    }
-    if (log.is_open()) log << step << "," << loss << std::endl;  // flushed: a kill loses no logged step
-
-    if (step % 50 == 0 || step + 1 == a.fit.iterations) {
-      const double done = (step + 1.0 - first_step) / (a.fit.iterations - first_step);
-      std::fprintf(stderr, "\rstep %d/%d  loss %.5f  %.0f s, ETA %.0f s   ", step + 1, a.fit.iterations, loss,
-                   watch.ElapsedSeconds(), watch.ElapsedSeconds() * (1 - done) / std::max(done, 1e-9));
-    }
-  });
-  std::fprintf(stderr, "\n");
-  const EvalResult eval = EvaluateOnSynthetic(avatar, model, data, a.eval);
-  avatar.training_summary() = {{"trained", true},
-                               {"stage", "pretrain (synthetic renders of the head model only)"},
-                               {"head_model", model.data().name},
-                               {"iterations", a.fit.iterations},
-                               {"batch", a.fit.batch},
-                               {"learning_rate", a.fit.learning_rate},
-                               {"seconds", fit.seconds},
-                               {"samples_per_s", fit.samples_per_s},
-                               {"final_loss", fit.loss.empty() ? 0.f : fit.loss.back()},
-                               {"eval_psnr_db", eval.psnr_mean},
-                               {"eval_samples", eval.count}};
-  cv::Mat preview = Preview(avatar, model, data, 4);
-  avatar.Save(a.out, preview);
-  if (!a.preview.empty()) WriteImage(a.preview, preview);
-  std::cout << avatar.training_summary().dump(2) << "\nwrote " << a.out << "\n";
-  return 0;
+// Flags every training subcommand has: optimiser, loss, checkpoints, outputs.
+void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
+  app->add_option("--iterations", fit->iterations, "optimiser steps")->capture_default_str();
+  app->add_option("--batch", fit->batch, "samples per step")->capture_default_str();
+  app->add_option("--lr", fit->learning_rate, "Adam learning rate")->capture_default_str();
+  app->add_option("--seed", fit->seed, "random seed");
+  app->add_option("--vgg", fit->loss.vgg_path,
+                  "VGG16 TorchScript file for the perceptual term (else 1 - SSIM stands in for it)");
+  app->add_option("--perceptual-weight", fit->loss.perceptual_weight, "weight of the VGG16 term")->capture_default_str();
+  app->add_option("--ssim-weight", fit->loss.ssim_weight, "weight of 1 - SSIM (without --vgg)")->capture_default_str();
+  app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
+      ->capture_default_str();
+  app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");
+  app->add_option("--z-augmentation", fit->z_augmentation, "probability of the distance augmentation on real frames")
+      ->capture_default_str();
+  app->add_option("--checkpoint-dir", fit->checkpoint_dir, "checkpoint here (atomically) every --checkpoint-every steps");
+  app->add_option("--checkpoint-every", fit->checkpoint_every, "steps between checkpoints")->capture_default_str();
+  app->add_flag("--resume", fit->resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
+  app->add_option("--out", out->out, "output .hcavatar")->required();
+  app->add_option("--log-csv", out->log_csv, "loss per step (CSV)");
+  app->add_option("--eval-csv", out->eval_csv, "held-out PSNR/SSIM every --eval-every steps (CSV)");
+  app->add_option("--eval-every", out->eval_every, "steps between held-out evaluations (0: at the end only)");
+  app->add_option("--eval", out->eval_frames, "held-out samples per evaluation")->capture_default_str();
+  app->add_option("--plots", out->plot_dir, "write losses.png (and psnr.png) here");
+  app->add_option("--preview", out->preview, "ground truth | avatar for 4 held-out samples (PNG)");
+  app->add_option("--report", out->report, "the training report (JSON)");
 }
 
 }  // namespace
-}  // namespace headcast
 
 int main(int argc, char** argv) {
-  using namespace headcast;
   CLI::App app{"headcast-train: build avatars"};
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level");
-  auto* pretrain = app.add_subcommand("pretrain", "fit an avatar's networks to synthetic head-model renders");
-  PretrainArgs a;
-  pretrain->add_option("--head-model", a.head_model, "builtin or a model .npz")->capture_default_str();
-  pretrain->add_option("--resolution", a.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
-  pretrain->add_option("--iterations", a.fit.iterations, "optimiser steps")->capture_default_str();
-  pretrain->add_option("--batch", a.fit.batch, "samples per step")->capture_default_str();
-  pretrain->add_option("--lr", a.fit.learning_rate, "Adam learning rate")->capture_default_str();
-  pretrain->add_option("--seed", a.fit.seed, "random seed");
-  pretrain->add_option("--neck-deg", a.neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
+
+  auto* prep = app.add_subcommand("prep", "video or image folder -> a prepared dataset (crops, masks, parameters)");
+  PrepOptions p;
+  prep->add_option("--input", p.input, "video file or image folder")->required();
+  prep->add_option("--head-model", p.head_model, "builtin or a model .npz")->capture_default_str();
+  prep->add_option("--out", p.out_dir, "dataset folder to write")->required();
+  prep->add_option("--resolutions", p.resolutions, "crop sizes (128, 256, 512)")->delimiter(',')->capture_default_str();
+  prep->add_option("--test-frames", p.test_frames, "the last N fitted frames are the test split")->capture_default_str();
+  prep->add_option("--max-frames", p.max_frames, "use only the first N frames");
+  prep->add_flag("!--no-calibrate", p.calibrate, "no identity calibration (shape stays neutral)");
+  prep->add_option("--identity-from", p.identity_from, "shape from headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
+  prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
+  prep->add_option("--crop-scale", p.crop_scale, "crop edge over the landmarks' extent")->capture_default_str();
+  prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
+
+  auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");
+  PretrainOptions g;
+  double neck_deg = 20;
+  pretrain->add_option("--head-model", g.head_model, "builtin or a model .npz")->capture_default_str();
+  pretrain->add_option("--resolution", g.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
+  pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
-  pretrain->add_option("--samples-per-ray", a.config.samples_per_ray, "CNeRF samples per ray")->capture_default_str();
-  pretrain->add_option("--init", a.init, "continue from this .hcavatar");
-  pretrain->add_option("--eval", a.eval, "held-out samples for the PSNR figure")->capture_default_str();
-  pretrain->add_option("--log-csv", a.log_csv, "write the loss per step here");
-  pretrain->add_option("--preview", a.preview, "write ground truth | avatar for 4 held-out samples (PNG)");
-  pretrain->add_option("--out", a.out, "output .hcavatar")->required();
-  pretrain->add_option("--checkpoint-dir", a.fit.checkpoint_dir, "checkpoint here (atomically) every --checkpoint-every steps");
-  pretrain->add_option("--checkpoint-every", a.fit.checkpoint_every, "steps between checkpoints")->capture_default_str();
-  pretrain->add_flag("--resume", a.fit.resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
+  pretrain->add_option("--samples-per-ray", g.config.samples_per_ray, "CNeRF samples per ray")->capture_default_str();
+  pretrain->add_option("--init", g.init, "continue from this .hcavatar");
+  pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
+  pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
+  pretrain->add_option("--mix-n", g.fit.mix.n_end, "METHOD eq. 9: p reaches p_min at step N")->capture_default_str();
+  pretrain->add_option("--p-min", g.fit.mix.p_min, "METHOD eq. 9")->capture_default_str();
+  pretrain->add_option("--p-max", g.fit.mix.p_max, "METHOD eq. 9")->capture_default_str();
+  AddTrainingFlags(pretrain, &g.fit, &g.outputs);
+
+  auto* subject = app.add_subcommand("subject", "fine-tune a person's avatar from the general model");
+  SubjectOptions s;
+  s.fit.iterations = 1000;
+  subject->add_option("--head-model", s.head_model, "builtin or a model .npz")->capture_default_str();
+  subject->add_option("--general", s.general, "the general model (.hcavatar)");
+  subject->add_flag("--from-scratch", s.from_scratch, "random networks instead of a general model (comparisons)");
+  subject->add_option("--data", s.dataset, "dataset folder from prep")->required();
+  subject->add_option("--resolution", s.resolution, "output size (crops of this size must be prepared)")
+      ->check(CLI::IsMember({128, 256, 512}))
+      ->capture_default_str();
+  subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
+  subject->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
+      ->capture_default_str();
+  subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")
+      ->capture_default_str();
+  AddTrainingFlags(subject, &s.fit, &s.outputs);
+
+  auto* eval = app.add_subcommand("eval", "evaluate an avatar on a dataset's test split; videos");
+  EvalOptions e;
+  eval->add_option("--head-model", e.head_model, "builtin or a model .npz")->capture_default_str();
+  eval->add_option("--avatar", e.avatar, ".hcavatar")->required();
+  eval->add_option("--data", e.dataset, "dataset folder from prep")->required();
+  eval->add_option("--out", e.out_dir, "folder for eval.json, per_frame.csv and the videos")->required();
+  eval->add_option("--max-frames", e.max_frames, "evaluate at most N test frames");
+  eval->add_option("--drive", e.drive, "a recording (.hcrec) whose expressions drive transfer.mp4");
+  eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);
-    if (pretrain->parsed()) return Pretrain(a);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
+    nlohmann::json report;
+    if (prep->parsed()) {
+      if (!p.identity_from.empty()) p.calibrate = false;
+      report = PrepareDataset(p);
+      report.erase("frame_numbers");
+    } else if (pretrain->parsed()) {
+      g.synthetic.neck_x_deg = g.synthetic.neck_y_deg = g.synthetic.neck_z_deg = neck_deg;
+      report = RunPretrain(g);
+    } else if (subject->parsed()) {
+      report = RunSubject(s);
+    } else if (eval->parsed()) {
+      report = RunEval(e);
+    }
+    std::cout << report.dump(2) << "\n";
+  } catch (const std::exception& ex) {
+    spdlog::error("{}", ex.what());
     return 1;
   }
   return 0;

@@ -82,7 +82,7 @@ Avatar Avatar::CreateRandom(const AvatarConfig& config, const HeadModel& model, 
 Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
   config.Check();
   const AvatarConfig& c = impl_->config;
-  if (config.output_size != c.output_size || config.feature_channels != c.feature_channels ||
+  if (config.feature_channels != c.feature_channels ||
       config.num_shape != c.num_shape || config.num_expression != c.num_expression ||
       config.num_texture != c.num_texture || config.pe_frequencies != c.pe_frequencies ||
       config.pe_scale != c.pe_scale || config.mlp_width != c.mlp_width || config.mlp_layers != c.mlp_layers ||

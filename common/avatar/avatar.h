@@ -37,7 +37,10 @@ class Avatar {
   static nlohmann::json ReadManifest(const std::string& path);
 
   // A copy whose run-time switches (sampling, samples per ray, shell, precompute)
-  // come from `config`; the architecture must be the same (throws otherwise).
+  // and output size come from `config`; the architecture must be the same
+  // (throws otherwise). The networks do not depend on the output size (CNeRF
+  // works in the head's frame, the renderer is convolutional), so a general
+  // model trained at 128 can be fine-tuned at 256.
   Avatar WithRuntimeSwitches(const AvatarConfig& config) const;
 
   Avatar(Avatar&&) noexcept;

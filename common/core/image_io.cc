@@ -1,6 +1,7 @@
 // Image and video I/O.
 #include "common/core/image_io.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -79,6 +80,19 @@ void VideoWriter::Write(const cv::Mat& frame) {
 
 void VideoWriter::Close() {
   if (writer_.isOpened()) writer_.release();
+}
+
+std::vector<std::string> ListImageFiles(const std::string& folder) {
+  std::vector<std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(folder)) {
+    std::string ext = e.path().extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".ppm" ||
+                                ext == ".tif" || ext == ".tiff"))
+      files.push_back(e.path().string());
+  }
+  std::sort(files.begin(), files.end());
+  return files;
 }
 
 }  // namespace headcast

@@ -4,6 +4,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
 #include <string>
+#include <vector>
 
 namespace headcast {
 
@@ -14,6 +15,10 @@ void WriteImage(const std::string& path, const cv::Mat& image);
 
 // Float image in [0,1] (any channel count of 1 or 3) to 8-bit, clamped.
 cv::Mat ToUint8(const cv::Mat& float_image);
+
+// The image files (png, jpg, jpeg, bmp, ppm, tif, tiff; any case) directly in
+// `folder`, sorted by name: the order of every image-folder input.
+std::vector<std::string> ListImageFiles(const std::string& folder);
 
 // Frames of a video file, or throws naming the file if it cannot be opened.
 class VideoReader {

@@ -49,21 +49,10 @@ ReadStatus VideoFileSource::Read(CapturedFrame* frame, std::string* problem) {
   return ReadStatus::kEnd;
 }
 
-namespace {
-bool IsImageFile(const fs::path& p) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".bmp" || ext == ".ppm" || ext == ".tif" ||
-         ext == ".tiff";
-}
-}  // namespace
-
 ImageFolderSource::ImageFolderSource(std::string folder, const SourceOptions& options)
     : folder_(std::move(folder)), options_(options), pacer_(options.realtime, options.fps) {
   if (!fs::is_directory(folder_)) throw std::runtime_error(folder_ + ": not a folder");
-  for (const auto& e : fs::directory_iterator(folder_))
-    if (e.is_regular_file() && IsImageFile(e.path())) files_.push_back(e.path().string());
-  std::sort(files_.begin(), files_.end());
+  files_ = ListImageFiles(folder_);
   if (files_.empty()) throw std::runtime_error(folder_ + ": no images in this folder (png, jpg, bmp, ppm, tif)");
 }
 

@@ -49,8 +49,8 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   f.batch = 2;
   f.learning_rate = 5e-3;
   const FitResult r = FitOnSynthetic(avatar, Model(), data, f);
-  ASSERT_EQ(r.loss.size(), 40u);
-  const float first = (r.loss[0] + r.loss[1] + r.loss[2]) / 3, last = (r.loss[37] + r.loss[38] + r.loss[39]) / 3;
+  ASSERT_EQ(r.steps.size(), 40u);
+  const float first = (r.steps[0].loss + r.steps[1].loss + r.steps[2].loss) / 3, last = (r.steps[37].loss + r.steps[38].loss + r.steps[39].loss) / 3;
   EXPECT_LT(last, 0.7f * first);
   const EvalResult after = EvaluateOnSynthetic(avatar, Model(), data, 4);
   EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
@@ -69,7 +69,7 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   f.checkpoint_dir = testing::TempDir("ckpt_straight");
   Avatar straight = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
   const FitResult all = FitOnSynthetic(straight, Model(), data, f);
-  ASSERT_EQ(all.loss.size(), 6u);
+  ASSERT_EQ(all.steps.size(), 6u);
 
   f.checkpoint_dir = testing::TempDir("ckpt_resumed");
   f.iterations = 3;
@@ -80,8 +80,8 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   Avatar second = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 99);  // other weights
   const FitResult rest = FitOnSynthetic(second, Model(), data, f);
   EXPECT_EQ(rest.first_step, 3);
-  ASSERT_EQ(rest.loss.size(), 3u);
-  for (int i = 0; i < 3; ++i) EXPECT_NEAR(rest.loss[i], all.loss[3 + i], 1e-4 * all.loss[3 + i]) << "step " << 3 + i;
+  ASSERT_EQ(rest.steps.size(), 3u);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
   const auto a = straight.modules().parameters(), b = second.modules().parameters();
   double diff = 0;
   for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());

@@ -1,0 +1,319 @@
+// Dataset preparation and loading.
+#include "training/dataset.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "common/core/image_io.h"
+#include "common/core/log.h"
+#include "common/core/options.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/tracking/head_fitter.h"
+#include "proto/recording.h"
+
+namespace headcast {
+namespace fs = std::filesystem;
+
+void PrepOptions::Check() const {
+  OptionsCheck c("PrepOptions");
+  c.That(!input.empty(), "input is required").That(!out_dir.empty(), "out_dir is required");
+  c.That(!resolutions.empty(), "at least one resolution");
+  for (int r : resolutions) c.That(r == 128 || r == 256 || r == 512, "resolutions are 128, 256 or 512");
+  c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
+  c.InRange("crop_scale", crop_scale, 1.0, 6.0);
+  c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
+  c.ThrowIfErrors();
+}
+
+PinholeCamera CropIntrinsics(const PinholeCamera& camera, double x0, double y0, double side, int resolution) {
+  const double s = resolution / side;
+  PinholeCamera k = camera;
+  k.width = k.height = resolution;
+  k.fx = camera.fx * s;
+  k.fy = camera.fy * s;
+  // Pixel centres: a source pixel u maps to (u + 0.5 - x0) * s - 0.5.
+  k.cx = (camera.cx + 0.5 - x0) * s - 0.5;
+  k.cy = (camera.cy + 0.5 - y0) * s - 0.5;
+  return k;
+}
+
+namespace {
+
+// Runs a program with its arguments (no shell: no quoting problems); returns its exit status.
+int RunProgram(const std::vector<std::string>& argv) {
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  const pid_t pid = fork();
+  if (pid < 0) throw std::runtime_error("cannot start " + argv[0]);
+  if (pid == 0) {
+    dup2(2, 1);  // the child's reports go to our stderr: our stdout carries our own report
+    execv(args[0], args.data());
+    std::fprintf(stderr, "cannot run %s\n", args[0]);
+    _exit(127);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+std::string FrameName(int frame) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%05d.png", frame);
+  return name;
+}
+
+// The frames of the input in the tracker's numbering: readable frames counted
+// from 0 (an unreadable image is skipped and not counted; a video ends at its
+// first undecodable frame), exactly as headcast-track's recorded sources do.
+// RGB-D folders: the colour images their associations.txt lists.
+class InputFrames {
+ public:
+  explicit InputFrames(const std::string& input) {
+    const fs::path associations = fs::path(input) / "associations.txt";
+    if (fs::is_directory(input) && fs::exists(associations)) {
+      std::ifstream in(associations);
+      std::string line;
+      while (std::getline(in, line)) {
+        if (line.empty() || line[0] == '#') continue;
+        std::istringstream fields(line);
+        std::string t, colour;
+        if (fields >> t >> colour) files_.push_back((fs::path(input) / colour).string());
+      }
+    } else if (fs::is_directory(input)) {
+      files_ = ListImageFiles(input);
+    } else {
+      video_ = std::make_unique<VideoReader>(input);
+    }
+  }
+  bool Next(cv::Mat* frame) {
+    if (video_) return video_->Read(frame);
+    while (next_ < files_.size()) {
+      try {
+        *frame = ReadImage(files_[next_++]);
+        return true;
+      } catch (const std::exception&) {
+        // skipped, as the tracker skipped it
+      }
+    }
+    return false;
+  }
+
+ private:
+  std::unique_ptr<VideoReader> video_;
+  std::vector<std::string> files_;
+  size_t next_ = 0;
+};
+
+double Percentile(std::vector<double> v, double q) {
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1))];
+}
+
+// The square crop of `image` at (x0, y0, side), resized; outside the frame is black.
+cv::Mat Crop(const cv::Mat& image, double x0, double y0, double side, int resolution, int interpolation) {
+  const double s = resolution / side;
+  cv::Matx23d affine(s, 0, -x0 * s, 0, s, -y0 * s);
+  // Map pixel centres (see CropIntrinsics).
+  affine(0, 2) += 0.5 * s - 0.5;
+  affine(1, 2) += 0.5 * s - 0.5;
+  cv::Mat out;
+  cv::warpAffine(image, out, affine, cv::Size(resolution, resolution), interpolation, cv::BORDER_CONSTANT,
+                 cv::Scalar::all(0));
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json PrepareDataset(const PrepOptions& o) {
+  o.Check();
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  fs::create_directories(o.out_dir);
+  const fs::path dir = o.out_dir;
+  std::string tracker = o.tracker;
+  if (tracker.empty()) tracker = (fs::read_symlink("/proc/self/exe").parent_path() / "headcast-track").string();
+  if (!fs::exists(tracker)) throw std::runtime_error(tracker + ": headcast-track not found (give --tracker)");
+
+  // 1. The sender's own tracking pipeline, same settings (DESIGN: the tracker
+  //    used for training data and live is the same code).
+  const fs::path full_masks = dir / "full_masks";
+  std::vector<std::string> argv = {tracker,
+                                   "--input", o.input,
+                                   "--head-model", o.head_model,
+                                   "--out", (dir / "params.hcrec").string(),
+                                   "--report", (dir / "track_report.json").string(),
+                                   "--overlay", (dir / "preview.mp4").string(),
+                                   "--masks", full_masks.string()};
+  if (o.calibrate) argv.push_back("--calibrate");
+  if (!o.identity_from.empty()) argv.insert(argv.end(), {"--identity-from", o.identity_from});
+  if (!o.intrinsics.empty()) argv.insert(argv.end(), {"--intrinsics", o.intrinsics});
+  if (o.max_frames > 0) argv.insert(argv.end(), {"--max-frames", std::to_string(o.max_frames)});
+  argv.insert(argv.end(), o.tracker_args.begin(), o.tracker_args.end());
+  spdlog::info("prep: tracking {} with {}", o.input, tracker);
+  if (const int rc = RunProgram(argv); rc != 0)
+    throw std::runtime_error(o.input + ": headcast-track failed (exit " + std::to_string(rc) +
+                             "); its messages are above");
+  const nlohmann::json track_report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
+  RecordingInfo info;
+  const std::vector<FrameParams> fitted = ReadRecording((dir / "params.hcrec").string(), &info);
+  if (fitted.empty()) throw std::runtime_error(o.input + ": no face was found and fitted in any frame");
+  const int min_train = 8;
+  if (static_cast<int>(fitted.size()) < o.test_frames + min_train)
+    throw std::runtime_error(o.input + ": " + std::to_string(fitted.size()) + " fitted frames; the split needs " +
+                             std::to_string(o.test_frames) + " test frames and at least " +
+                             std::to_string(min_train) + " training frames (lower --test-frames?)");
+
+  // 2. One crop box for the whole video, so the camera stays one pinhole:
+  //    the landmarks' median centre (raised toward the hair by 0.3 of the extent) and their 95th
+  //    percentile extent, times crop_scale.
+  HeadFitter fitter(model);
+  fitter.SetIdentity(info.subject.shape.cast<double>());
+  const PinholeCamera& camera = info.subject.intrinsics;
+  std::vector<double> cx, cy, extent;
+  for (const FrameParams& f : fitted) {
+    const Landmarks2d l = fitter.Project(f, camera);
+    Eigen::Vector2d lo = l[0], hi = l[0];
+    for (const auto& p : l) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    cx.push_back(0.5 * (lo.x() + hi.x()));
+    cy.push_back(0.5 * (lo.y() + hi.y()));
+    extent.push_back(std::max(hi.x() - lo.x(), hi.y() - lo.y()));
+  }
+  const double size = Percentile(extent, 0.95);
+  const double side = o.crop_scale * size;
+  const double x0 = Percentile(cx, 0.5) - side / 2;
+  const double y0 = Percentile(cy, 0.5) - 0.3 * size - side / 2;
+
+  // 3. Crops and masks at each resolution, named by source frame number.
+  for (int r : o.resolutions) {
+    fs::create_directories(dir / std::to_string(r) / "images");
+    fs::create_directories(dir / std::to_string(r) / "masks");
+  }
+  InputFrames frames(o.input);
+  size_t next = 0;
+  int read = 0;
+  cv::Mat frame;
+  while (next < fitted.size() && frames.Next(&frame)) {
+    const int n = read++;
+    if (static_cast<int>(fitted[next].sequence) != n) continue;
+    ++next;
+    const cv::Mat mask = ReadImage((full_masks / FrameName(n)).string(), cv::IMREAD_GRAYSCALE);
+    if (mask.size() != frame.size())
+      throw std::runtime_error(o.input + ": frame " + std::to_string(n) + " and its mask differ in size");
+    for (int r : o.resolutions) {
+      const fs::path rd = dir / std::to_string(r);
+      WriteImage((rd / "images" / FrameName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
+      cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
+      cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
+      WriteImage((rd / "masks" / FrameName(n)).string(), m);
+    }
+  }
+  if (next != fitted.size())
+    throw std::runtime_error(o.input + ": read " + std::to_string(read) + " frames but the tracker fitted frame " +
+                             std::to_string(fitted[next].sequence) + " (frame numbering differs?)");
+  fs::remove_all(full_masks);
+
+  // 4. The manifest: split, subject, intrinsics per resolution.
+  const int n = static_cast<int>(fitted.size());
+  nlohmann::json intrinsics = nlohmann::json::object();
+  for (int r : o.resolutions) {
+    const PinholeCamera k = CropIntrinsics(camera, x0, y0, side, r);
+    intrinsics[std::to_string(r)] = {k.fx, k.fy, k.cx, k.cy};
+  }
+  std::vector<int> frame_numbers;
+  for (const FrameParams& f : fitted) frame_numbers.push_back(static_cast<int>(f.sequence));
+  const std::vector<float> shape(info.subject.shape.data(), info.subject.shape.data() + info.subject.shape.size());
+  const std::vector<float> texture(info.subject.texture.data(),
+                                   info.subject.texture.data() + info.subject.texture.size());
+  nlohmann::json manifest = {
+      {"format", "headcast-dataset"},
+      {"format_version", kDatasetFormatVersion},
+      {"source", o.input},
+      {"head_model", {{"name", model.data().name}, {"fingerprint", model.fingerprint()}}},
+      {"frames_read", read},
+      {"frames_fitted", n},
+      {"frame_numbers", frame_numbers},
+      {"split", {{"train", n - o.test_frames}, {"test", o.test_frames}, {"rule", "test = the last N fitted frames"}}},
+      {"crop", {{"x0", x0}, {"y0", y0}, {"side", side}, {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}}}},
+      {"resolutions", o.resolutions},
+      {"intrinsics", intrinsics},
+      {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
+      {"identity", track_report.value("identity", std::string("?"))},
+      {"tracking",
+       {{"fitted_frames", track_report.value("fitted_frames", 0)},
+        {"frames", track_report.value("frames", 0)},
+        {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
+        {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)}}}};
+  if (track_report.value("frames", -1) != read)
+    throw std::runtime_error(o.input + ": the tracker saw " + std::to_string(track_report.value("frames", -1)) +
+                             " frames, prep read " + std::to_string(read) + " (frame numbering differs)");
+  std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
+  return manifest;
+}
+
+PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& model, int resolution) {
+  const fs::path manifest_path = fs::path(dir) / "dataset.json";
+  PreparedDataset d;
+  d.dir_ = dir;
+  d.resolution_ = resolution;
+  try {
+    std::ifstream in(manifest_path);
+    if (!in) throw std::runtime_error("missing (not a prepared dataset? run headcast-train prep)");
+    d.manifest_ = nlohmann::json::parse(in);
+    const auto& m = d.manifest_;
+    if (m.value("format", "") != "headcast-dataset") throw std::runtime_error("not a headcast dataset");
+    if (m.at("format_version").get<int>() != kDatasetFormatVersion)
+      throw std::runtime_error("format version " + std::to_string(m.at("format_version").get<int>()) +
+                               ", this build reads " + std::to_string(kDatasetFormatVersion));
+    const std::string fingerprint = m.at("head_model").at("fingerprint");
+    if (fingerprint != model.fingerprint())
+      throw std::runtime_error("prepared for head model " + m.at("head_model").at("name").get<std::string>() + " (" +
+                               fingerprint + "), not " + model.data().name + " (" + model.fingerprint() + ")");
+    const auto& k = m.at("intrinsics");
+    if (!k.contains(std::to_string(resolution)))
+      throw std::runtime_error("no " + std::to_string(resolution) + " crops (prepared: " + m.at("resolutions").dump() +
+                               ")");
+    const std::vector<double> kk = k.at(std::to_string(resolution));
+    d.subject_.intrinsics = PinholeCamera{kk.at(0), kk.at(1), kk.at(2), kk.at(3), resolution, resolution};
+    const std::vector<float> shape = m.at("subject").at("shape"), texture = m.at("subject").at("texture");
+    d.subject_.shape = Eigen::Map<const Eigen::VectorXf>(shape.data(), static_cast<Eigen::Index>(shape.size()));
+    d.subject_.texture = Eigen::Map<const Eigen::VectorXf>(texture.data(), static_cast<Eigen::Index>(texture.size()));
+    d.subject_.light = m.at("subject").at("light").get<std::array<float, 27>>();
+    d.frames_ = ReadRecording((fs::path(dir) / "params.hcrec").string());
+    const int n = static_cast<int>(d.frames_.size());
+    const int train = m.at("split").at("train").get<int>();
+    if (n != m.at("frames_fitted").get<int>() || train < 1 || train > n)
+      throw std::runtime_error("the split does not match params.hcrec");
+    for (int i = 0; i < n; ++i) (i < train ? d.train_ : d.test_).push_back(i);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(manifest_path.string() + ": " + e.what());
+  }
+  return d;
+}
+
+const RealSample& PreparedDataset::At(int i) const {
+  if (i < 0 || i >= size()) throw std::out_of_range("PreparedDataset::At: no frame " + std::to_string(i));
+  auto it = cache_.find(i);
+  if (it != cache_.end()) return it->second;
+  RealSample s;
+  s.params = frames_[static_cast<size_t>(i)];
+  s.frame = static_cast<int>(s.params.sequence);
+  const fs::path rd = fs::path(dir_) / std::to_string(resolution_);
+  s.image_bgr = ReadImage((rd / "images" / FrameName(s.frame)).string());
+  s.mask = ReadImage((rd / "masks" / FrameName(s.frame)).string(), cv::IMREAD_GRAYSCALE);
+  if (s.image_bgr.rows != resolution_ || s.image_bgr.cols != resolution_ || s.mask.size() != s.image_bgr.size())
+    throw std::runtime_error(rd.string() + ": frame " + std::to_string(s.frame) + " is not " +
+                             std::to_string(resolution_) + " pixels square");
+  return cache_.emplace(i, std::move(s)).first->second;
+}
+
+}  // namespace headcast

@@ -1,0 +1,87 @@
+// Prepared datasets (`headcast-train prep`): one person's video turned into
+// what the trainer reads — square head crops at one or more resolutions with
+// their head masks, the per-frame parameters fitted by the sender's own
+// tracker, the subject's constants (beta, tau, lambda, the crop's intrinsics)
+// and an INSTA-style split (train on the leading frames, test on the last N).
+//
+// On disk (DIR):
+//   dataset.json        format, version, head model, source, crop box, split, subject, per-resolution intrinsics
+//   params.hcrec        the tracker's recording (full-frame camera)
+//   track_report.json   the tracker's report; preview.mp4 its overlay
+//   R/images/NNNNN.png  crops at R x R (R in 128, 256, 512), NNNNN the source frame number
+//   R/masks/NNNNN.png   the head masks, same crops
+#pragma once
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "common/headmodel/head_model.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+constexpr int kDatasetFormatVersion = 1;
+
+struct PrepOptions {
+  std::string input;                // video, image folder (anything headcast-track reads)
+  std::string head_model = "builtin";
+  std::string out_dir;
+  std::vector<int> resolutions = {128, 256};
+  int test_frames = 150;            // the last N fitted frames are the test split
+  int max_frames = 0;               // 0: all
+  bool calibrate = true;            // identity calibration over key frames (shape, focal)
+  std::string identity_from;        // or: beta from headcast-fit-mesh's PARAMS.json
+  std::string intrinsics;           // fx,fy,cx,cy when known (else calibration / field of view)
+  double crop_scale = 2.2;          // crop edge over the landmarks' extent (room for hair, ears, neck)
+  std::string tracker;              // headcast-track to run; default: the one beside this program
+  std::vector<std::string> tracker_args;  // passed on to headcast-track as they are
+  void Check() const;
+};
+
+// Runs the tracker, crops, writes DIR; returns the dataset's report (also in dataset.json).
+// Throws with a clear message: no face anywhere, too few fitted frames for the split, unreadable input.
+nlohmann::json PrepareDataset(const PrepOptions& options);
+
+// One real training or test frame at one resolution.
+struct RealSample {
+  int frame = 0;      // source frame number
+  cv::Mat image_bgr;  // R x R, CV_8UC3
+  cv::Mat mask;       // R x R, CV_8U, 255 on the head
+  FrameParams params;
+};
+
+class PreparedDataset {
+ public:
+  // Refuses, naming the file: a missing or foreign folder, another format
+  // version, a dataset made for another head model, a missing resolution.
+  static PreparedDataset Load(const std::string& dir, const HeadModel& model, int resolution);
+
+  int resolution() const { return resolution_; }
+  int size() const { return static_cast<int>(frames_.size()); }
+  const std::vector<int>& train() const { return train_; }  // positions in [0, size)
+  const std::vector<int>& test() const { return test_; }
+  // The subject's constants with the intrinsics of the R x R crops.
+  const SubjectParams& subject() const { return subject_; }
+  const nlohmann::json& manifest() const { return manifest_; }
+  const std::string& dir() const { return dir_; }
+  // Reads (and caches) the crop and mask of position i.
+  const RealSample& At(int i) const;
+
+ private:
+  std::string dir_;
+  int resolution_ = 0;
+  nlohmann::json manifest_;
+  SubjectParams subject_;
+  std::vector<FrameParams> frames_;
+  std::vector<int> train_, test_;
+  mutable std::map<int, RealSample> cache_;
+};
+
+// The crop box's intrinsics: `camera` (full frame) cut to the square at
+// (x0, y0) with edge `side` pixels, resized to `resolution`.
+PinholeCamera CropIntrinsics(const PinholeCamera& camera, double x0, double y0, double side, int resolution);
+
+}  // namespace headcast

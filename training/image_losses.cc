@@ -1,0 +1,94 @@
+// SSIM, PSNR and the TorchScript perceptual loss.
+#include "training/image_losses.h"
+
+#include <torch/script.h>
+
+#include <cmath>
+#include <filesystem>
+
+namespace headcast {
+namespace {
+
+torch::Tensor GaussianWindow(int channels) {
+  const int size = 11;
+  const double sigma = 1.5;
+  torch::Tensor g = torch::arange(size, torch::kFloat32) - (size - 1) / 2.0;
+  g = torch::exp(-g * g / (2 * sigma * sigma));
+  g = g / g.sum();
+  return torch::outer(g, g).expand({channels, 1, size, size}).contiguous();
+}
+
+}  // namespace
+
+torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b) {
+  TORCH_CHECK(a.dim() == 4 && a.sizes() == b.sizes(), "Ssim: two (B, C, H, W) images of one size");
+  const int64_t c = a.size(1);
+  const torch::Tensor w = GaussianWindow(static_cast<int>(c)).to(a.dtype());
+  auto blur = [&](const torch::Tensor& x) {
+    return torch::nn::functional::conv2d(x, w, torch::nn::functional::Conv2dFuncOptions().groups(c));
+  };
+  const double c1 = 0.01 * 0.01, c2 = 0.03 * 0.03;
+  const torch::Tensor mu_a = blur(a);
+  const torch::Tensor mu_b = blur(b);
+  const torch::Tensor var_a = blur(a * a) - mu_a * mu_a;
+  const torch::Tensor var_b = blur(b * b) - mu_b * mu_b;
+  const torch::Tensor cov = blur(a * b) - mu_a * mu_b;
+  const torch::Tensor map = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
+                            ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+  return map.mean();
+}
+
+double Psnr(const torch::Tensor& a, const torch::Tensor& b) {
+  const double mse = torch::mse_loss(a, b).item<double>();
+  return 10 * std::log10(1.0 / std::max(mse, 1e-12));
+}
+
+struct PerceptualLoss::Impl {
+  torch::jit::Module module;
+  torch::Tensor mean, std;
+};
+
+PerceptualLoss::PerceptualLoss(const std::string& path) : impl_(std::make_unique<Impl>()), path_(path) {
+  if (!std::filesystem::exists(path)) throw std::runtime_error(path + ": no such file (a VGG16 TorchScript file)");
+  try {
+    impl_->module = torch::jit::load(path, torch::kCPU);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": not a TorchScript module (" + std::string(e.what()).substr(0, 200) + ")");
+  }
+  impl_->module.eval();
+  for (auto p : impl_->module.parameters()) p.requires_grad_(false);
+  impl_->mean = torch::tensor({0.485f, 0.456f, 0.406f}).view({1, 3, 1, 1});
+  impl_->std = torch::tensor({0.229f, 0.224f, 0.225f}).view({1, 3, 1, 1});
+  // One call on a small image now, so a module with the wrong interface fails here and not mid-training.
+  try {
+    const torch::Tensor x = torch::rand({1, 3, 32, 32});
+    (*this)(x, x);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": the module does not map (B, 3, H, W) images to features (" +
+                             std::string(e.what()).substr(0, 200) + ")");
+  }
+}
+
+PerceptualLoss::~PerceptualLoss() = default;
+
+torch::Tensor PerceptualLoss::operator()(const torch::Tensor& a, const torch::Tensor& b) {
+  const torch::Tensor both = torch::cat({a, b}, 0);
+  const torch::IValue out = impl_->module.forward({(both - impl_->mean) / impl_->std});
+  std::vector<torch::Tensor> features;
+  if (out.isTensor()) {
+    features.push_back(out.toTensor());
+  } else if (out.isTensorList()) {
+    for (const auto& t : out.toTensorVector()) features.push_back(t);
+  } else if (out.isTuple() || out.isList()) {
+    const auto elements = out.isTuple() ? out.toTupleRef().elements().vec() : out.toListRef().vec();
+    for (const auto& e : elements) features.push_back(e.toTensor());
+  } else {
+    throw std::runtime_error(path_ + ": forward must return a tensor or a list of tensors");
+  }
+  torch::Tensor loss = torch::zeros({});
+  const int64_t n = a.size(0);
+  for (const auto& f : features) loss = loss + torch::mse_loss(f.narrow(0, 0, n), f.narrow(0, n, n));
+  return loss;
+}
+
+}  // namespace headcast

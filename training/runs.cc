@@ -1,0 +1,336 @@
+// headcast-train's subcommands.
+#include "training/runs.h"
+
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <opencv2/imgproc.hpp>
+
+#include "common/core/image_io.h"
+#include "common/core/log.h"
+#include "common/core/options.h"
+#include "common/core/rotation.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/headmodel/head_render.h"
+#include "common/tracking/mesh_fitter.h"
+#include "proto/recording.h"
+#include "training/run_report.h"
+
+namespace headcast {
+namespace fs = std::filesystem;
+
+namespace {
+
+void CheckOutputs(const RunOutputs& o, OptionsCheck* c) {
+  c->That(!o.out.empty(), "out is required").NonNegative("eval_every", o.eval_every);
+  c->InRange("eval_frames", o.eval_frames, 1, 100000);
+}
+
+// The loop around TrainAvatar that people see: progress with ETA, the loss
+// CSV, held-out figures every eval_every steps, plots at the end.
+FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& fit,
+                            const RunOutputs& out, const std::function<EvalResult(Avatar&)>& evaluate) {
+  std::optional<ProgressLine> progress;
+  CsvLog loss_log, eval_log;
+  double last_psnr = NAN;
+  const FitResult fit_result = TrainAvatar(avatar, model, data, fit, [&](const StepInfo& s) {
+    if (!progress) {  // the first step of this run (not 0 after a resume)
+      progress.emplace(s.step, fit.iterations);
+      if (!out.log_csv.empty()) loss_log = CsvLog(out.log_csv, "step,loss,mse,synthetic", fit.resume, s.step);
+      if (!out.eval_csv.empty()) eval_log = CsvLog(out.eval_csv, "step,psnr,ssim", fit.resume, s.step);
+    }
+    loss_log.Row(std::to_string(s.step) + "," + std::to_string(s.loss) + "," + std::to_string(s.mse) + "," +
+                 std::to_string(s.synthetic));
+    const bool last = s.step + 1 == fit.iterations;
+    if (out.eval_every > 0 && ((s.step + 1) % out.eval_every == 0 || last)) {
+      const EvalResult e = evaluate(avatar);
+      last_psnr = e.psnr_mean;
+      eval_log.Row(std::to_string(s.step + 1) + "," + std::to_string(e.psnr_mean) + "," + std::to_string(e.ssim_mean));
+    }
+    if (s.step % 10 == 0 || last) {
+      char figures[96];
+      std::snprintf(figures, sizeof(figures), "loss %.5f  mse %.5f  test PSNR %.2f dB", s.loss, s.mse, last_psnr);
+      progress->Show(s.step, figures);
+    }
+  });
+  if (progress) progress->Finish();
+  if (!out.plot_dir.empty()) {
+    fs::create_directories(out.plot_dir);
+    if (!out.log_csv.empty())
+      WritePlot((fs::path(out.plot_dir) / "losses.png").string(), "training loss", "step", "loss",
+                ReadCsvColumns(out.log_csv, {"loss", "mse"}), true);
+    if (!out.eval_csv.empty() && out.eval_every > 0)
+      WritePlot((fs::path(out.plot_dir) / "psnr.png").string(), "held-out PSNR", "step", "dB",
+                ReadCsvColumns(out.eval_csv, {"psnr"}));
+  }
+  return fit_result;
+}
+
+nlohmann::json EvalJson(const EvalResult& e, const std::string& what) {
+  return {{"psnr_db", e.psnr_mean}, {"ssim", e.ssim_mean}, {"frames", e.count}, {"ms_per_image", e.ms_median},
+          {"on", what}};
+}
+
+nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
+  nlohmann::json j = {{"iterations", f.iterations},
+          {"batch", f.batch},
+          {"learning_rate", f.learning_rate},
+          {"seconds", r.seconds},
+          {"samples_per_s", r.samples_per_s},
+          {"first_step", r.first_step},
+          {"final_loss", r.steps.empty() ? 0.f : r.steps.back().loss},
+          {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual}};
+  if (real) {  // only real frames are augmented and get offsets
+    j["z_augmentation"] = f.z_augmentation;
+    j["learned_offsets"] = f.learn_offsets;
+  }
+  return j;
+}
+
+void Finish(Avatar& avatar, const nlohmann::json& summary, const cv::Mat& preview, const RunOutputs& out) {
+  avatar.training_summary() = summary;
+  avatar.Save(out.out, preview);
+  if (!out.preview.empty()) WriteImage(out.preview, preview);
+  if (!out.report.empty()) std::ofstream(out.report) << summary.dump(2) << "\n";
+}
+
+cv::Mat Stack(const std::vector<cv::Mat>& rows) {
+  cv::Mat sheet;
+  cv::vconcat(rows, sheet);
+  return sheet;
+}
+
+// Truncates or pads with zeros.
+Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n) {
+  Eigen::VectorXf out = Eigen::VectorXf::Zero(n);
+  const int k = std::min<int>(n, static_cast<int>(v.size()));
+  out.head(k) = v.head(k);
+  return out;
+}
+
+void FitConfigToModel(const HeadModel& model, AvatarConfig* c) {
+  c->num_shape = std::min(c->num_shape, model.num_shape());
+  c->num_expression = std::min(c->num_expression, model.num_expression());
+  c->num_texture = std::min(c->num_texture, model.num_texture());
+}
+
+}  // namespace
+
+void PretrainOptions::Check() const {
+  OptionsCheck c("PretrainOptions");
+  c.That(resolution == 128 || resolution == 256 || resolution == 512, "resolution is 128, 256 or 512");
+  CheckOutputs(outputs, &c);
+  c.ThrowIfErrors();
+  fit.Check();
+}
+
+nlohmann::json RunPretrain(PretrainOptions o) {
+  o.Check();
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  o.config.output_size = o.resolution;
+  FitConfigToModel(model, &o.config);
+  const SubjectParams base = DefaultSubject(model, o.resolution);
+  Avatar avatar = o.init.empty() ? Avatar::CreateRandom(o.config, model, base, o.fit.seed)
+                                 : Avatar::Load(o.init, model).WithRuntimeSwitches(o.config);
+  o.synthetic.image_size = o.resolution;
+  SyntheticData synthetic(model, o.synthetic, base, o.fit.seed + 100);
+  std::optional<PreparedDataset> real;
+  if (!o.real_dataset.empty()) real = PreparedDataset::Load(o.real_dataset, model, o.resolution);
+  const TrainingData data{&synthetic, real ? &*real : nullptr};
+  const int eval_frames = o.outputs.eval_frames;
+  const FitResult fitted = TrainWithReports(avatar, model, data, o.fit, o.outputs, [&](Avatar& a) {
+    return EvaluateOnSynthetic(a, model, synthetic, eval_frames);
+  });
+  const EvalResult eval = EvaluateOnSynthetic(avatar, model, synthetic, eval_frames);
+  std::vector<cv::Mat> rows;
+  for (int i = 0; i < 4; ++i) {
+    const SyntheticSample s = synthetic.At((uint64_t{1} << 41) + i);  // neither training nor evaluation
+    cv::Mat row;
+    cv::hconcat(s.image_bgr, RenderAvatarBgr(avatar, model, s.subject, s.frame), row);
+    rows.push_back(row);
+  }
+  nlohmann::json summary = {{"trained", true},
+                            {"stage", real ? "pretrain (synthetic renders mixed with real frames, METHOD eq. 9)"
+                                           : "pretrain (synthetic renders of the head model)"},
+                            {"head_model", model.data().name},
+                            {"resolution", o.resolution},
+                            {"fit", FitJson(o.fit, fitted, real.has_value())},
+                            {"eval", EvalJson(eval, "held-out synthetic renders")}};
+  if (real)
+    summary["mix"] = {{"dataset", o.real_dataset}, {"m", o.fit.mix.m}, {"n", o.fit.mix.n_end},
+                      {"p_min", o.fit.mix.p_min}, {"p_max", o.fit.mix.p_max}};
+  Finish(avatar, summary, Stack(rows), o.outputs);
+  return summary;
+}
+
+void SubjectOptions::Check() const {
+  OptionsCheck c("SubjectOptions");
+  c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
+  c.That(!dataset.empty(), "dataset is required");
+  c.That(resolution == 128 || resolution == 256 || resolution == 512, "resolution is 128, 256 or 512");
+  c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
+  CheckOutputs(outputs, &c);
+  c.ThrowIfErrors();
+  fit.Check();
+}
+
+nlohmann::json RunSubject(SubjectOptions o) {
+  o.Check();
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  const PreparedDataset data = PreparedDataset::Load(o.dataset, model, o.resolution);
+  if (data.test().empty()) spdlog::warn("{}: no test frames; figures are on training frames", o.dataset);
+  SubjectParams subject = data.subject();
+  std::string identity = "the dataset's (" + data.manifest().value("identity", std::string("?")) + ")";
+  if (!o.identity_from.empty()) {
+    subject.shape = ReadIdentityFromMeshFit(o.identity_from, model).cast<float>();
+    identity = "headcast-fit-mesh " + o.identity_from;
+  }
+  subject.texture = Resized(subject.texture, model.num_texture());
+  Avatar avatar = [&] {
+    if (o.from_scratch) {
+      o.config.output_size = o.resolution;
+      FitConfigToModel(model, &o.config);
+      return Avatar::CreateRandom(o.config, model, subject, o.fit.seed);
+    }
+    Avatar general = Avatar::Load(o.general, model);
+    AvatarConfig c = general.config();
+    c.output_size = o.resolution;
+    return general.WithRuntimeSwitches(c);
+  }();
+  avatar.mutable_subject() = subject;
+  // The subject's own renders, decaying to none (METHOD §6): beta and tau stay the subject's.
+  SyntheticDataOptions synthetic_options;
+  synthetic_options.image_size = o.resolution;
+  synthetic_options.vary_identity = false;
+  synthetic_options.neck_x_deg = synthetic_options.neck_y_deg = synthetic_options.neck_z_deg = 25;
+  SyntheticData synthetic(model, synthetic_options, subject, o.fit.seed + 200);
+  FitOptions fit = o.fit;
+  fit.freeze_identity = true;
+  fit.freeze_cnerf_layers = o.from_scratch ? 0 : o.freeze_layers;
+  fit.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, o.synthetic_start};
+  const TrainingData training{o.synthetic_start > 0 ? &synthetic : nullptr, &data};
+  std::vector<int> eval_positions = data.test().empty() ? data.train() : data.test();
+  std::vector<int> periodic = eval_positions;
+  if (static_cast<int>(periodic.size()) > o.outputs.eval_frames) {
+    // Spread over the split, for the curve; the final figure uses every frame.
+    std::vector<int> spread;
+    for (int k = 0; k < o.outputs.eval_frames; ++k)
+      spread.push_back(periodic[static_cast<size_t>(k) * periodic.size() / o.outputs.eval_frames]);
+    periodic = spread;
+  }
+  const FitResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs, [&](Avatar& a) {
+    return EvaluateOnDataset(a, model, data, periodic);
+  });
+  const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
+  std::vector<cv::Mat> rows;
+  for (int k = 0; k < 4; ++k) {
+    const int i = eval_positions[static_cast<size_t>(k) * eval_positions.size() / 4];
+    const RealSample& s = data.At(i);
+    cv::Mat row;
+    cv::hconcat(MaskedTarget(s.image_bgr, s.mask), RenderAvatarBgr(avatar, model, subject, s.params), row);
+    rows.push_back(row);
+  }
+  const nlohmann::json summary = {
+      {"trained", true},
+      {"stage", o.from_scratch ? "subject, from random networks" : "subject fine-tune of " + o.general},
+      {"head_model", model.data().name},
+      {"resolution", o.resolution},
+      {"dataset", o.dataset},
+      {"identity", identity},
+      {"frozen", {{"beta_tau", true}, {"cnerf_layers", fit.freeze_cnerf_layers}}},
+      {"synthetic_mix", {{"start", o.synthetic_start}, {"end", 0}, {"decay", "linear over the iterations"}}},
+      {"train_frames", data.train().size()},
+      {"fit", FitJson(fit, fitted, true)},
+      {"eval", EvalJson(eval, data.test().empty() ? "training frames (no test split)"
+                                                  : "test split: the last frames, never trained on")}};
+  Finish(avatar, summary, Stack(rows), o.outputs);
+  return summary;
+}
+
+void EvalOptions::Check() const {
+  OptionsCheck c("EvalOptions");
+  c.That(!avatar.empty(), "avatar is required").That(!dataset.empty(), "dataset is required");
+  c.That(!out_dir.empty(), "out_dir is required").NonNegative("max_frames", max_frames);
+  c.InRange("orbit_frames", orbit_frames, 0, 10000).InRange("orbit_deg", orbit_deg, 0.0, 90.0);
+  c.ThrowIfErrors();
+}
+
+nlohmann::json RunEval(const EvalOptions& o) {
+  o.Check();
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  Avatar avatar = Avatar::Load(o.avatar, model);
+  const PreparedDataset data = PreparedDataset::Load(o.dataset, model, avatar.config().output_size);
+  std::vector<int> positions = data.test().empty() ? data.train() : data.test();
+  if (o.max_frames > 0 && static_cast<int>(positions.size()) > o.max_frames) positions.resize(o.max_frames);
+  fs::create_directories(o.out_dir);
+  const fs::path dir = o.out_dir;
+  const SubjectParams& subject = avatar.subject();
+  // The head model as the tracker saw it, for the third panel.
+  HeadRenderOptions render_options;
+  std::copy(subject.light.begin(), subject.light.end(), render_options.light.begin());
+  const cv::Mat albedo = AlbedoTexture(model, subject.texture.cast<double>());
+  const HeadIdentity identity = model.MakeIdentity(subject.shape.cast<double>());
+  auto head_model_view = [&](const FrameParams& f) {
+    HeadModelOutput posed;
+    model.Forward(identity, Resized(f.expression, model.num_expression()).cast<double>(), f.HeadPose(), &posed);
+    return RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
+  };
+  const double fps = 30;
+  std::ofstream csv(dir / "per_frame.csv");
+  csv << "frame,psnr,ssim\n";
+  {
+    VideoWriter side((dir / "side_by_side.mp4").string(), fps);
+    const EvalResult e = EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth,
+                                                                               const cv::Mat& rendered) {
+      cv::Mat row;
+      cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
+      side.Write(row);
+    });
+    for (int k = 0; k < e.count; ++k)
+      csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";
+    nlohmann::json report = {{"avatar", o.avatar},
+                             {"dataset", o.dataset},
+                             {"resolution", avatar.config().output_size},
+                             {"eval", EvalJson(e, data.test().empty() ? "training frames" : "test split")},
+                             {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
+                             {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
+                             {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};
+    // Novel views: the first evaluated frame, the head turned on its vertical axis.
+    const FrameParams base = data.At(positions.front()).params;
+    if (o.orbit_frames > 0) {
+      VideoWriter orbit((dir / "orbit.mp4").string(), fps);
+      const RigidTransform cam_from_head = base.CamFromHead();
+      for (int k = 0; k < o.orbit_frames; ++k) {
+        const double yaw = o.orbit_deg * M_PI / 180 * std::sin(2 * M_PI * k / o.orbit_frames);
+        FrameParams f = base;
+        f.SetCamFromHead({cam_from_head.rotation * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).matrix(),
+                          cam_from_head.translation});
+        orbit.Write(RenderAvatarBgr(avatar, model, subject, f));
+      }
+      report["videos"].push_back("orbit.mp4: novel views, yaw +-" + std::to_string(o.orbit_deg) + " degrees");
+    }
+    // Expression transfer: another recording's expressions and jaw on this avatar, its pose kept.
+    if (!o.drive.empty()) {
+      RecordingInfo info;
+      const std::vector<FrameParams> drive = ReadRecording(o.drive, &info);
+      if (info.head_model_fingerprint != model.fingerprint())
+        throw std::runtime_error(o.drive + ": recorded for head model " + info.head_model_name + ", not " +
+                                 model.data().name);
+      VideoWriter transfer((dir / "transfer.mp4").string(), fps);
+      for (const FrameParams& d : drive) {
+        FrameParams f = base;
+        f.expression = d.expression;
+        f.jaw = d.jaw;
+        cv::Mat row;
+        cv::hconcat(head_model_view(f), RenderAvatarBgr(avatar, model, subject, f), row);
+        transfer.Write(row);
+      }
+      report["videos"].push_back("transfer.mp4: " + o.drive + "'s expressions (head model | avatar)");
+    }
+    std::ofstream(dir / "eval.json") << report.dump(2) << "\n";
+    return report;
+  }
+}
+
+}  // namespace headcast

@@ -1,0 +1,77 @@
+// The subcommands of headcast-train as library entry points: each takes a
+// checked options struct, does the whole job (progress, logs, plots,
+// checkpoints, reports) and returns its report.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "common/avatar/avatar_config.h"
+#include "training/avatar_fit.h"
+
+namespace headcast {
+
+// Logs, plots and periodic evaluation shared by pretrain and subject.
+struct RunOutputs {
+  std::string out;            // the .hcavatar to write
+  std::string log_csv;        // loss per step (step,loss,mse,synthetic)
+  std::string eval_csv;       // test PSNR/SSIM every eval_every steps (step,psnr,ssim)
+  std::string plot_dir;       // losses.png and psnr.png here
+  std::string preview;        // ground truth | avatar for 4 held-out samples (PNG)
+  std::string report;         // the report JSON
+  int eval_every = 0;         // 0: only at the end
+  int eval_frames = 20;       // held-out samples per evaluation
+};
+
+// General model (METHOD §5): synthetic renders of the head model made on the
+// fly, optionally mixed with the real training frames of a prepared dataset by
+// the p(n) schedule.
+struct PretrainOptions {
+  std::string head_model = "builtin";
+  int resolution = 128;
+  std::string init;       // continue from this .hcavatar
+  AvatarConfig config;    // architecture (output_size is set from resolution)
+  SyntheticDataOptions synthetic;
+  std::string real_dataset;  // a prepared dataset to mix in (optional)
+  FitOptions fit;
+  RunOutputs outputs;
+  void Check() const;
+};
+nlohmann::json RunPretrain(PretrainOptions options);
+
+// Per-subject avatar (METHOD §6): from a general model, beta and tau frozen,
+// the first four CNeRF layers frozen, synthetic mixing decaying linearly to 0,
+// z-augmentation; trained on the dataset's training split, evaluated on its test split.
+struct SubjectOptions {
+  std::string head_model = "builtin";
+  std::string general;        // the general model .hcavatar; empty only with from_scratch
+  bool from_scratch = false;  // random networks instead (the comparison of the thesis's claim)
+  std::string dataset;        // from `prep`
+  int resolution = 256;
+  std::string identity_from;  // beta from headcast-fit-mesh's PARAMS.json instead of the dataset's
+  double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
+  int freeze_layers = 4;
+  AvatarConfig config;        // architecture when from_scratch
+  FitOptions fit;
+  RunOutputs outputs;
+  void Check() const;
+};
+nlohmann::json RunSubject(SubjectOptions options);
+
+// Figures and videos of an avatar on a dataset's test split.
+struct EvalOptions {
+  std::string head_model = "builtin";
+  std::string avatar;
+  std::string dataset;
+  std::string out_dir;
+  int max_frames = 0;         // 0: the whole test split
+  std::string drive;          // a recording whose expressions drive the expression-transfer video
+  int orbit_frames = 60;      // novel-view orbit video (0: none)
+  double orbit_deg = 30;      // yaw swing of the orbit
+  void Check() const;
+};
+// Writes OUT/eval.json, per_frame.csv, side_by_side.mp4 (ground truth | avatar |
+// head model), orbit.mp4 and, with `drive`, transfer.mp4.
+nlohmann::json RunEval(const EvalOptions& options);
+
+}  // namespace headcast
