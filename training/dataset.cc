@@ -189,9 +189,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     extent.push_back(std::max(hi.x() - lo.x(), hi.y() - lo.y()));
   }
   const double size = Percentile(extent, 0.95);
-  const double side = o.crop_scale * size;
-  const double x0 = Percentile(cx, 0.5) - side / 2;
-  const double y0 = Percentile(cy, 0.5) - 0.3 * size - side / 2;
+  // Close-ups: no bigger than the frame, and inside it (no black borders to learn).
+  const double side = std::min({o.crop_scale * size, 1.0 * camera.width, 1.0 * camera.height});
+  const double x0 = std::clamp(Percentile(cx, 0.5) - side / 2, 0.0, camera.width - side);
+  const double y0 = std::clamp(Percentile(cy, 0.5) - 0.3 * size - side / 2, 0.0, camera.height - side);
 
   // 3. Crops and masks at each resolution, named by source frame number.
   for (int r : o.resolutions) {

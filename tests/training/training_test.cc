@@ -8,6 +8,12 @@
 #include "common/headmodel/builtin_head.h"
 #include "tests/testing/test_data.h"
 #include "training/avatar_fit.h"
+#include "training/image_losses.h"
+#include "proto/recording.h"
+#include "common/core/image_io.h"
+
+#include <filesystem>
+#include <torch/script.h>
 
 namespace headcast {
 namespace {
@@ -110,6 +116,213 @@ TEST(Avatar, RuntimeSwitchesKeepTheWeights) {
               1e-3);
   c.mlp_width = 32;
   EXPECT_THROW(a.WithRuntimeSwitches(c), std::invalid_argument);
+}
+
+TEST(MixSchedule, FollowsMethodEquation9) {
+  const MixSchedule m{310000, 312500, 0.0, 0.25};  // METHOD §5's best general model
+  EXPECT_EQ(m.SyntheticProbability(0), 1.0);
+  EXPECT_EQ(m.SyntheticProbability(310000), 1.0);
+  EXPECT_NEAR(m.SyntheticProbability(311250), 0.125, 1e-12);
+  EXPECT_NEAR(m.SyntheticProbability(310001), 0.25 * (1 - 1.0 / 2500), 1e-12);
+  EXPECT_EQ(m.SyntheticProbability(312500), 0.0);
+  EXPECT_EQ(m.SyntheticProbability(400000), 0.0);
+  const MixSchedule subject{0, 1000, 0.0, 0.5};  // METHOD §6: decays linearly to 0
+  EXPECT_NEAR(subject.SyntheticProbability(500), 0.25, 1e-12);
+  EXPECT_THROW((MixSchedule{10, 10, 0.0, 0.25}.Check()), std::invalid_argument);
+  EXPECT_THROW((MixSchedule{0, 10, 0.5, 0.25}.Check()), std::invalid_argument);
+}
+
+TEST(ImageLosses, SsimAndPsnr) {
+  torch::manual_seed(3);
+  const torch::Tensor a = torch::rand({1, 3, 32, 32});
+  EXPECT_NEAR(Ssim(a, a).item<double>(), 1.0, 1e-5);
+  torch::Tensor b = (a + 0.2 * torch::randn({1, 3, 32, 32})).clamp(0, 1).requires_grad_(true);
+  const torch::Tensor s = Ssim(a, b);
+  EXPECT_LT(s.item<double>(), 0.9);
+  (1 - s).backward();
+  EXPECT_GT(b.grad().abs().sum().item<double>(), 0);
+  EXPECT_NEAR(Psnr(torch::full({1, 3, 8, 8}, 0.5), torch::full({1, 3, 8, 8}, 0.6)), 20.0, 1e-4);
+}
+
+TEST(ImageLosses, PerceptualLossReadsATorchScriptFeatureNetwork) {
+  const std::string dir = testing::TempDir("vgg");
+  torch::jit::Module net("Features");
+  torch::manual_seed(4);
+  net.register_parameter("weight", torch::randn({4, 3, 3, 3}), false);
+  net.define(R"(
+def forward(self, x):
+    a = torch.relu(torch.conv2d(x, self.weight))
+    return [a, torch.avg_pool2d(a, 2)]
+)");
+  net.save(dir + "/features.pt");
+  PerceptualLoss loss(dir + "/features.pt");
+  const torch::Tensor x = torch::rand({1, 3, 16, 16});
+  torch::Tensor y = torch::rand({1, 3, 16, 16}).requires_grad_(true);
+  EXPECT_NEAR(loss(x, x).item<double>(), 0.0, 1e-9);
+  const torch::Tensor l = loss(x, y);
+  EXPECT_GT(l.item<double>(), 0);
+  l.backward();
+  EXPECT_GT(y.grad().abs().sum().item<double>(), 0);
+  std::ofstream(dir + "/garbage.pt") << "not a module";
+  for (const auto& [file, expected] : std::vector<std::pair<std::string, std::string>>{
+           {dir + "/garbage.pt", "not a TorchScript module"}, {dir + "/missing.pt", "no such file"}}) {
+    try {
+      PerceptualLoss bad(file);
+      ADD_FAILURE() << file << " accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  }
+}
+
+TEST(Dataset, CropIntrinsicsMapTheCropBoxToTheImage) {
+  const PinholeCamera full{600, 600, 320, 240, 640, 480};
+  const PinholeCamera k = CropIntrinsics(full, 200, 100, 256, 128);
+  // A point seen at pixel (u, v) in the frame is at ((u + 0.5 - x0) * s - 0.5, ...) in the crop.
+  const Eigen::Vector3d p(0.03, -0.02, 0.6);
+  const Eigen::Vector2d in_frame = full.Project(p), in_crop = k.Project(p);
+  EXPECT_NEAR(in_crop.x(), (in_frame.x() + 0.5 - 200) * 0.5 - 0.5, 1e-9);
+  EXPECT_NEAR(in_crop.y(), (in_frame.y() + 0.5 - 100) * 0.5 - 0.5, 1e-9);
+  EXPECT_EQ(k.width, 128);
+}
+
+// A prepared dataset written in the documented format from renders with known
+// parameters: `frames` frames, the last `test` of them the test split.
+std::string WriteRenderedDataset(const std::string& name, int frames, int test) {
+  namespace fs = std::filesystem;
+  const std::string dir = testing::TempDir(name);
+  fs::create_directories(dir + "/128/images");
+  fs::create_directories(dir + "/128/masks");
+  SyntheticDataOptions o;
+  o.vary_identity = false;
+  o.neck_x_deg = o.neck_y_deg = o.neck_z_deg = 10;
+  SubjectParams subject = DefaultSubject(Model(), 128);
+  subject.shape[0] = 0.5f;
+  SyntheticData data(Model(), o, subject, 7);
+  RecordingInfo info;
+  info.head_model_name = Model().data().name;
+  info.head_model_fingerprint = Model().fingerprint();
+  info.num_expression = Model().num_expression();
+  info.subject = subject;
+  RecordingWriter writer(dir + "/params.hcrec", info);
+  PinholeCamera k;
+  for (int i = 0; i < frames; ++i) {
+    SyntheticSample s = data.At(static_cast<uint64_t>(i));
+    k = s.subject.intrinsics;
+    s.frame.sequence = static_cast<uint64_t>(i);
+    writer.Write(s.frame);
+    char file[32];
+    std::snprintf(file, sizeof(file), "/%05d.png", i);
+    WriteImage(dir + "/128/images" + file, s.image_bgr);
+    WriteImage(dir + "/128/masks" + file, s.mask);
+  }
+  writer.Close();
+  const std::vector<float> shape(subject.shape.data(), subject.shape.data() + subject.shape.size());
+  const std::vector<float> texture(subject.texture.data(), subject.texture.data() + subject.texture.size());
+  const nlohmann::json manifest = {
+      {"format", "headcast-dataset"},
+      {"format_version", kDatasetFormatVersion},
+      {"head_model", {{"name", Model().data().name}, {"fingerprint", Model().fingerprint()}}},
+      {"frames_fitted", frames},
+      {"split", {{"train", frames - test}, {"test", test}}},
+      {"resolutions", {128}},
+      {"intrinsics", {{"128", {k.fx, k.fy, k.cx, k.cy}}}},
+      {"subject", {{"shape", shape}, {"texture", texture}, {"light", subject.light}}}};
+  std::ofstream(dir + "/dataset.json") << manifest.dump(2);
+  return dir;
+}
+
+TEST(Dataset, LoadsAndRefusesWhatItCannotUse) {
+  const std::string dir = WriteRenderedDataset("dataset_load", 6, 2);
+  const PreparedDataset d = PreparedDataset::Load(dir, Model(), 128);
+  EXPECT_EQ(d.size(), 6);
+  EXPECT_EQ(d.train().size(), 4u);
+  EXPECT_EQ(d.test(), (std::vector<int>{4, 5}));
+  EXPECT_EQ(d.At(5).image_bgr.size(), cv::Size(128, 128));
+  EXPECT_EQ(d.At(5).frame, 5);
+  EXPECT_NEAR(d.subject().shape[0], 0.5f, 1e-6);
+  auto refused = [&](const std::string& where, int resolution, const std::string& expected) {
+    try {
+      PreparedDataset::Load(where, Model(), resolution);
+      ADD_FAILURE() << where << " accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  refused(dir, 256, "no 256 crops");
+  refused(testing::TempDir("dataset_empty"), 128, "not a prepared dataset");
+  nlohmann::json m = nlohmann::json::parse(std::ifstream(dir + "/dataset.json"));
+  m["head_model"]["fingerprint"] = "0123456789abcdef";
+  std::ofstream(dir + "/dataset.json") << m.dump();
+  refused(dir, 128, "prepared for head model");
+}
+
+// METHOD §6 on real frames: beta/tau frozen (no offsets there), the first
+// CNeRF layers frozen, offsets learned; the test PSNR rises; resume continues exactly.
+TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
+  const std::string dir = WriteRenderedDataset("dataset_train", 12, 3);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+  const torch::Tensor first_layer = avatar.modules().cnerf->parameters()[0].clone();
+  const EvalResult before = EvaluateOnDataset(avatar, Model(), real, real.test());
+  FitOptions f;
+  f.iterations = 40;
+  f.batch = 2;
+  f.learning_rate = 5e-3;
+  f.freeze_identity = true;
+  f.freeze_cnerf_layers = 1;
+  f.checkpoint_dir = testing::TempDir("ckpt_real");
+  f.checkpoint_every = 20;
+  const FitResult r = TrainAvatar(avatar, Model(), TrainingData{nullptr, &real}, f);
+  ASSERT_EQ(r.steps.size(), 40u);
+  EXPECT_EQ(r.steps[0].synthetic, 0);
+  const EvalResult after = EvaluateOnDataset(avatar, Model(), real, real.test());
+  EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
+  EXPECT_GT(after.ssim_mean, before.ssim_mean);
+  EXPECT_EQ((avatar.modules().cnerf->parameters()[0] - first_layer).abs().max().item<double>(), 0.0);
+  // Offsets: saved with the checkpoint, zero on beta (the first columns) and tau (the last).
+  std::string latest;
+  std::getline(std::ifstream(f.checkpoint_dir + "/LATEST"), latest);
+  std::vector<torch::Tensor> offsets;
+  torch::load(offsets, f.checkpoint_dir + "/" + latest + "/offsets.pt");
+  ASSERT_EQ(offsets.size(), 2u);
+  const AvatarConfig& c = avatar.config();
+  EXPECT_GT(offsets[0].narrow(1, c.num_shape, c.conditioning_dim() - c.num_shape).abs().max().item<double>(), 0);
+  // Masked out of the conditioning, beta's offsets get no gradient.
+  EXPECT_EQ(offsets[0].narrow(1, 0, c.num_shape).abs().max().item<double>(), 0.0);
+  EXPECT_EQ(offsets[1].narrow(1, c.appearance_dim() - c.num_texture, c.num_texture).abs().max().item<double>(), 0.0);
+
+  // Resume: 6 steps straight against 3 + 3, with augmentation, offsets and mixing.
+  SyntheticDataOptions so;
+  SyntheticData synthetic(Model(), so, real.subject(), 2);
+  FitOptions g;
+  g.iterations = 6;
+  g.batch = 2;
+  g.mix = MixSchedule{0, 6, 0.0, 0.5};
+  g.checkpoint_every = 3;
+  g.checkpoint_dir = testing::TempDir("ckpt_real_straight");
+  Avatar straight = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+  const FitResult all = TrainAvatar(straight, Model(), TrainingData{&synthetic, &real}, g);
+  int synthetic_samples = 0;
+  for (const auto& s : all.steps) synthetic_samples += s.synthetic;
+  EXPECT_GT(synthetic_samples, 0);
+  EXPECT_LT(synthetic_samples, 12);
+  g.checkpoint_dir = testing::TempDir("ckpt_real_split");
+  g.iterations = 3;
+  Avatar first = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+  TrainAvatar(first, Model(), TrainingData{&synthetic, &real}, g);
+  g.iterations = 6;
+  g.resume = true;
+  Avatar second = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 9);
+  const FitResult rest = TrainAvatar(second, Model(), TrainingData{&synthetic, &real}, g);
+  ASSERT_EQ(rest.steps.size(), 3u);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
+  // A 256 avatar cannot train on 128 crops.
+  AvatarConfig big = Tiny();
+  big.output_size = 256;
+  Avatar wrong = Avatar::CreateRandom(big, Model(), DefaultSubject(Model(), 256), 1);
+  EXPECT_THROW(TrainAvatar(wrong, Model(), TrainingData{nullptr, &real}, f), std::invalid_argument);
 }
 
 }  // namespace

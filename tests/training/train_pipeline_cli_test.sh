@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# The avatar pipeline as a user runs it, on tiny settings: prep (the sender's
+# tracker on a rendered sequence of a known subject) -> pretrain -> subject
+# (identity from headcast-fit-mesh) -> resume -> eval; then the bad inputs.
+set -u
+bin=$1 src=$2 python=${3:-/usr/bin/python3}
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
+trap 'rm -rf "$tmp"' EXIT
+json() { "$python" -c "import json,sys; j=json.load(open('$1')); print($2)" 2>/dev/null; }
+
+"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 36 --size 320 --shape 0=0.8 > /dev/null 2>&1
+"$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/ds" --resolutions 128 --test-frames 8 --no-calibrate \
+  > "$tmp/prep.json" 2> "$tmp/prep.err"
+fitted=$(json "$tmp/ds/dataset.json" "j['frames_fitted']")
+crops=$(ls "$tmp/ds/128/images" 2>/dev/null | wc -l)
+masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
+[ "${fitted:-0}" -ge 34 ] && [ "$crops" -eq "$fitted" ] && [ "$masks" -eq "$fitted" ] &&
+  [ "$(json "$tmp/ds/dataset.json" "j['split']['test']")" = 8 ] && [ -s "$tmp/ds/preview.mp4" ] &&
+  ok "prep: $fitted of 36 frames fitted, cropped, masked; 8 test frames; preview video" ||
+  bad "prep: fitted=$fitted crops=$crops masks=$masks $(tail -3 "$tmp/prep.err")"
+
+"$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
+  > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
+
+"$bin/headcast-headmodel" export builtin --out "$tmp/scan.obj" --shape 0=0.8 > /dev/null 2>&1
+"$bin/headcast-fit-mesh" --mesh "$tmp/scan.obj" --out "$tmp/params.json" --fit shape > /dev/null 2>&1
+subject=(subject --general "$tmp/general.hcavatar" --data "$tmp/ds" --resolution 128 --batch 2 --eval 4
+         --eval-every 10 --identity-from "$tmp/params.json" --out "$tmp/s.hcavatar" --log-csv "$tmp/s.csv"
+         --eval-csv "$tmp/s_eval.csv" --plots "$tmp/plots" --report "$tmp/s.json" --checkpoint-dir "$tmp/ckpt"
+         --checkpoint-every 10)
+"$bin/headcast-train" "${subject[@]}" --iterations 20 > /dev/null 2> "$tmp/s.err" &&
+  [ -s "$tmp/plots/losses.png" ] && [ -s "$tmp/plots/psnr.png" ] &&
+  [ "$(tail -n +2 "$tmp/s_eval.csv" | wc -l)" -eq 2 ] && [ "$(tail -n +2 "$tmp/s.csv" | wc -l)" -eq 20 ] &&
+  ok "subject: 20 steps logged, test PSNR at 10 and 20, plots" || bad "subject: $(tail -3 "$tmp/s.err")"
+beta0=$(json "$tmp/params.json" "j['shape'][0]")
+json "$tmp/s.json" "j['identity']" | grep -q "headcast-fit-mesh" && awk "BEGIN{exit !($beta0 > 0.7 && $beta0 < 0.9)}" &&
+  ok "identity from headcast-fit-mesh (beta0 $beta0)" || bad "identity: $(json "$tmp/s.json" "j['identity']") $beta0"
+"$bin/headcast-train" "${subject[@]}" --iterations 30 --resume > /dev/null 2> "$tmp/r.err" &&
+  [ "$(json "$tmp/s.json" "j['fit']['first_step']")" = 20 ] && [ "$(tail -n +2 "$tmp/s.csv" | wc -l)" -eq 30 ] &&
+  ok "subject resumed at step 20, log continued to 30" || bad "resume: $(tail -3 "$tmp/r.err")"
+
+"$bin/headcast-train" eval --avatar "$tmp/s.hcavatar" --data "$tmp/ds" --out "$tmp/ev" --drive "$tmp/ds/params.hcrec" \
+  --orbit-frames 6 > /dev/null 2> "$tmp/e.err"
+same=$(json "$tmp/ev/eval.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/s.json'))['eval']['psnr_db']) < 1e-4")
+[ "$same" = True ] && [ "$(tail -n +2 "$tmp/ev/per_frame.csv" | wc -l)" -eq 8 ] && [ -s "$tmp/ev/side_by_side.mp4" ] &&
+  [ -s "$tmp/ev/orbit.mp4" ] && [ -s "$tmp/ev/transfer.mp4" ] &&
+  ok "eval: PSNR $(json "$tmp/ev/eval.json" "round(j['eval']['psnr_db'],2)") dB as the trainer measured, 8 frames, 3 videos" ||
+  bad "eval: same=$same $(tail -3 "$tmp/e.err")"
+
+# Bad inputs: clear errors, exit status 1.
+refused() {  # refused WHAT EXPECTED-TEXT COMMAND...
+  local what=$1 expected=$2
+  shift 2
+  out=$("$@" 2>&1); rc=$?
+  [ $rc -ne 0 ] && grep -q "$expected" <<<"$out" && ok "refused: $what" || bad "$what (rc $rc): $(tail -2 <<<"$out")"
+}
+mkdir -p "$tmp/empty" "$tmp/black"
+refused "empty folder" "no images" "$bin/headcast-train" prep --input "$tmp/empty" --out "$tmp/x1" --no-calibrate
+"$python" - "$tmp/black" <<'EOF'
+import struct, sys, zlib
+# 64x64 black RGB PNGs: no face anywhere.
+def png(w, h):
+    raw = b"".join(b"\0" + b"\0" * 3 * w for _ in range(h))
+    chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)) + \
+        chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+for i in (1, 2, 3):
+    open(f"{sys.argv[1]}/{i}.png", "wb").write(png(64, 64))
+EOF
+refused "video with no face" "no face" "$bin/headcast-train" prep --input "$tmp/black" --out "$tmp/x2" --no-calibrate
+refused "too few frames for the split" "test frames" \
+  "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x3" --no-calibrate --max-frames 10 --test-frames 8
+echo garbage > "$tmp/ckpt/$(cat "$tmp/ckpt/LATEST")/state.json"
+refused "corrupt checkpoint" "cannot resume" "$bin/headcast-train" "${subject[@]}" --iterations 40 --resume
+refused "missing resolution" "no 256 crops" "$bin/headcast-train" subject --general "$tmp/general.hcavatar" \
+  --data "$tmp/ds" --resolution 256 --iterations 2 --out "$tmp/x.hcavatar"
+echo "not a recording" > "$tmp/foreign.hcrec"
+refused "foreign drive recording" "foreign.hcrec" \
+  "$bin/headcast-train" eval --avatar "$tmp/s.hcavatar" --data "$tmp/ds" --out "$tmp/ev2" --drive "$tmp/foreign.hcrec"
+ict=${HEADCAST_DATA:-$src/../shared/data}/head-models/ict-facekit
+if [ -d "$ict" ]; then
+  "$bin/headcast-headmodel" convert ict --folder "$ict" --out "$tmp/ict.npz" > /dev/null 2>&1
+  refused "dataset and avatar of another head model" "prepared for head model" "$bin/headcast-train" subject \
+    --head-model "$tmp/ict.npz" --general "$tmp/general.hcavatar" --data "$tmp/ds" --resolution 128 --out "$tmp/y.hcavatar"
+  refused "avatar of another head model" "head model" "$bin/headcast-train" pretrain --head-model "$tmp/ict.npz" \
+    --init "$tmp/general.hcavatar" --iterations 1 --out "$tmp/z.hcavatar"
+else
+  echo "skip: no ICT-FaceKit folder ($ict): the other-head-model checks"
+fi
+checks_summary "train pipeline cli"
