@@ -13,6 +13,8 @@ packages=(
   libeigen3-dev libceres-dev libnanoflann-dev
   # neural networks on the CPU; OpenBLAS makes libtorch's matrix products ~12x faster
   libtorch-dev libopenblas0-pthread libopenblas-dev
+  # c10d's Gloo headers: data-parallel training (headcast-train --world-size)
+  libgloo-dev
   # images, video, faces
   libopencv-dev libopencv-contrib-dev libdlib-dev libdlib-data ffmpeg
   # the stereo test pair (aloe) for the depth check

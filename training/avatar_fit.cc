@@ -48,6 +48,7 @@ void FitOptions::Check() const {
   c.ThrowIfErrors();
   loss.Check();
   mix.Check();
+  distributed.Check();
 }
 
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
@@ -116,9 +117,13 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
   return o;
 }
 
-// Counts every step's samples the same way (resume reproduces the run).
-std::mt19937 StepRng(uint64_t seed, int step) {
-  return std::mt19937(static_cast<unsigned>(seed * 1000003u + static_cast<uint64_t>(step)));
+// Each sample's draws (synthetic or real, which frame, augmentation, ray
+// jitter) from its own generator: a resumed run, or one split over ranks,
+// makes exactly the draws of one uninterrupted process.
+std::mt19937 SampleRng(uint64_t seed, int step, int b) {
+  std::seed_seq seq{static_cast<uint32_t>(seed), static_cast<uint32_t>(seed >> 32), static_cast<uint32_t>(step),
+                    static_cast<uint32_t>(b)};
+  return std::mt19937(seq);
 }
 
 namespace fs = std::filesystem;
@@ -226,19 +231,22 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
   }
   RaySampler sampler(config);
   if (options.resume) result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets);
-  if (!options.checkpoint_dir.empty()) fs::create_directories(options.checkpoint_dir);
+  const DistributedOptions& dp = options.distributed;
+  const bool writes = dp.rank == 0;
+  if (!options.checkpoint_dir.empty() && writes) fs::create_directories(options.checkpoint_dir);
+  std::unique_ptr<GradientAllReduce> group;
+  if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);
   const LossOptions& w = options.loss;
   Stopwatch watch;
   for (int step = result.first_step; step < options.iterations; ++step) {
     modules.train();
-    // Every draw of a step comes from its own generator: a resumed run sees what the uninterrupted one would.
-    std::mt19937 rng = StepRng(options.seed, step);
     std::uniform_real_distribution<double> u01(0, 1);
     const double p_synthetic = !data.real ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
     adam.zero_grad();
     StepInfo info;
     info.step = step;
-    for (int b = 0; b < options.batch; ++b) {
+    for (int b = dp.rank; b < options.batch; b += dp.world_size) {
+      std::mt19937 rng = SampleRng(options.seed, step, b);
       PreparedSample p;
       int real_index = -1;
       if (u01(rng) < p_synthetic) {
@@ -277,9 +285,15 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
       info.loss += loss.item<float>() / options.batch;
       info.mse += mse.item<float>() / options.batch;
     }
+    if (group) {
+      group->SumGradients(params);
+      info.loss = static_cast<float>(group->Sum(info.loss));
+      info.mse = static_cast<float>(group->Sum(info.mse));
+      info.synthetic = static_cast<int>(std::lround(group->Sum(info.synthetic)));
+    }
     adam.step();
     result.steps.push_back(info);
-    if (!options.checkpoint_dir.empty() &&
+    if (writes && !options.checkpoint_dir.empty() &&
         ((step + 1) % options.checkpoint_every == 0 || step + 1 == options.iterations)) {
       modules.eval();
       SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "common/avatar/avatar.h"
+#include "training/data_parallel.h"
 #include "training/dataset.h"
 #include "training/synthetic_data.h"
 
@@ -61,6 +62,11 @@ struct FitOptions {
   std::string checkpoint_dir;
   int checkpoint_every = 100;
   bool resume = false;
+  // Data parallel: the batch is shared out over the ranks (sample b on rank
+  // b mod world_size); each sample's random draws depend only on (seed, step,
+  // b), so any number of ranks trains exactly what one process would. Rank 0
+  // writes the checkpoints; every rank resumes from the same folder.
+  DistributedOptions distributed;
   void Check() const;
 };
 

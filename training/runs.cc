@@ -34,6 +34,7 @@ FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const Trainin
   std::optional<ProgressLine> progress;
   CsvLog loss_log, eval_log;
   double last_psnr = NAN;
+  if (fit.distributed.rank != 0) return TrainAvatar(avatar, model, data, fit);  // rank 0 reports
   const FitResult fit_result = TrainAvatar(avatar, model, data, fit, [&](const StepInfo& s) {
     if (!progress) {  // the first step of this run (not 0 after a resume)
       progress.emplace(s.step, fit.iterations);
@@ -80,7 +81,8 @@ nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
           {"samples_per_s", r.samples_per_s},
           {"first_step", r.first_step},
           {"final_loss", r.steps.empty() ? 0.f : r.steps.back().loss},
-          {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual}};
+          {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual},
+          {"processes", f.distributed.world_size}};
   if (real) {  // only real frames are augmented and get offsets
     j["z_augmentation"] = f.z_augmentation;
     j["learned_offsets"] = f.learn_offsets;
@@ -142,6 +144,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
   const FitResult fitted = TrainWithReports(avatar, model, data, o.fit, o.outputs, [&](Avatar& a) {
     return EvaluateOnSynthetic(a, model, synthetic, eval_frames);
   });
+  if (o.fit.distributed.rank != 0) return {{"rank", o.fit.distributed.rank}, {"written_by", "rank 0"}};
   const EvalResult eval = EvaluateOnSynthetic(avatar, model, synthetic, eval_frames);
   std::vector<cv::Mat> rows;
   for (int i = 0; i < 4; ++i) {
@@ -222,6 +225,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   const FitResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs, [&](Avatar& a) {
     return EvaluateOnDataset(a, model, data, periodic);
   });
+  if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
   for (int k = 0; k < 4; ++k) {

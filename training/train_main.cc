@@ -31,6 +31,12 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
   app->add_option("--checkpoint-dir", fit->checkpoint_dir, "checkpoint here (atomically) every --checkpoint-every steps");
   app->add_option("--checkpoint-every", fit->checkpoint_every, "steps between checkpoints")->capture_default_str();
   app->add_flag("--resume", fit->resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
+  app->add_option("--rank", fit->distributed.rank, "data parallel: this process's rank (0 writes the outputs)");
+  app->add_option("--world-size", fit->distributed.world_size, "data parallel: processes in all")->capture_default_str();
+  app->add_option("--master-addr", fit->distributed.master_addr, "data parallel: rank 0's address")
+      ->capture_default_str();
+  app->add_option("--master-port", fit->distributed.master_port, "data parallel: rank 0's TCP store port")
+      ->capture_default_str();
   app->add_option("--out", out->out, "output .hcavatar")->required();
   app->add_option("--log-csv", out->log_csv, "loss per step (CSV)");
   app->add_option("--eval-csv", out->eval_csv, "held-out PSNR/SSIM every --eval-every steps (CSV)");

@@ -22,6 +22,19 @@ masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
 "$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
   > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
 
+# Data parallel: two processes on loopback train what one process trains with the whole batch.
+dp=(pretrain --resolution 128 --iterations 6 --batch 4 --eval 3 --seed 5)
+port=$((20000 + $$ % 20000))
+"$bin/headcast-train" "${dp[@]}" --out "$tmp/one.hcavatar" --report "$tmp/one.json" > /dev/null 2>&1
+"$bin/headcast-train" "${dp[@]}" --world-size 2 --rank 1 --master-port $port --out "$tmp/r1.hcavatar" > /dev/null 2>&1 &
+"$bin/headcast-train" "${dp[@]}" --world-size 2 --rank 0 --master-port $port --out "$tmp/two.hcavatar" \
+  --report "$tmp/two.json" > /dev/null 2> "$tmp/dp.err"
+wait
+same=$(json "$tmp/two.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/one.json'))['eval']['psnr_db']) < 1e-3 and abs(j['fit']['final_loss'] / json.load(open('$tmp/one.json'))['fit']['final_loss'] - 1) < 1e-4 and j['fit']['processes'] == 2")
+[ "$same" = True ] && [ ! -e "$tmp/r1.hcavatar" ] &&
+  ok "two processes (c10d/Gloo over 127.0.0.1) = one process with the combined batch (loss, held-out PSNR)" ||
+  bad "data parallel: $same $(tail -3 "$tmp/dp.err")"
+
 "$bin/headcast-headmodel" export builtin --out "$tmp/scan.obj" --shape 0=0.8 > /dev/null 2>&1
 "$bin/headcast-fit-mesh" --mesh "$tmp/scan.obj" --out "$tmp/params.json" --fit shape > /dev/null 2>&1
 subject=(subject --general "$tmp/general.hcavatar" --data "$tmp/ds" --resolution 128 --batch 2 --eval 4

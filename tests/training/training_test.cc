@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <thread>
+#include <unistd.h>
 
 #include "tests/testing/tiny_avatar.h"
 #include "common/avatar/avatar_pipeline.h"
@@ -323,6 +325,52 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   big.output_size = 256;
   Avatar wrong = Avatar::CreateRandom(big, Model(), DefaultSubject(Model(), 256), 1);
   EXPECT_THROW(TrainAvatar(wrong, Model(), TrainingData{nullptr, &real}, f), std::invalid_argument);
+}
+
+// c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
+// loopback TCP) end with the weights of one process running the whole batch.
+TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
+  SyntheticDataOptions so;
+  so.neck_x_deg = so.neck_y_deg = so.neck_z_deg = 10;
+  SyntheticData data(Model(), so, DefaultSubject(Model(), 128), 2);
+  FitOptions f;
+  f.iterations = 4;
+  f.batch = 4;
+  f.learning_rate = 5e-3;
+  Avatar single = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  const FitResult one = FitOnSynthetic(single, Model(), data, f);
+  std::vector<Avatar> ranks;
+  for (int r = 0; r < 2; ++r) ranks.push_back(Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4));
+  std::vector<FitResult> results(2);
+  std::vector<std::string> errors(2);
+  const int port = 20000 + static_cast<int>(getpid() % 20000);
+  std::vector<std::thread> threads;
+  for (int r = 0; r < 2; ++r)
+    threads.emplace_back([&, r] {
+      try {
+        FitOptions g = f;
+        g.distributed.rank = r;
+        g.distributed.world_size = 2;
+        g.distributed.master_port = port;
+        g.distributed.timeout_s = 60;
+        results[r] = TrainAvatar(ranks[r], Model(), TrainingData{&data, nullptr}, g);
+      } catch (const std::exception& e) {
+        errors[r] = e.what();
+      }
+    });
+  for (auto& t : threads) t.join();
+  ASSERT_EQ(errors[0] + errors[1], "");
+  for (int r = 0; r < 2; ++r) {
+    ASSERT_EQ(results[r].steps.size(), 4u);
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(results[r].steps[i].loss, one.steps[i].loss, 1e-4 * one.steps[i].loss);
+    const auto a = single.modules().parameters(), b = ranks[r].modules().parameters();
+    double diff = 0, size = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
+      size = std::max(size, a[i].abs().max().item<double>());
+    }
+    EXPECT_LT(diff, 1e-5 * std::max(1.0, size)) << "rank " << r;
+  }
 }
 
 }  // namespace
