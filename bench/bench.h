@@ -18,7 +18,8 @@ struct BenchOptions {
   bool compare_headnerf = false;       // render: also run the HeadNeRF-sized configuration
   std::string avatar;                  // codec: measure the PSNR the codec costs with this avatar
   std::string video;                   // track: the video to track
-  std::string head_model = "builtin";  // track: head model (builtin or .npz)
+  std::string head_model = "builtin";  // track, train: head model (builtin or .npz)
+  std::string dataset;                 // train: a prepared dataset for the fine-tune figure
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.
@@ -35,5 +36,6 @@ nlohmann::json RunCodecSuite(const BenchOptions& options);
 nlohmann::json RunTrackSuite(const BenchOptions& options);
 nlohmann::json RunMeshFitSuite(const BenchOptions& options);
 nlohmann::json RunRgbdSuite(const BenchOptions& options);
+nlohmann::json RunTrainSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

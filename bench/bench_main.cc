@@ -61,6 +61,12 @@ int main(int argc, char** argv) {
   auto* rgbd = app.add_subcommand("rgbd", "RGB-D fit per frame on a rendered sequence: ms, accuracy, position error");
   rgbd->add_option("--frames", options.repeats, "frames per noise level")->check(CLI::Range(2, 100000));
   rgbd->add_option("--json", options.json_path, "write the results to this JSON file");
+  auto* train = app.add_subcommand("train", "training throughput: pretraining and subject fine-tune, samples/s");
+  train->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
+  train->add_option("--iterations", options.repeats, "timed steps (batch 4)")->check(CLI::Range(1, 100000));
+  train->add_option("--head-model", options.head_model, "builtin or a model .npz");
+  train->add_option("--data", options.dataset, "a prepared dataset (headcast-train prep) for the fine-tune figure");
+  train->add_option("--json", options.json_path, "write the results to this JSON file");
   codec->add_option("--avatar", options.avatar,
                     "an .hcavatar for the built-in head: also report the PSNR the codec costs");
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
@@ -72,6 +78,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging("warn");
+    if (train->parsed() && train->count("--iterations") == 0) options.repeats = 30;
     if (render->parsed() && options.compare_headnerf && options.resolution != 256)
       throw std::invalid_argument("--compare-headnerf is defined at --resolution 256 (HeadNeRF's 32x32 feature map)");
     nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options)
@@ -81,6 +88,7 @@ int main(int argc, char** argv) {
                             : track->parsed()   ? bench::RunTrackSuite(options)
                             : meshfit->parsed() ? bench::RunMeshFitSuite(options)
                             : rgbd->parsed()    ? bench::RunRgbdSuite(options)
+                            : train->parsed()   ? bench::RunTrainSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

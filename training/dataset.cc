@@ -15,6 +15,8 @@
 #include "common/core/log.h"
 #include "common/core/options.h"
 #include "common/headmodel/head_model_io.h"
+#include "common/headmodel/head_render.h"
+#include "common/raster/rasterizer.h"
 #include "common/tracking/head_fitter.h"
 #include "proto/recording.h"
 
@@ -27,7 +29,7 @@ void PrepOptions::Check() const {
   c.That(!resolutions.empty(), "at least one resolution");
   for (int r : resolutions) c.That(r == 128 || r == 256 || r == 512, "resolutions are 128, 256 or 512");
   c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
-  c.InRange("crop_scale", crop_scale, 1.0, 6.0);
+  c.InRange("crop_scale", crop_scale, 1.0, 6.0).InRange("mask_margin", mask_margin, 0.0, 0.5);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -175,6 +177,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   //    percentile extent, times crop_scale.
   HeadFitter fitter(model);
   fitter.SetIdentity(info.subject.shape.cast<double>());
+  const HeadIdentity identity = model.MakeIdentity(info.subject.shape.cast<double>());
   const PinholeCamera& camera = info.subject.intrinsics;
   std::vector<double> cx, cy, extent;
   for (const FrameParams& f : fitted) {
@@ -210,11 +213,23 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     const cv::Mat mask = ReadImage((full_masks / FrameName(n)).string(), cv::IMREAD_GRAYSCALE);
     if (mask.size() != frame.size())
       throw std::runtime_error(o.input + ": frame " + std::to_string(n) + " and its mask differ in size");
+    const FrameParams& params = fitted[next - 1];
+    HeadModelOutput posed;
+    model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
       WriteImage((rd / "images" / FrameName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
+      RasterVertices in_camera;
+      TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
+      RasterBuffers silhouette;
+      Rasterize(in_camera, model.data().faces, CropIntrinsics(camera, x0, y0, side, r), RasterOptions{}, &silhouette);
+      cv::Mat reach = silhouette.Mask();
+      const int radius = static_cast<int>(std::lround(o.mask_margin * r));
+      if (radius > 0)
+        cv::dilate(reach, reach, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
+      cv::bitwise_and(m, reach, m);
       WriteImage((rd / "masks" / FrameName(n)).string(), m);
     }
   }
@@ -249,6 +264,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"intrinsics", intrinsics},
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
       {"identity", track_report.value("identity", std::string("?"))},
+      {"masks", "the tracker's head mask (GrabCut) within the fitted model's silhouette dilated by " +
+                    std::to_string(o.mask_margin) + " of the crop edge"},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
         {"frames", track_report.value("frames", 0)},

@@ -36,6 +36,10 @@ struct PrepOptions {
   std::string identity_from;        // or: beta from headcast-fit-mesh's PARAMS.json
   std::string intrinsics;           // fx,fy,cx,cy when known (else calibration / field of view)
   double crop_scale = 2.2;          // crop edge over the landmarks' extent (room for hair, ears, neck)
+  // The training mask is the tracker's head mask (GrabCut) within the fitted
+  // head model's silhouette dilated by this fraction of the crop edge: pixels
+  // the avatar cannot reach (background caught by GrabCut) are not targets.
+  double mask_margin = 0.08;
   std::string tracker;              // headcast-track to run; default: the one beside this program
   std::vector<std::string> tracker_args;  // passed on to headcast-track as they are
   void Check() const;

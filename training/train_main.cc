@@ -3,10 +3,12 @@
 //   pretrain  the general model on synthetic renders (optionally mixed with real frames)
 //   subject   a person's avatar, fine-tuned from the general model
 //   eval      PSNR/SSIM on the test split, side-by-side, orbit and transfer videos
+//   plot      CSV logs of several runs in one picture
 #include <CLI/CLI.hpp>
 #include <iostream>
 
 #include "common/core/log.h"
+#include "training/run_report.h"
 #include "training/runs.h"
 
 namespace {
@@ -67,6 +69,8 @@ int main(int argc, char** argv) {
   prep->add_option("--identity-from", p.identity_from, "shape from headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
   prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
   prep->add_option("--crop-scale", p.crop_scale, "crop edge over the landmarks' extent")->capture_default_str();
+  prep->add_option("--mask-margin", p.mask_margin, "training masks: the model's silhouette grown by this fraction of the crop")
+      ->capture_default_str();
   prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
 
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");
@@ -112,6 +116,17 @@ int main(int argc, char** argv) {
   eval->add_option("--drive", e.drive, "a recording (.hcrec) whose expressions drive transfer.mp4");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
 
+  auto* plot = app.add_subcommand("plot", "line plot of CSV columns (logs of several runs in one picture)");
+  std::vector<std::string> series;
+  std::string plot_out, title = "", x_label = "step", y_label = "";
+  bool log_y = false;
+  plot->add_option("--series", series, "CSV:COLUMN:LABEL, repeatable")->required();
+  plot->add_option("--out", plot_out, "PNG to write")->required();
+  plot->add_option("--title", title, "title");
+  plot->add_option("--x-label", x_label, "x axis")->capture_default_str();
+  plot->add_option("--y-label", y_label, "y axis");
+  plot->add_flag("--log-y", log_y, "logarithmic y axis");
+
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);
@@ -127,6 +142,18 @@ int main(int argc, char** argv) {
       report = RunSubject(s);
     } else if (eval->parsed()) {
       report = RunEval(e);
+    } else if (plot->parsed()) {
+      std::vector<PlotSeries> lines;
+      for (const std::string& spec : series) {
+        const size_t a = spec.find(':'), b = spec.find(':', a == std::string::npos ? a : a + 1);
+        if (a == std::string::npos || b == std::string::npos)
+          throw std::invalid_argument("--series wants CSV:COLUMN:LABEL, got " + spec);
+        PlotSeries line = ReadCsvColumns(spec.substr(0, a), {spec.substr(a + 1, b - a - 1)}).front();
+        line.name = spec.substr(b + 1);
+        lines.push_back(line);
+      }
+      WritePlot(plot_out, title, x_label, y_label, lines, log_y);
+      report = {{"wrote", plot_out}};
     }
     std::cout << report.dump(2) << "\n";
   } catch (const std::exception& ex) {

@@ -1,0 +1,66 @@
+// Benchmark suite "train": training throughput (samples per second) of
+// pretraining the general model and of a subject fine-tune at one resolution.
+#include <optional>
+
+#include "bench/bench.h"
+#include "common/headmodel/head_model_io.h"
+#include "training/avatar_fit.h"
+
+namespace headcast::bench {
+
+nlohmann::json RunTrainSuite(const BenchOptions& o) {
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  AvatarConfig config = AvatarConfig::Default(o.resolution);
+  config.num_shape = std::min(config.num_shape, model.num_shape());
+  config.num_expression = std::min(config.num_expression, model.num_expression());
+  config.num_texture = std::min(config.num_texture, model.num_texture());
+  const SubjectParams subject = DefaultSubject(model, o.resolution);
+  SyntheticDataOptions so;
+  so.image_size = o.resolution;
+  FitOptions fit;
+  fit.iterations = o.repeats;
+  fit.batch = 4;
+  nlohmann::json out = {{"suite", "train"},
+                        {"resolution", o.resolution},
+                        {"head_model", model.data().name},
+                        {"batch", fit.batch},
+                        {"iterations", fit.iterations},
+                        {"config", config.ToJson()}};
+  auto timed = [&](Avatar& avatar, const TrainingData& data, const FitOptions& f) {
+    FitOptions warm = f;
+    warm.iterations = 2;  // first-call allocations are not throughput
+    Avatar copy = avatar.WithRuntimeSwitches(avatar.config());
+    TrainAvatar(copy, model, data, warm);
+    return TrainAvatar(avatar, model, data, f);
+  };
+  // Pretraining: every parameter trained on renders of varied people.
+  {
+    SyntheticData data(model, so, subject, 1);
+    Avatar avatar = Avatar::CreateRandom(config, model, subject, 1);
+    const FitResult r = timed(avatar, TrainingData{&data, nullptr}, fit);
+    out["pretrain_samples_per_s"] = r.samples_per_s;
+    out["pretrain_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
+  }
+  // Fine-tune (METHOD §6): four CNeRF layers frozen, beta/tau frozen; on a
+  // prepared dataset's frames when given, else on the subject's own renders.
+  {
+    so.vary_identity = false;
+    SyntheticData data(model, so, subject, 2);
+    std::optional<PreparedDataset> real;
+    if (!o.dataset.empty()) real = PreparedDataset::Load(o.dataset, model, o.resolution);
+    Avatar avatar = Avatar::CreateRandom(config, model, real ? real->subject() : subject, 1);
+    FitOptions f = fit;
+    f.freeze_identity = true;
+    f.freeze_cnerf_layers = 4;
+    f.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, 0.25};
+    const FitResult r = timed(avatar, TrainingData{&data, real ? &*real : nullptr}, f);
+    out["finetune_samples_per_s"] = r.samples_per_s;
+    out["finetune_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
+    out["finetune_data"] = real ? "prepared dataset " + o.dataset + " (real frames, 25 % renders falling to 0)"
+                                : "the subject's own renders (no --data given)";
+  }
+  out["threads"] = torch::get_num_threads();
+  return out;
+}
+
+}  // namespace headcast::bench

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Trains the shipped defaults with the project's own pipeline, from nothing but
+# the built-in head model:
+#   1. the general model for the built-in head (headcast-train pretrain);
+#   2. a synthetic demo subject: a talking head with its own identity rendered
+#      by headcast-headmodel, as a video; its first frames train the avatar
+#      (prep -> subject), its last frames are the demo's input (never trained on);
+#   3. their reports, logs and plots.
+# Usage: deploy/make_default_models.sh [OUT_DIR]   (default: models/; ~40 min on 2 cores)
+# Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 deploy/make_default_models.sh /tmp/m
+set -euo pipefail
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+bin=${HEADCAST_BIN:-$here/build/bin}
+out=${1:-$here/models}
+general_iterations=${GENERAL_ITERATIONS:-6000}
+subject_iterations=${SUBJECT_ITERATIONS:-1500}
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+mkdir -p "$out/general" "$out/demo"
+
+echo "== 1. general model (built-in head, 128 px, $general_iterations steps)"
+"$bin/headcast-train" pretrain --head-model builtin --resolution 128 --iterations "$general_iterations" --batch 4 \
+  --neck-deg 30 --eval 40 --eval-every 500 --log-csv "$out/general/loss.csv" --eval-csv "$out/general/eval.csv" \
+  --plots "$out/general" --preview "$out/general/preview.png" --report "$out/general/report.json" \
+  --checkpoint-dir "$work/ckpt_general" --out "$out/builtin_general.hcavatar" > /dev/null
+
+echo "== 2. demo subject: 450 rendered frames; 300 to train on, the last 150 are the demo input"
+"$bin/headcast-headmodel" render-rgbd builtin --out "$work/render" --frames 450 --size 640 \
+  --shape 0=0.8 --shape 3=-0.5 --shape 5=0.6 > /dev/null
+ffmpeg -loglevel error -y -framerate 30 -i "$work/render/rgb/%05d.png" -frames:v 300 \
+  -c:v libx264 -crf 10 -pix_fmt yuv420p "$work/subject_train.mp4"
+ffmpeg -loglevel error -y -framerate 30 -start_number 300 -i "$work/render/rgb/%05d.png" \
+  -c:v libx264 -crf 18 -pix_fmt yuv420p "$out/demo/demo_sequence.mp4"
+cp "$work/render/truth.json" "$out/demo/render_truth.json"
+
+echo "== 3. prep (the sender's tracker, RGB only, identity calibration)"
+"$bin/headcast-train" prep --input "$work/subject_train.mp4" --out "$work/dataset" --resolutions 256 \
+  --test-frames 60 > "$out/demo/dataset.json"
+cp "$work/dataset/track_report.json" "$out/demo/track_report.json"
+
+echo "== 4. subject fine-tune (256 px, $subject_iterations steps)"
+"$bin/headcast-train" subject --general "$out/builtin_general.hcavatar" --data "$work/dataset" --resolution 256 \
+  --iterations "$subject_iterations" --batch 4 --eval 20 --eval-every 100 --log-csv "$out/demo/loss.csv" \
+  --eval-csv "$out/demo/eval.csv" --plots "$out/demo" --preview "$out/demo/preview.png" \
+  --report "$out/demo/report.json" --checkpoint-dir "$work/ckpt_subject" --out "$out/demo_avatar.hcavatar" > /dev/null
+
+du -sh "$out"
+echo "wrote $out/builtin_general.hcavatar and $out/demo_avatar.hcavatar (reports beside them)"
