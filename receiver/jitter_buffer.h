@@ -52,8 +52,4 @@ class JitterBuffer {
   JitterBufferStats stats_;
 };
 
-// Interpolation of parameters at fraction t in [0, 1]: linear for expression
-// and translation, slerp for every rotation.
-FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double t);
-
 }  // namespace headcast

@@ -19,6 +19,7 @@
 #include "common/raster/rasterizer.h"
 #include "common/tracking/head_fitter.h"
 #include "proto/recording.h"
+#include "training/interpolation.h"
 
 namespace headcast {
 namespace fs = std::filesystem;
@@ -29,7 +30,7 @@ void PrepOptions::Check() const {
   c.That(!resolutions.empty(), "at least one resolution");
   for (int r : resolutions) c.That(r == 128 || r == 256 || r == 512, "resolutions are 128, 256 or 512");
   c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
-  c.InRange("crop_scale", crop_scale, 1.0, 6.0).InRange("mask_margin", mask_margin, 0.0, 0.5);
+  c.InRange("interpolate", interpolate, 0, 8).InRange("crop_scale", crop_scale, 1.0, 6.0).InRange("mask_margin", mask_margin, 0.0, 0.5);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -238,8 +239,45 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
                              std::to_string(fitted[next].sequence) + " (frame numbering differs?)");
   fs::remove_all(full_masks);
 
-  // 4. The manifest: split, subject, intrinsics per resolution.
   const int n = static_cast<int>(fitted.size());
+  // 4. Short videos: frames between consecutive training frames.
+  int interpolated = 0;
+  if (o.interpolate > 0) {
+    RecordingWriter writer((dir / "params_interp.hcrec").string(), info);
+    for (int r : o.resolutions) {
+      fs::create_directories(dir / std::to_string(r) / "interp" / "images");
+      fs::create_directories(dir / std::to_string(r) / "interp" / "masks");
+    }
+    for (int i = 0; i + 1 < n - o.test_frames; ++i) {
+      const FrameParams &a = fitted[static_cast<size_t>(i)], &b = fitted[static_cast<size_t>(i + 1)];
+      if (b.sequence != a.sequence + 1) continue;  // a gap (lost face): nothing to interpolate
+      for (int r : o.resolutions) {
+        const fs::path rd = dir / std::to_string(r);
+        auto read = [&](const char* kind, uint64_t frame, int flags) {
+          return ReadImage((rd / kind / FrameName(static_cast<int>(frame))).string(), flags);
+        };
+        const cv::Mat ia = read("images", a.sequence, cv::IMREAD_COLOR), ib = read("images", b.sequence, cv::IMREAD_COLOR);
+        const cv::Mat ma = read("masks", a.sequence, cv::IMREAD_GRAYSCALE),
+                      mb = read("masks", b.sequence, cv::IMREAD_GRAYSCALE);
+        const FlowPair flow = DenseFlow(ia, ib);
+        for (int k = 1; k <= o.interpolate; ++k) {
+          const double t = static_cast<double>(k) / (o.interpolate + 1);
+          const int id = interpolated + k - 1;
+          WriteImage((rd / "interp" / "images" / FrameName(id)).string(), InterpolateImage(ia, ib, flow, t));
+          cv::Mat m = InterpolateImage(ma, mb, flow, t);
+          cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
+          WriteImage((rd / "interp" / "masks" / FrameName(id)).string(), m);
+        }
+      }
+      for (int k = 1; k <= o.interpolate; ++k) {
+        FrameParams f = InterpolateParams(a, b, static_cast<double>(k) / (o.interpolate + 1));
+        f.sequence = static_cast<uint64_t>(interpolated++);
+        writer.Write(f);
+      }
+    }
+  }
+
+  // 5. The manifest: split, subject, intrinsics per resolution.
   nlohmann::json intrinsics = nlohmann::json::object();
   for (int r : o.resolutions) {
     const PinholeCamera k = CropIntrinsics(camera, x0, y0, side, r);
@@ -259,6 +297,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"frames_fitted", n},
       {"frame_numbers", frame_numbers},
       {"split", {{"train", n - o.test_frames}, {"test", o.test_frames}, {"rule", "test = the last N fitted frames"}}},
+      {"interpolated",
+       {{"per_pair", o.interpolate},
+        {"frames", interpolated},
+        {"how", "Farneback optical flow both ways, neighbours warped and blended; parameters interpolated"}}},
       {"crop", {{"x0", x0}, {"y0", y0}, {"side", side}, {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}}}},
       {"resolutions", o.resolutions},
       {"intrinsics", intrinsics},
@@ -278,7 +320,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   return manifest;
 }
 
-PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& model, int resolution) {
+PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& model, int resolution,
+                                      bool interpolated) {
   const fs::path manifest_path = fs::path(dir) / "dataset.json";
   PreparedDataset d;
   d.dir_ = dir;
@@ -312,6 +355,16 @@ PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& m
     if (n != m.at("frames_fitted").get<int>() || train < 1 || train > n)
       throw std::runtime_error("the split does not match params.hcrec");
     for (int i = 0; i < n; ++i) (i < train ? d.train_ : d.test_).push_back(i);
+    d.first_interpolated_ = n;
+    const int extra = m.contains("interpolated") ? m.at("interpolated").at("frames").get<int>() : 0;
+    if (interpolated && extra > 0) {
+      const std::vector<FrameParams> more = ReadRecording((fs::path(dir) / "params_interp.hcrec").string());
+      if (static_cast<int>(more.size()) != extra) throw std::runtime_error("params_interp.hcrec does not match");
+      for (const FrameParams& f : more) {
+        d.train_.push_back(static_cast<int>(d.frames_.size()));
+        d.frames_.push_back(f);
+      }
+    }
   } catch (const std::exception& e) {
     throw std::runtime_error(manifest_path.string() + ": " + e.what());
   }
@@ -325,7 +378,7 @@ const RealSample& PreparedDataset::At(int i) const {
   RealSample s;
   s.params = frames_[static_cast<size_t>(i)];
   s.frame = static_cast<int>(s.params.sequence);
-  const fs::path rd = fs::path(dir_) / std::to_string(resolution_);
+  const fs::path rd = fs::path(dir_) / std::to_string(resolution_) / (i >= first_interpolated_ ? "interp" : "");
   s.image_bgr = ReadImage((rd / "images" / FrameName(s.frame)).string());
   s.mask = ReadImage((rd / "masks" / FrameName(s.frame)).string(), cv::IMREAD_GRAYSCALE);
   if (s.image_bgr.rows != resolution_ || s.image_bgr.cols != resolution_ || s.mask.size() != s.image_bgr.size())

@@ -10,6 +10,8 @@
 //   track_report.json   the tracker's report; preview.mp4 its overlay
 //   R/images/NNNNN.png  crops at R x R (R in 128, 256, 512), NNNNN the source frame number
 //   R/masks/NNNNN.png   the head masks, same crops
+//   params_interp.hcrec, R/interp/{images,masks}/NNNNN.png   frames synthesised between
+//                       consecutive training frames (prep --interpolate K), training only
 #pragma once
 
 #include <map>
@@ -40,6 +42,9 @@ struct PrepOptions {
   // head model's silhouette dilated by this fraction of the crop edge: pixels
   // the avatar cannot reach (background caught by GrabCut) are not targets.
   double mask_margin = 0.08;
+  // Short videos: K frames synthesised between each pair of consecutive
+  // training frames (optical flow; parameters interpolated). Never in the test split.
+  int interpolate = 0;
   std::string tracker;              // headcast-track to run; default: the one beside this program
   std::vector<std::string> tracker_args;  // passed on to headcast-track as they are
   void Check() const;
@@ -61,11 +66,15 @@ class PreparedDataset {
  public:
   // Refuses, naming the file: a missing or foreign folder, another format
   // version, a dataset made for another head model, a missing resolution.
-  static PreparedDataset Load(const std::string& dir, const HeadModel& model, int resolution);
+  // `interpolated`: also train on the synthesised in-between frames, if prepared.
+  static PreparedDataset Load(const std::string& dir, const HeadModel& model, int resolution,
+                              bool interpolated = true);
 
   int resolution() const { return resolution_; }
   int size() const { return static_cast<int>(frames_.size()); }
-  const std::vector<int>& train() const { return train_; }  // positions in [0, size)
+  // Positions in [0, size): the real training frames, then any interpolated ones.
+  const std::vector<int>& train() const { return train_; }
+  int interpolated() const { return size() - first_interpolated_; }
   const std::vector<int>& test() const { return test_; }
   // The subject's constants with the intrinsics of the R x R crops.
   const SubjectParams& subject() const { return subject_; }
@@ -81,6 +90,7 @@ class PreparedDataset {
   SubjectParams subject_;
   std::vector<FrameParams> frames_;
   std::vector<int> train_, test_;
+  int first_interpolated_ = 0;
   mutable std::map<int, RealSample> cache_;
 };
 

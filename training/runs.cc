@@ -181,7 +181,7 @@ void SubjectOptions::Check() const {
 nlohmann::json RunSubject(SubjectOptions o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
-  const PreparedDataset data = PreparedDataset::Load(o.dataset, model, o.resolution);
+  const PreparedDataset data = PreparedDataset::Load(o.dataset, model, o.resolution, o.use_interpolated);
   if (data.test().empty()) spdlog::warn("{}: no test frames; figures are on training frames", o.dataset);
   SubjectParams subject = data.subject();
   std::string identity = "the dataset's (" + data.manifest().value("identity", std::string("?")) + ")";
@@ -244,7 +244,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
       {"identity", identity},
       {"frozen", {{"beta_tau", true}, {"cnerf_layers", fit.freeze_cnerf_layers}}},
       {"synthetic_mix", {{"start", o.synthetic_start}, {"end", 0}, {"decay", "linear over the iterations"}}},
-      {"train_frames", data.train().size()},
+      {"train_frames", data.train().size() - data.interpolated()},
+      {"interpolated_frames", data.interpolated()},
       {"fit", FitJson(fit, fitted, true)},
       {"eval", EvalJson(eval, data.test().empty() ? "training frames (no test split)"
                                                   : "test split: the last frames, never trained on")}};

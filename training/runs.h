@@ -50,6 +50,7 @@ struct SubjectOptions {
   int resolution = 256;
   std::string identity_from;  // beta from headcast-fit-mesh's PARAMS.json instead of the dataset's
   double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
+  bool use_interpolated = true;   // train on the dataset's interpolated frames too, if it has them
   int freeze_layers = 4;
   AvatarConfig config;        // architecture when from_scratch
   FitOptions fit;

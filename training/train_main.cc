@@ -71,6 +71,8 @@ int main(int argc, char** argv) {
   prep->add_option("--crop-scale", p.crop_scale, "crop edge over the landmarks' extent")->capture_default_str();
   prep->add_option("--mask-margin", p.mask_margin, "training masks: the model's silhouette grown by this fraction of the crop")
       ->capture_default_str();
+  prep->add_option("--interpolate", p.interpolate, "short videos: frames synthesised between consecutive training frames")
+      ->capture_default_str();
   prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
 
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");
@@ -102,6 +104,7 @@ int main(int argc, char** argv) {
   subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
   subject->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
       ->capture_default_str();
+  subject->add_flag("!--no-interpolated", s.use_interpolated, "leave out the dataset's interpolated frames");
   subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")
       ->capture_default_str();
   AddTrainingFlags(subject, &s.fit, &s.outputs);

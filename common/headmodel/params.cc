@@ -1,6 +1,8 @@
 // FrameParams helpers.
 #include "common/headmodel/params.h"
 
+#include <Eigen/Geometry>
+
 #include <cmath>
 
 #include "common/core/rotation.h"
@@ -60,6 +62,34 @@ bool FrameParams::IsValid(std::string* why, float max_abs_expression) const {
   if (!std::isfinite(capture_time_s)) return fail("capture time is not finite");
   if (!(confidence >= 0 && confidence <= 1)) return fail("confidence outside 0..1");
   return true;
+}
+
+namespace {
+Eigen::Vector3f Slerp(const Eigen::Vector3f& a, const Eigen::Vector3f& b, double t) {
+  auto quat = [](const Eigen::Vector3f& w) {
+    const double angle = w.norm();
+    return angle < 1e-12 ? Eigen::Quaterniond::Identity()
+                         : Eigen::Quaterniond(Eigen::AngleAxisd(angle, w.cast<double>() / angle));
+  };
+  const Eigen::AngleAxisd r(quat(a).slerp(t, quat(b)));
+  return (r.angle() * r.axis()).cast<float>();
+}
+}  // namespace
+
+FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double t) {
+  FrameParams out = t < 0.5 ? a : b;
+  if (a.expression.size() == b.expression.size())
+    out.expression = ((1 - t) * a.expression.cast<double>() + t * b.expression.cast<double>()).cast<float>();
+  out.jaw = Slerp(a.jaw, b.jaw, t);
+  out.neck = Slerp(a.neck, b.neck, t);
+  out.left_eye = Slerp(a.left_eye, b.left_eye, t);
+  out.right_eye = Slerp(a.right_eye, b.right_eye, t);
+  out.cam_rotation = Slerp(a.cam_rotation, b.cam_rotation, t);
+  out.cam_translation =
+      ((1 - t) * a.cam_translation.cast<double>() + t * b.cam_translation.cast<double>()).cast<float>();
+  out.capture_time_s = (1 - t) * a.capture_time_s + t * b.capture_time_s;
+  out.confidence = static_cast<float>((1 - t) * a.confidence + t * b.confidence);
+  return out;
 }
 
 }  // namespace headcast

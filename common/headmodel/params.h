@@ -43,6 +43,10 @@ struct FrameParams {
 // The head's rotation relative to a frontal camera, axis-angle (see FrameParams::ViewPose).
 Eigen::Vector3d ViewRotation(const Eigen::Matrix3d& cam_from_head_rotation);
 
+// Interpolation of parameters at fraction t in [0, 1]: linear for expression
+// and translation, slerp for every rotation.
+FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double t);
+
 // Per-person constants, sent once or baked into the avatar.
 struct SubjectParams {
   Eigen::VectorXf shape;          // beta

@@ -60,6 +60,19 @@ same=$(json "$tmp/ev/eval.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp
   ok "eval: PSNR $(json "$tmp/ev/eval.json" "round(j['eval']['psnr_db'],2)") dB as the trainer measured, 8 frames, 3 videos" ||
   bad "eval: same=$same $(tail -3 "$tmp/e.err")"
 
+# Short videos: frames interpolated between consecutive training frames, used by subject unless told not to.
+"$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/dsi" --resolutions 128 --test-frames 8 --no-calibrate \
+  --max-frames 20 --interpolate 1 > /dev/null 2>&1
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --out "$tmp/i.hcavatar" --report "$tmp/i.json" > /dev/null 2>&1
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --no-interpolated --out "$tmp/n.hcavatar" --report "$tmp/n.json" > /dev/null 2>&1
+interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
+[ "$interp" -eq 11 ] && [ "$(json "$tmp/i.json" "j['interpolated_frames']")" = 11 ] &&
+  [ "$(json "$tmp/n.json" "j['interpolated_frames']")" = 0 ] && [ "$(json "$tmp/i.json" "j['eval']['frames']")" = 8 ] &&
+  ok "interpolation: 11 in-between frames for 12 training frames, trained on, never tested on" ||
+  bad "interpolation: $interp frames, $(json "$tmp/i.json" "j['interpolated_frames']")"
+
 # Bad inputs: clear errors, exit status 1.
 refused() {  # refused WHAT EXPECTED-TEXT COMMAND...
   local what=$1 expected=$2

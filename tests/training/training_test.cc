@@ -11,6 +11,8 @@
 #include "tests/testing/test_data.h"
 #include "training/avatar_fit.h"
 #include "training/image_losses.h"
+#include "training/interpolation.h"
+#include <opencv2/imgproc.hpp>
 #include "proto/recording.h"
 #include "common/core/image_io.h"
 
@@ -371,6 +373,30 @@ TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
     }
     EXPECT_LT(diff, 1e-5 * std::max(1.0, size)) << "rank " << r;
   }
+}
+
+// Flow interpolation puts a moving picture half way, where a plain blend ghosts it.
+TEST(Interpolation, FlowPutsAMovingHeadHalfWay) {
+  SyntheticData data(Model(), SyntheticDataOptions{}, DefaultSubject(Model(), 128), 3);
+  const cv::Mat base = data.At(0).image_bgr;
+  auto shifted = [&](double dx) {
+    cv::Mat out;
+    cv::warpAffine(base, out, cv::Matx23d(1, 0, dx, 0, 1, 0), base.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    return out;
+  };
+  const cv::Mat a = shifted(-3), b = shifted(3), truth = shifted(0);
+  const cv::Mat mid = InterpolateImage(a, b, DenseFlow(a, b), 0.5);
+  cv::Mat blend;
+  cv::addWeighted(a, 0.5, b, 0.5, 0, blend);
+  const double flow_error = cv::norm(mid, truth, cv::NORM_L1), blend_error = cv::norm(blend, truth, cv::NORM_L1);
+  EXPECT_LT(flow_error, 0.5 * blend_error) << flow_error << " vs " << blend_error;
+  // The parameters: halfway too.
+  FrameParams p = data.At(0).frame, q = p;
+  q.cam_translation.x() += 0.02f;
+  q.expression[0] += 1.f;
+  const FrameParams h = InterpolateParams(p, q, 0.5);
+  EXPECT_NEAR(h.cam_translation.x(), p.cam_translation.x() + 0.01f, 1e-6);
+  EXPECT_NEAR(h.expression[0], p.expression[0] + 0.5f, 1e-6);
 }
 
 }  // namespace
