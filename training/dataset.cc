@@ -20,6 +20,7 @@
 #include "common/tracking/head_fitter.h"
 #include "proto/recording.h"
 #include "training/interpolation.h"
+#include "training/run_report.h"
 
 namespace headcast {
 namespace fs = std::filesystem;
@@ -159,10 +160,16 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   if (!o.intrinsics.empty()) argv.insert(argv.end(), {"--intrinsics", o.intrinsics});
   if (o.max_frames > 0) argv.insert(argv.end(), {"--max-frames", std::to_string(o.max_frames)});
   argv.insert(argv.end(), o.tracker_args.begin(), o.tracker_args.end());
-  spdlog::info("prep: tracking {} with {}", o.input, tracker);
-  if (const int rc = RunProgram(argv); rc != 0)
-    throw std::runtime_error(o.input + ": headcast-track failed (exit " + std::to_string(rc) +
-                             "); its messages are above");
+  const bool tracked = o.resume && fs::exists(dir / "track_report.json") && fs::exists(full_masks);
+  if (tracked) {
+    spdlog::info("prep: reusing the finished tracking pass in {}", o.out_dir);
+  } else {
+    fs::remove(dir / "track_report.json");  // written last by the tracker: marks a finished pass
+    spdlog::info("prep: tracking {} with {}", o.input, tracker);
+    if (const int rc = RunProgram(argv); rc != 0)
+      throw std::runtime_error(o.input + ": headcast-track failed (exit " + std::to_string(rc) +
+                               "); its messages are above");
+  }
   const nlohmann::json track_report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
   RecordingInfo info;
   const std::vector<FrameParams> fitted = ReadRecording((dir / "params.hcrec").string(), &info);
@@ -207,9 +214,11 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   size_t next = 0;
   int read = 0;
   cv::Mat frame;
+  ProgressLine progress(0, static_cast<int>(fitted.size()));
   while (next < fitted.size() && frames.Next(&frame)) {
     const int n = read++;
     if (static_cast<int>(fitted[next].sequence) != n) continue;
+    if (next % 20 == 0 || next + 1 == fitted.size()) progress.Show(static_cast<int>(next), "cropping");
     ++next;
     const cv::Mat mask = ReadImage((full_masks / FrameName(n)).string(), cv::IMREAD_GRAYSCALE);
     if (mask.size() != frame.size())
@@ -234,10 +243,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       WriteImage((rd / "masks" / FrameName(n)).string(), m);
     }
   }
+  progress.Finish();
   if (next != fitted.size())
     throw std::runtime_error(o.input + ": read " + std::to_string(read) + " frames but the tracker fitted frame " +
                              std::to_string(fitted[next].sequence) + " (frame numbering differs?)");
-  fs::remove_all(full_masks);
 
   const int n = static_cast<int>(fitted.size());
   // 4. Short videos: frames between consecutive training frames.

@@ -7,7 +7,8 @@
 // On disk (DIR):
 //   dataset.json        format, version, head model, source, crop box, split, subject, per-resolution intrinsics
 //   params.hcrec        the tracker's recording (full-frame camera)
-//   track_report.json   the tracker's report; preview.mp4 its overlay
+//   track_report.json   the tracker's report (written last: a finished pass); preview.mp4 its overlay
+//   full_masks/         the tracker's full-frame head masks
 //   R/images/NNNNN.png  crops at R x R (R in 128, 256, 512), NNNNN the source frame number
 //   R/masks/NNNNN.png   the head masks, same crops
 //   params_interp.hcrec, R/interp/{images,masks}/NNNNN.png   frames synthesised between
@@ -46,6 +47,9 @@ struct PrepOptions {
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;
   std::string tracker;              // headcast-track to run; default: the one beside this program
+  // Reuse a finished tracking pass in out_dir (its report is written last, so
+  // its presence means the recording is complete); crops are always redone.
+  bool resume = false;
   std::vector<std::string> tracker_args;  // passed on to headcast-track as they are
   void Check() const;
 };

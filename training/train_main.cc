@@ -73,6 +73,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   prep->add_option("--interpolate", p.interpolate, "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();
+  prep->add_flag("--resume", p.resume, "reuse a finished tracking pass in --out (after an interrupted prep)");
   prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
 
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");

@@ -19,6 +19,11 @@ masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
   ok "prep: $fitted of 36 frames fitted, cropped, masked; 8 test frames; preview video" ||
   bad "prep: fitted=$fitted crops=$crops masks=$masks $(tail -3 "$tmp/prep.err")"
 
+"$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/ds" --resolutions 128 --test-frames 8 --no-calibrate \
+  --resume > /dev/null 2> "$tmp/prep2.err" && grep -q "reusing the finished tracking pass" "$tmp/prep2.err" &&
+  [ "$(json "$tmp/ds/dataset.json" "j['frames_fitted']")" = "$fitted" ] &&
+  ok "prep --resume reuses the finished tracking pass" || bad "prep resume: $(tail -2 "$tmp/prep2.err")"
+
 "$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
   > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
 
