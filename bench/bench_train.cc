@@ -20,12 +20,8 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
   FitOptions fit;
   fit.iterations = o.repeats;
   fit.batch = 4;
-  nlohmann::json out = {{"suite", "train"},
-                        {"resolution", o.resolution},
-                        {"head_model", model.data().name},
-                        {"batch", fit.batch},
-                        {"iterations", fit.iterations},
-                        {"config", config.ToJson()}};
+  nlohmann::json out = {{"suite", "train"},   {"resolution", o.resolution},   {"head_model", model.data().name},
+                        {"batch", fit.batch}, {"iterations", fit.iterations}, {"config", config.ToJson()}};
   auto timed = [&](Avatar& avatar, const TrainingData& data, const FitOptions& f) {
     FitOptions warm = f;
     warm.iterations = 2;  // first-call allocations are not throughput

@@ -71,6 +71,10 @@ int main(int argc, char** argv) {
   std::string latency_csv;
   app.add_option("--latency-csv", latency_csv,
                  "log every received frame: arrival time, session, sequence, capture-to-arrival ms (same-host clocks)");
+  std::string display_csv;
+  app.add_option("--display-csv", display_csv,
+                 "log every shown frame: shown time, sequence, glass-to-glass ms (capture to shown, same-host clocks), "
+                 "render ms");
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);
@@ -134,6 +138,16 @@ int main(int argc, char** argv) {
     RenderLoopOptions loop;
     loop.target_fps = render_fps;
     loop.max_seconds = duration;
+    std::ofstream display_log;
+    if (!display_csv.empty()) {
+      display_log.open(display_csv);
+      if (!display_log) throw std::runtime_error(display_csv + ": cannot write");
+      display_log << "shown_s,sequence,glass_to_glass_ms,render_ms\n";
+      loop.on_shown = [&](const FrameParams& f, double glass_ms, double render_ms) {
+        display_log << std::fixed << SteadyNowSeconds() << "," << f.sequence << "," << glass_ms << "," << render_ms
+                    << "\n";
+      };
+    }
     SessionSource source(&server);
     const RenderLoopStats stats = RunRenderLoop(renderer, source, *shown_display, loop, [&](DisplayOverlay* o) {
       server.SetRenderFps(o->fps);
@@ -143,14 +157,18 @@ int main(int argc, char** argv) {
     server.Shutdown();
     if (recorder) recorder->Close();
     const ServerCounters c = server.counters();
-    nlohmann::json report = {{"rendered", stats.rendered},
-                             {"fps", stats.fps()},
-                             {"render_ms_median", stats.render_ms.Median()},
-                             {"sessions_started", c.sessions_started},
-                             {"sessions_rejected", c.sessions_rejected},
-                             {"frames_received", c.frames_received},
-                             {"frames_bad", c.frames_bad},
-                             {"payload_bytes_received", c.bytes_received}};
+    nlohmann::json report = {
+        {"rendered", stats.rendered},
+        {"fps", stats.fps()},
+        {"render_ms_median", stats.render_ms.Median()},
+        {"show_ms_median", stats.show_ms.Median()},
+        {"glass_to_glass_ms_p50", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Median()},
+        {"glass_to_glass_ms_p95", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Percentile(95)},
+        {"sessions_started", c.sessions_started},
+        {"sessions_rejected", c.sessions_rejected},
+        {"frames_received", c.frames_received},
+        {"frames_bad", c.frames_bad},
+        {"payload_bytes_received", c.bytes_received}};
     std::cout << report.dump(2) << "\n";
     if (!stats_json.empty()) std::ofstream(stats_json) << report.dump(2) << "\n";
   } catch (const std::exception& e) {

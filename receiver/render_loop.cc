@@ -77,6 +77,9 @@ RenderLoopStats RunRenderLoop(AvatarRenderer& renderer, FrameParamsSource& sourc
         stats.upsample_ms.Add(t.upsample_ms);
         stats.show_ms.Add(show_watch.ElapsedMs());
         stats.frame_ms.Add(frame_watch.ElapsedMs());
+        const double glass_ms = 1e3 * (SteadyNowSeconds() - params->capture_time_s);
+        if (std::abs(glass_ms) < 60e3) stats.glass_to_glass_ms.Add(glass_ms);
+        if (options.on_shown) options.on_shown(*params, glass_ms, t.total_ms);
         if (!keep_going) break;
       } else {
         ++stats.refused;

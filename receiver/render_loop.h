@@ -38,6 +38,8 @@ struct RenderLoopOptions {
   double target_fps = 30;  // ticks per second when paced
   bool paced = true;       // false: render as fast as the source gives frames
   double max_seconds = 0;  // stop after this long (0: when the source finishes)
+  // Called after each frame is shown: its parameters, glass-to-glass ms, render ms.
+  std::function<void(const FrameParams&, double, double)> on_shown;
   void Check() const;
 };
 
@@ -49,6 +51,10 @@ struct RenderLoopStats {
   double seconds = 0;    // wall time of the loop
   SampleStats frame_ms;  // render + show per frame
   SampleStats render_ms, head_model_ms, sample_ms, mlp_ms, composite_ms, upsample_ms, show_ms;
+  // Glass to glass: shown minus the capture time of what is shown (the jitter
+  // buffer interpolates capture times too). Same-host clocks only: values
+  // beyond a minute (other hosts' clocks) are left out.
+  SampleStats glass_to_glass_ms;
   double fps() const { return seconds > 0 ? rendered / seconds : 0; }
 };
 

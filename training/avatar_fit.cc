@@ -111,7 +111,7 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
   o.geometry_mask = torch::ones({1, config.conditioning_dim()});
   o.appearance_mask = torch::ones({1, config.appearance_dim()});
   if (freeze_identity) {
-    o.geometry_mask.narrow(1, 0, config.num_shape).zero_();                                    // beta first
+    o.geometry_mask.narrow(1, 0, config.num_shape).zero_();  // beta first
     o.appearance_mask.narrow(1, config.appearance_dim() - config.num_texture, config.num_texture).zero_();  // tau last
   }
   return o;
@@ -187,7 +187,8 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
       std::vector<torch::Tensor> saved_offsets;
       torch::load(saved_offsets, (ckpt / "offsets.pt").string());
       const std::vector<torch::Tensor> now = {offsets->geometry, offsets->appearance};
-      if (!fits(saved_offsets, now)) throw std::runtime_error("the checkpoint's per-frame offsets are for another dataset");
+      if (!fits(saved_offsets, now))
+        throw std::runtime_error("the checkpoint's per-frame offsets are for another dataset");
       for (size_t i = 0; i < now.size(); ++i) now[i].copy_(saved_offsets[i]);
     }
     torch::serialize::InputArchive archive;
@@ -205,7 +206,8 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
                       const std::function<void(const StepInfo&)>& progress) {
   options.Check();
   if (!data.synthetic && !data.real) throw std::invalid_argument("TrainAvatar: no training data");
-  if (data.real && data.real->train().empty()) throw std::invalid_argument("TrainAvatar: the dataset has no training frames");
+  if (data.real && data.real->train().empty())
+    throw std::invalid_argument("TrainAvatar: the dataset has no training frames");
   const AvatarConfig& config = avatar.config();
   if (data.real && data.real->resolution() != config.output_size)
     throw std::invalid_argument("TrainAvatar: dataset crops are " + std::to_string(data.real->resolution()) +
@@ -375,7 +377,8 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
   return r;
 }
 
-cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame) {
+cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
+                        const FrameParams& frame) {
   avatar.modules().eval();
   torch::InferenceMode inference;
   RaySampler sampler(avatar.config());

@@ -78,8 +78,8 @@ struct TrainingData {
 
 struct StepInfo {
   int step = 0;
-  float loss = 0;  // the whole objective, mean over the batch
-  float mse = 0;   // the masked MSE part (RGB in [0, 1])
+  float loss = 0;     // the whole objective, mean over the batch
+  float mse = 0;      // the masked MSE part (RGB in [0, 1])
   int synthetic = 0;  // samples of the batch that were synthetic
 };
 

@@ -7,9 +7,9 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
@@ -31,7 +31,9 @@ void PrepOptions::Check() const {
   c.That(!resolutions.empty(), "at least one resolution");
   for (int r : resolutions) c.That(r == 128 || r == 256 || r == 512, "resolutions are 128, 256 or 512");
   c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
-  c.InRange("interpolate", interpolate, 0, 8).InRange("crop_scale", crop_scale, 1.0, 6.0).InRange("mask_margin", mask_margin, 0.0, 0.5);
+  c.InRange("interpolate", interpolate, 0, 8)
+      .InRange("crop_scale", crop_scale, 1.0, 6.0)
+      .InRange("mask_margin", mask_margin, 0.0, 0.5);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -149,12 +151,18 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   //    used for training data and live is the same code).
   const fs::path full_masks = dir / "full_masks";
   std::vector<std::string> argv = {tracker,
-                                   "--input", o.input,
-                                   "--head-model", o.head_model,
-                                   "--out", (dir / "params.hcrec").string(),
-                                   "--report", (dir / "track_report.json").string(),
-                                   "--overlay", (dir / "preview.mp4").string(),
-                                   "--masks", full_masks.string()};
+                                   "--input",
+                                   o.input,
+                                   "--head-model",
+                                   o.head_model,
+                                   "--out",
+                                   (dir / "params.hcrec").string(),
+                                   "--report",
+                                   (dir / "track_report.json").string(),
+                                   "--overlay",
+                                   (dir / "preview.mp4").string(),
+                                   "--masks",
+                                   full_masks.string()};
   if (o.calibrate) argv.push_back("--calibrate");
   if (!o.identity_from.empty()) argv.insert(argv.end(), {"--identity-from", o.identity_from});
   if (!o.intrinsics.empty()) argv.insert(argv.end(), {"--intrinsics", o.intrinsics});
@@ -177,8 +185,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   const int min_train = 8;
   if (static_cast<int>(fitted.size()) < o.test_frames + min_train)
     throw std::runtime_error(o.input + ": " + std::to_string(fitted.size()) + " fitted frames; the split needs " +
-                             std::to_string(o.test_frames) + " test frames and at least " +
-                             std::to_string(min_train) + " training frames (lower --test-frames?)");
+                             std::to_string(o.test_frames) + " test frames and at least " + std::to_string(min_train) +
+                             " training frames (lower --test-frames?)");
 
   // 2. One crop box for the whole video, so the camera stays one pinhole:
   //    the landmarks' median centre (raised toward the hair by 0.3 of the extent) and their 95th
@@ -265,7 +273,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         auto read = [&](const char* kind, uint64_t frame, int flags) {
           return ReadImage((rd / kind / FrameName(static_cast<int>(frame))).string(), flags);
         };
-        const cv::Mat ia = read("images", a.sequence, cv::IMREAD_COLOR), ib = read("images", b.sequence, cv::IMREAD_COLOR);
+        const cv::Mat ia = read("images", a.sequence, cv::IMREAD_COLOR),
+                      ib = read("images", b.sequence, cv::IMREAD_COLOR);
         const cv::Mat ma = read("masks", a.sequence, cv::IMREAD_GRAYSCALE),
                       mb = read("masks", b.sequence, cv::IMREAD_GRAYSCALE);
         const FlowPair flow = DenseFlow(ia, ib);
@@ -310,7 +319,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
        {{"per_pair", o.interpolate},
         {"frames", interpolated},
         {"how", "Farneback optical flow both ways, neighbours warped and blended; parameters interpolated"}}},
-      {"crop", {{"x0", x0}, {"y0", y0}, {"side", side}, {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}}}},
+      {"crop",
+       {{"x0", x0}, {"y0", y0}, {"side", side}, {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}}}},
       {"resolutions", o.resolutions},
       {"intrinsics", intrinsics},
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},

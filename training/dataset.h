@@ -29,16 +29,16 @@ namespace headcast {
 constexpr int kDatasetFormatVersion = 1;
 
 struct PrepOptions {
-  std::string input;                // video, image folder (anything headcast-track reads)
+  std::string input;  // video, image folder (anything headcast-track reads)
   std::string head_model = "builtin";
   std::string out_dir;
   std::vector<int> resolutions = {128, 256};
-  int test_frames = 150;            // the last N fitted frames are the test split
-  int max_frames = 0;               // 0: all
-  bool calibrate = true;            // identity calibration over key frames (shape, focal)
-  std::string identity_from;        // or: beta from headcast-fit-mesh's PARAMS.json
-  std::string intrinsics;           // fx,fy,cx,cy when known (else calibration / field of view)
-  double crop_scale = 2.2;          // crop edge over the landmarks' extent (room for hair, ears, neck)
+  int test_frames = 150;      // the last N fitted frames are the test split
+  int max_frames = 0;         // 0: all
+  bool calibrate = true;      // identity calibration over key frames (shape, focal)
+  std::string identity_from;  // or: beta from headcast-fit-mesh's PARAMS.json
+  std::string intrinsics;     // fx,fy,cx,cy when known (else calibration / field of view)
+  double crop_scale = 2.2;    // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
   // head model's silhouette dilated by this fraction of the crop edge: pixels
   // the avatar cannot reach (background caught by GrabCut) are not targets.
@@ -46,7 +46,7 @@ struct PrepOptions {
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;
-  std::string tracker;              // headcast-track to run; default: the one beside this program
+  std::string tracker;  // headcast-track to run; default: the one beside this program
   // Reuse a finished tracking pass in out_dir (its report is written last, so
   // its presence means the recording is complete); crops are always redone.
   bool resume = false;
@@ -71,8 +71,7 @@ class PreparedDataset {
   // Refuses, naming the file: a missing or foreign folder, another format
   // version, a dataset made for another head model, a missing resolution.
   // `interpolated`: also train on the synthesised in-between frames, if prepared.
-  static PreparedDataset Load(const std::string& dir, const HeadModel& model, int resolution,
-                              bool interpolated = true);
+  static PreparedDataset Load(const std::string& dir, const HeadModel& model, int resolution, bool interpolated = true);
 
   int resolution() const { return resolution_; }
   int size() const { return static_cast<int>(frames_.size()); }

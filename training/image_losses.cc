@@ -33,8 +33,8 @@ torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b) {
   const torch::Tensor var_a = blur(a * a) - mu_a * mu_a;
   const torch::Tensor var_b = blur(b * b) - mu_b * mu_b;
   const torch::Tensor cov = blur(a * b) - mu_a * mu_b;
-  const torch::Tensor map = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) /
-                            ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+  const torch::Tensor map =
+      ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
   return map.mean();
 }
 

@@ -4,8 +4,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <optional>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
@@ -30,7 +30,7 @@ void CheckOutputs(const RunOutputs& o, OptionsCheck* c) {
 // The loop around TrainAvatar that people see: progress with ETA, the loss
 // CSV, held-out figures every eval_every steps, plots at the end.
 FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& fit,
-                            const RunOutputs& out, const std::function<EvalResult(Avatar&)>& evaluate) {
+                           const RunOutputs& out, const std::function<EvalResult(Avatar&)>& evaluate) {
   std::optional<ProgressLine> progress;
   CsvLog loss_log, eval_log;
   double last_psnr = NAN;
@@ -69,20 +69,24 @@ FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const Trainin
 }
 
 nlohmann::json EvalJson(const EvalResult& e, const std::string& what) {
-  return {{"psnr_db", e.psnr_mean}, {"ssim", e.ssim_mean}, {"frames", e.count}, {"ms_per_image", e.ms_median},
+  return {{"psnr_db", e.psnr_mean},
+          {"ssim", e.ssim_mean},
+          {"frames", e.count},
+          {"ms_per_image", e.ms_median},
           {"on", what}};
 }
 
 nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
-  nlohmann::json j = {{"iterations", f.iterations},
-          {"batch", f.batch},
-          {"learning_rate", f.learning_rate},
-          {"seconds", r.seconds},
-          {"samples_per_s", r.samples_per_s},
-          {"first_step", r.first_step},
-          {"final_loss", r.steps.empty() ? 0.f : r.steps.back().loss},
-          {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual},
-          {"processes", f.distributed.world_size}};
+  nlohmann::json j = {
+      {"iterations", f.iterations},
+      {"batch", f.batch},
+      {"learning_rate", f.learning_rate},
+      {"seconds", r.seconds},
+      {"samples_per_s", r.samples_per_s},
+      {"first_step", r.first_step},
+      {"final_loss", r.steps.empty() ? 0.f : r.steps.back().loss},
+      {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual},
+      {"processes", f.distributed.world_size}};
   if (real) {  // only real frames are augmented and get offsets
     j["z_augmentation"] = f.z_augmentation;
     j["learned_offsets"] = f.learn_offsets;
@@ -161,8 +165,11 @@ nlohmann::json RunPretrain(PretrainOptions o) {
                             {"fit", FitJson(o.fit, fitted, real.has_value())},
                             {"eval", EvalJson(eval, "held-out synthetic renders")}};
   if (real)
-    summary["mix"] = {{"dataset", o.real_dataset}, {"m", o.fit.mix.m}, {"n", o.fit.mix.n_end},
-                      {"p_min", o.fit.mix.p_min}, {"p_max", o.fit.mix.p_max}};
+    summary["mix"] = {{"dataset", o.real_dataset},
+                      {"m", o.fit.mix.m},
+                      {"n", o.fit.mix.n_end},
+                      {"p_min", o.fit.mix.p_min},
+                      {"p_max", o.fit.mix.p_max}};
   Finish(avatar, summary, Stack(rows), o.outputs);
   return summary;
 }
@@ -222,9 +229,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
       spread.push_back(periodic[static_cast<size_t>(k) * periodic.size() / o.outputs.eval_frames]);
     periodic = spread;
   }
-  const FitResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs, [&](Avatar& a) {
-    return EvaluateOnDataset(a, model, data, periodic);
-  });
+  const FitResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs,
+                                            [&](Avatar& a) { return EvaluateOnDataset(a, model, data, periodic); });
   if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
@@ -286,21 +292,22 @@ nlohmann::json RunEval(const EvalOptions& o) {
   csv << "frame,psnr,ssim\n";
   {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
-    const EvalResult e = EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth,
-                                                                               const cv::Mat& rendered) {
-      cv::Mat row;
-      cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
-      side.Write(row);
-    });
+    const EvalResult e =
+        EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
+          cv::Mat row;
+          cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
+          side.Write(row);
+        });
     for (int k = 0; k < e.count; ++k)
       csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";
-    nlohmann::json report = {{"avatar", o.avatar},
-                             {"dataset", o.dataset},
-                             {"resolution", avatar.config().output_size},
-                             {"eval", EvalJson(e, data.test().empty() ? "training frames" : "test split")},
-                             {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
-                             {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
-                             {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};
+    nlohmann::json report = {
+        {"avatar", o.avatar},
+        {"dataset", o.dataset},
+        {"resolution", avatar.config().output_size},
+        {"eval", EvalJson(e, data.test().empty() ? "training frames" : "test split")},
+        {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
+        {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
+        {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};
     // Novel views: the first evaluated frame, the head turned on its vertical axis.
     const FrameParams base = data.At(positions.front()).params;
     if (o.orbit_frames > 0) {

@@ -13,14 +13,14 @@ namespace headcast {
 
 // Logs, plots and periodic evaluation shared by pretrain and subject.
 struct RunOutputs {
-  std::string out;            // the .hcavatar to write
-  std::string log_csv;        // loss per step (step,loss,mse,synthetic)
-  std::string eval_csv;       // test PSNR/SSIM every eval_every steps (step,psnr,ssim)
-  std::string plot_dir;       // losses.png and psnr.png here
-  std::string preview;        // ground truth | avatar for 4 held-out samples (PNG)
-  std::string report;         // the report JSON
-  int eval_every = 0;         // 0: only at the end
-  int eval_frames = 20;       // held-out samples per evaluation
+  std::string out;       // the .hcavatar to write
+  std::string log_csv;   // loss per step (step,loss,mse,synthetic)
+  std::string eval_csv;  // test PSNR/SSIM every eval_every steps (step,psnr,ssim)
+  std::string plot_dir;  // losses.png and psnr.png here
+  std::string preview;   // ground truth | avatar for 4 held-out samples (PNG)
+  std::string report;    // the report JSON
+  int eval_every = 0;    // 0: only at the end
+  int eval_frames = 20;  // held-out samples per evaluation
 };
 
 // General model (METHOD §5): synthetic renders of the head model made on the
@@ -29,8 +29,8 @@ struct RunOutputs {
 struct PretrainOptions {
   std::string head_model = "builtin";
   int resolution = 128;
-  std::string init;       // continue from this .hcavatar
-  AvatarConfig config;    // architecture (output_size is set from resolution)
+  std::string init;     // continue from this .hcavatar
+  AvatarConfig config;  // architecture (output_size is set from resolution)
   SyntheticDataOptions synthetic;
   std::string real_dataset;  // a prepared dataset to mix in (optional)
   FitOptions fit;
@@ -48,11 +48,11 @@ struct SubjectOptions {
   bool from_scratch = false;  // random networks instead (the comparison of the thesis's claim)
   std::string dataset;        // from `prep`
   int resolution = 256;
-  std::string identity_from;  // beta from headcast-fit-mesh's PARAMS.json instead of the dataset's
+  std::string identity_from;      // beta from headcast-fit-mesh's PARAMS.json instead of the dataset's
   double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
   bool use_interpolated = true;   // train on the dataset's interpolated frames too, if it has them
   int freeze_layers = 4;
-  AvatarConfig config;        // architecture when from_scratch
+  AvatarConfig config;  // architecture when from_scratch
   FitOptions fit;
   RunOutputs outputs;
   void Check() const;
@@ -65,10 +65,10 @@ struct EvalOptions {
   std::string avatar;
   std::string dataset;
   std::string out_dir;
-  int max_frames = 0;         // 0: the whole test split
-  std::string drive;          // a recording whose expressions drive the expression-transfer video
-  int orbit_frames = 60;      // novel-view orbit video (0: none)
-  double orbit_deg = 30;      // yaw swing of the orbit
+  int max_frames = 0;     // 0: the whole test split
+  std::string drive;      // a recording whose expressions drive the expression-transfer video
+  int orbit_frames = 60;  // novel-view orbit video (0: none)
+  double orbit_deg = 30;  // yaw swing of the orbit
   void Check() const;
 };
 // Writes OUT/eval.json, per_frame.csv, side_by_side.mp4 (ground truth | avatar |

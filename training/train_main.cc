@@ -23,18 +23,21 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
   app->add_option("--seed", fit->seed, "random seed");
   app->add_option("--vgg", fit->loss.vgg_path,
                   "VGG16 TorchScript file for the perceptual term (else 1 - SSIM stands in for it)");
-  app->add_option("--perceptual-weight", fit->loss.perceptual_weight, "weight of the VGG16 term")->capture_default_str();
+  app->add_option("--perceptual-weight", fit->loss.perceptual_weight, "weight of the VGG16 term")
+      ->capture_default_str();
   app->add_option("--ssim-weight", fit->loss.ssim_weight, "weight of 1 - SSIM (without --vgg)")->capture_default_str();
   app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
       ->capture_default_str();
   app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");
   app->add_option("--z-augmentation", fit->z_augmentation, "probability of the distance augmentation on real frames")
       ->capture_default_str();
-  app->add_option("--checkpoint-dir", fit->checkpoint_dir, "checkpoint here (atomically) every --checkpoint-every steps");
+  app->add_option("--checkpoint-dir", fit->checkpoint_dir,
+                  "checkpoint here (atomically) every --checkpoint-every steps");
   app->add_option("--checkpoint-every", fit->checkpoint_every, "steps between checkpoints")->capture_default_str();
   app->add_flag("--resume", fit->resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
   app->add_option("--rank", fit->distributed.rank, "data parallel: this process's rank (0 writes the outputs)");
-  app->add_option("--world-size", fit->distributed.world_size, "data parallel: processes in all")->capture_default_str();
+  app->add_option("--world-size", fit->distributed.world_size, "data parallel: processes in all")
+      ->capture_default_str();
   app->add_option("--master-addr", fit->distributed.master_addr, "data parallel: rank 0's address")
       ->capture_default_str();
   app->add_option("--master-port", fit->distributed.master_port, "data parallel: rank 0's TCP store port")
@@ -63,15 +66,19 @@ int main(int argc, char** argv) {
   prep->add_option("--head-model", p.head_model, "builtin or a model .npz")->capture_default_str();
   prep->add_option("--out", p.out_dir, "dataset folder to write")->required();
   prep->add_option("--resolutions", p.resolutions, "crop sizes (128, 256, 512)")->delimiter(',')->capture_default_str();
-  prep->add_option("--test-frames", p.test_frames, "the last N fitted frames are the test split")->capture_default_str();
+  prep->add_option("--test-frames", p.test_frames, "the last N fitted frames are the test split")
+      ->capture_default_str();
   prep->add_option("--max-frames", p.max_frames, "use only the first N frames");
   prep->add_flag("!--no-calibrate", p.calibrate, "no identity calibration (shape stays neutral)");
-  prep->add_option("--identity-from", p.identity_from, "shape from headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
+  prep->add_option("--identity-from", p.identity_from,
+                   "shape from headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
   prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
   prep->add_option("--crop-scale", p.crop_scale, "crop edge over the landmarks' extent")->capture_default_str();
-  prep->add_option("--mask-margin", p.mask_margin, "training masks: the model's silhouette grown by this fraction of the crop")
+  prep->add_option("--mask-margin", p.mask_margin,
+                   "training masks: the model's silhouette grown by this fraction of the crop")
       ->capture_default_str();
-  prep->add_option("--interpolate", p.interpolate, "short videos: frames synthesised between consecutive training frames")
+  prep->add_option("--interpolate", p.interpolate,
+                   "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();
   prep->add_flag("--resume", p.resume, "reuse a finished tracking pass in --out (after an interrupted prep)");
   prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
@@ -103,7 +110,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({128, 256, 512}))
       ->capture_default_str();
   subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
-  subject->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
+  subject
+      ->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
       ->capture_default_str();
   subject->add_flag("!--no-interpolated", s.use_interpolated, "leave out the dataset's interpolated frames");
   subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")

@@ -168,8 +168,13 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
   r.iterations = static_cast<int>(summary.iterations.size());
   r.ok = summary.IsSolutionUsable() && translation[2] > 0;
   if (!r.ok) return r;
+  // A frontal head is about pi from the camera; the solver may leave the angle
+  // just beyond it. The same rotation with its angle in [0, pi] is what the
+  // stream accepts (FrameParams::IsValid).
+  const Eigen::Vector3d w =
+      MatrixToAxisAngle(AxisAngleToMatrix(Eigen::Vector3d(rotation[0], rotation[1], rotation[2])));
   for (int i = 0; i < 3; ++i) {
-    frame->cam_rotation[i] = static_cast<float>(rotation[i]);
+    frame->cam_rotation[i] = static_cast<float>(w[i]);
     frame->cam_translation[i] = static_cast<float>(translation[i]);
     frame->jaw[i] = static_cast<float>(jaw[i]);
   }
