@@ -1,19 +1,150 @@
 #!/usr/bin/env bash
-# Sets headcast up, then runs its main job on the embedded default.
-# Until the end-to-end session exists, that is: the built-in head rendered
-# through a head-turn, jaw and expression sweep to a video, plus preview PNGs.
+# The one-command demo: sets headcast up (packages, build), then runs a real
+# session on loopback. A recorded sequence of the synthetic demo subject goes
+# through the real sender (file source, the tracker, the codec, gRPC over
+# 127.0.0.1) to the real receiver holding the demo avatar, which shows it in a
+# window when there is a display and renders offscreen otherwise. It writes an
+# MP4 (input | avatar), a JSON report (frames, fps, glass-to-glass latency,
+# uplink kbit/s) and a PNG plot, and prints where they are.
+#
+#   deploy/demo.sh                                     # the bundled subject and avatar
+#   deploy/demo.sh --input /dev/video0 --avatar me.hcavatar --head-model ict.npz   # your camera, your avatar
+# Options: --input SRC (camera, video or image folder), --avatar A.hcavatar,
+# --head-model builtin|M.npz, --intrinsics fx,fy,cx,cy | --fov DEG, --duration S,
+# --display auto|window|offscreen, --out DIR, --no-setup.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-"$root/deploy/setup.sh"
+input=$root/models/demo/demo_sequence.mp4
+avatar=$root/models/demo_avatar.hcavatar
+head_model=builtin intrinsics="" fov="" duration="" display=auto setup=1
 out=${HEADCAST_DEMO_OUT:-$root/out/demo}
-mkdir -p "$out"
+while [ $# -gt 0 ]; do
+  case $1 in
+    --input) input=$2; shift 2 ;;
+    --avatar) avatar=$2; shift 2 ;;
+    --head-model) head_model=$2; shift 2 ;;
+    --intrinsics) intrinsics=$2; shift 2 ;;
+    --fov) fov=$2; shift 2 ;;
+    --duration) duration=$2; shift 2 ;;
+    --display) display=$2; shift 2 ;;
+    --out) out=$2; shift 2 ;;
+    --no-setup) setup=0; shift ;;
+    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+[ "$setup" = 1 ] && "$root/deploy/setup.sh"
 bin=$root/build/bin
-"$bin/headcast-headmodel" summary builtin
-"$bin/headcast-headmodel" render builtin --view both --landmarks --out "$out/builtin_front_side.png"
-"$bin/headcast-headmodel" render builtin --view grid --out "$out/builtin_components.png"
-"$bin/headcast-headmodel" render builtin --sweep all --size 512 --video "$out/builtin_sweep.mp4"
-echo
-echo "headcast demo: wrote"
-echo "  $out/builtin_sweep.mp4        (head turn, jaw, every expression component; 30 fps)"
-echo "  $out/builtin_front_side.png   (front and side view with the 68 landmarks)"
-echo "  $out/builtin_components.png   (every expression at +1 and shape component at +2)"
+python=${HEADCAST_PYTHON:-/usr/bin/python3}
+[ -e "$avatar" ] || { echo "demo: no avatar at $avatar (deploy/make_default_models.sh makes the default)" >&2; exit 1; }
+mkdir -p "$out"
+rm -f "$out"/{shown.csv,arrival.csv,receiver.json,sender.json,wire.txt}
+
+# The bundled subject's camera is the one its avatar was prepared with.
+if [ -z "$intrinsics$fov" ] && [ "$input" = "$root/models/demo/demo_sequence.mp4" ]; then
+  intrinsics=$("$python" -c "import json; print(','.join(str(v) for v in json.load(open('$root/models/demo/dataset.json'))['crop']['source_camera']))")
+fi
+camera=()
+[ -n "$intrinsics" ] && camera=(--intrinsics "$intrinsics")
+[ -n "$fov" ] && camera=(--fov "$fov")
+if [ -z "$duration" ]; then
+  case $input in
+    /dev/*|v4l2:*) duration=30 ;;  # a camera: 30 s
+    *) duration=0 ;;               # a recording: to its end
+  esac
+fi
+if [ "$display" = auto ]; then
+  if [ -n "${DISPLAY:-}" ]; then display=window; else display=offscreen; fi
+fi
+
+port=$((20000 + RANDOM % 20000))
+"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$avatar" \
+  --head-model "$head_model" --display "$display" --video "$out/avatar.mp4" --target-delay 0.05 \
+  --display-csv "$out/shown.csv" --latency-csv "$out/arrival.csv" --stats-json "$out/receiver.json" \
+  > /dev/null 2> "$out/receiver.log" &
+rx=$!
+trap 'kill "$rx" 2>/dev/null || true' EXIT
+for _ in $(seq 200); do grep -q listening "$out/receiver.log" && break; sleep 0.05; done
+grep -q listening "$out/receiver.log" || { cat "$out/receiver.log" >&2; exit 1; }
+
+# Bytes on the wire: the sender's socket counters (payload + 52 B of IP/TCP headers per segment), every 0.5 s.
+(
+  while kill -0 "$rx" 2>/dev/null; do
+    ss -tinH state established "( dport = :$port )" 2>/dev/null | awk -v t="$(date +%s.%N)" '
+      { for (i = 1; i <= NF; i++) { split($i, kv, ":");
+          if (kv[1] == "bytes_sent") bs = kv[2]; if (kv[1] == "segs_out") so = kv[2]; } }
+      END { if (so > 0) printf "%s %d\n", t, bs + 52 * so }' >> "$out/wire.txt"
+    sleep 0.5
+  done
+) &
+sampler=$!
+echo "demo: streaming $input -> receiver on 127.0.0.1:$port ($display)"
+"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --head-model "$head_model" \
+  --input "$input" --identity-from "$avatar" "${camera[@]}" --duration "$duration" --stats-json "$out/sender.json" \
+  > /dev/null 2> "$out/sender.log" || { tail -5 "$out/sender.log" >&2; exit 1; }
+sleep 1  # the jitter buffer and the last frames
+kill -INT "$rx"
+wait "$rx" || true
+kill "$sampler" 2>/dev/null || true
+trap - EXIT
+
+# Input | avatar, side by side at the avatar's height.
+h=$("$python" -c "import json; print(json.load(open('$out/receiver.json')).get('rendered', 0))")
+[ "$h" -gt 0 ] || { echo "demo: the receiver showed nothing; see $out/receiver.log" >&2; exit 1; }
+if [ -f "$input" ]; then
+  ffmpeg -loglevel error -y -i "$input" -i "$out/avatar.mp4" -filter_complex \
+    "[1]scale=-2:256[a];[0]scale=-2:256[i];[i][a]hstack=inputs=2:shortest=1" -c:v libx264 -pix_fmt yuv420p \
+    "$out/side_by_side.mp4"
+else
+  cp "$out/avatar.mp4" "$out/side_by_side.mp4"  # a camera: only the avatar was recorded
+fi
+
+"$python" - "$out" "$input" <<'PY'
+import csv, json, statistics, sys
+out, source = sys.argv[1], sys.argv[2]
+rx = json.load(open(f"{out}/receiver.json"))
+tx = json.load(open(f"{out}/sender.json"))
+shown = [r for r in csv.DictReader(open(f"{out}/shown.csv"))]
+arrival = [float(r["latency_ms"]) for r in csv.DictReader(open(f"{out}/arrival.csv"))]
+glass = sorted(float(r["glass_to_glass_ms"]) for r in shown)
+def pct(v, p):
+    return v[min(len(v) - 1, int(round(p / 100 * (len(v) - 1))))] if v else None
+wire = [tuple(map(float, l.split())) for l in open(f"{out}/wire.txt") if l.strip()] if glass else []
+t = tx.get("tracking", {})
+report = {
+    "input": source,
+    "frames": {"read": t.get("frames_read"), "fitted": t.get("frames_fitted"), "sent": tx.get("frames_sent"),
+               "received": rx.get("frames_received"), "shown": rx.get("rendered")},
+    "fps_shown": (len(shown) - 1) / (float(shown[-1]["shown_s"]) - float(shown[0]["shown_s"])) if len(shown) > 1 else None,
+    "glass_to_glass_ms": {"p50": pct(glass, 50), "p95": pct(glass, 95),
+                          "what": "camera frame captured (the recording's frame due) to the avatar frame shown, "
+                                  "same host clock"},
+    "stages_ms_median": {"landmarks (detect/track + 68 points)": t.get("landmarks_ms_median"),
+                         "fit": t.get("fit_ms_median"),
+                         "capture to arrival (tracking, encode, gRPC, decode)": statistics.median(arrival) if arrival else None,
+                         "jitter buffer (target delay)": 50.0,
+                         "render": rx.get("render_ms_median"), "display": rx.get("show_ms_median")},
+    "uplink_kbps": {"payload": tx.get("payload_kbps"),
+                    "on_wire": (8e-3 * (wire[-1][1] - wire[0][1]) / (wire[-1][0] - wire[0][0])) if len(wire) >= 2 else None,
+                    "what": "on_wire: the sender socket's bytes with 52 B of IP/TCP headers per segment"},
+}
+json.dump(report, open(f"{out}/report.json", "w"), indent=2)
+with open(f"{out}/latency.csv", "w") as f:
+    f.write("frame,glass_to_glass_ms\n")
+    for i, r in enumerate(shown):
+        f.write(f"{i},{r['glass_to_glass_ms']}\n")
+PY
+"$bin/headcast-train" plot --series "$out/latency.csv:glass_to_glass_ms:glass to glass" --title "headcast demo" \
+  --x-label "shown frame" --y-label ms --out "$out/latency.png" > /dev/null
+"$python" - "$out" <<'PY'
+import json, sys
+r = json.load(open(f"{sys.argv[1]}/report.json"))
+g, k = r["glass_to_glass_ms"], r["uplink_kbps"]
+f = lambda v, d=1: "?" if v is None else f"{v:.{d}f}"
+print(f"\nheadcast demo: {r['frames']['shown']} frames shown at {f(r['fps_shown'])} fps; glass to glass "
+      f"p50 {f(g['p50'])} ms, p95 {f(g['p95'])} ms; uplink {f(k['payload'], 2)} kbit/s payload, "
+      f"{f(k['on_wire'], 2)} kbit/s on the wire")
+PY
+echo "  $out/side_by_side.mp4   input | avatar"
+echo "  $out/report.json        what was measured"
+echo "  $out/latency.png        glass-to-glass latency per shown frame"

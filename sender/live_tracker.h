@@ -28,6 +28,12 @@ struct LiveTrackResult {
   double fit_ms = 0;        // head-model fit
 };
 
+// The person's shape for tracking: from an avatar (.hcavatar: the identity it
+// was trained with, so the fit agrees with the avatar) or a PARAMS.json
+// (headcast-fit-mesh). Throws naming the file when it is unreadable or made
+// for another head model.
+Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model);
+
 class LiveTracker {
  public:
   LiveTracker(const HeadModel& model, const LiveTrackerOptions& options);

@@ -14,7 +14,6 @@
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
-#include "common/tracking/mesh_fitter.h"
 #include "proto/recording.h"
 #include "sender/capture/frame_source.h"
 #include "sender/live_tracker.h"
@@ -49,7 +48,7 @@ int main(int argc, char** argv) {
   LiveTrackerOptions live;
   app.add_option("--input", input, "track this camera (/dev/videoN), video or image folder live");
   app.add_option("--identity-from", identity_from,
-                 "--input: the person's shape from a PARAMS.json (headcast-fit-mesh, or prep's identity.json)");
+                 "--input: the person's shape: the avatar's own (.hcavatar) or a PARAMS.json (headcast-fit-mesh)");
   app.add_option("--intrinsics", intrinsics, "--input: camera fx,fy,cx,cy in pixels");
   app.add_option("--fov", live.fov_deg, "--input: vertical field of view when intrinsics are unknown")
       ->capture_default_str();
@@ -125,7 +124,7 @@ int main(int argc, char** argv) {
       // frame keeps its capture timestamp (the receiver measures glass-to-glass from it).
       if (std::sscanf(camera_size.c_str(), "%dx%d", &source_options.width, &source_options.height) != 2)
         throw std::invalid_argument("--camera-size wants WIDTHxHEIGHT");
-      if (!identity_from.empty()) live.identity = ReadIdentityFromMeshFit(identity_from, model);
+      if (!identity_from.empty()) live.identity = ReadTrackingIdentity(identity_from, model);
       if (!intrinsics.empty()) {
         PinholeCamera k;
         if (std::sscanf(intrinsics.c_str(), "%lf,%lf,%lf,%lf", &k.fx, &k.fy, &k.cx, &k.cy) != 4)

@@ -1,6 +1,8 @@
 // Landmark fitting with Ceres.
 #include "common/tracking/head_fitter.h"
 
+#include <algorithm>
+
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
@@ -16,6 +18,7 @@ void HeadFitterOptions::Check() const {
   OptionsCheck c("HeadFitterOptions");
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
+  c.InRange("expression_limit", expression_limit, 0.1, 5.0);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.ThrowIfErrors();
@@ -139,7 +142,8 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
     jaw[i] = frame->jaw[i];
   }
   std::vector<double> expression(num_expression_);
-  for (int k = 0; k < num_expression_; ++k) expression[k] = frame->expression[k];
+  const double limit = options_.expression_limit;
+  for (int k = 0; k < num_expression_; ++k) expression[k] = std::clamp<double>(frame->expression[k], -limit, limit);
   ceres::Problem problem;
   for (int l = 0; l < kNumLandmarks; ++l) {
     const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
@@ -153,9 +157,14 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
     problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
                              {rotation, translation, expression.data(), jaw});
   }
-  if (num_expression_ > 0)
+  if (num_expression_ > 0) {
     problem.AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr,
                              expression.data());
+    for (int k = 0; k < num_expression_; ++k) {
+      problem.SetParameterLowerBound(expression.data(), k, -limit);
+      problem.SetParameterUpperBound(expression.data(), k, limit);
+    }
+  }
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
   ceres::Solver::Options solver;
