@@ -288,6 +288,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
     return RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
   };
   const double fps = 30;
+  int written = 0;
+  if (o.write_frames) fs::create_directories(dir / "frames");
   std::ofstream csv(dir / "per_frame.csv");
   csv << "frame,psnr,ssim\n";
   {
@@ -297,6 +299,12 @@ nlohmann::json RunEval(const EvalOptions& o) {
           cv::Mat row;
           cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
           side.Write(row);
+          if (o.write_frames) {
+            char name[32];
+            std::snprintf(name, sizeof(name), "_%05d.png", written++);
+            WriteImage((dir / "frames" / ("truth" + std::string(name))).string(), truth);
+            WriteImage((dir / "frames" / ("avatar" + std::string(name))).string(), rendered);
+          }
         });
     for (int k = 0; k < e.count; ++k)
       csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";

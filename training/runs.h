@@ -69,6 +69,7 @@ struct EvalOptions {
   std::string drive;      // a recording whose expressions drive the expression-transfer video
   int orbit_frames = 60;  // novel-view orbit video (0: none)
   double orbit_deg = 30;  // yaw swing of the orbit
+  bool write_frames = false;  // also OUT/frames/truth_NNNNN.png and avatar_NNNNN.png (codec comparisons)
   void Check() const;
 };
 // Writes OUT/eval.json, per_frame.csv, side_by_side.mp4 (ground truth | avatar |

@@ -126,6 +126,7 @@ int main(int argc, char** argv) {
   eval->add_option("--out", e.out_dir, "folder for eval.json, per_frame.csv and the videos")->required();
   eval->add_option("--max-frames", e.max_frames, "evaluate at most N test frames");
   eval->add_option("--drive", e.drive, "a recording (.hcrec) whose expressions drive transfer.mp4");
+  eval->add_flag("--write-frames", e.write_frames, "also write the ground-truth and avatar frames (PNG) under OUT/frames");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
 
   auto* plot = app.add_subcommand("plot", "line plot of CSV columns (logs of several runs in one picture)");
