@@ -22,7 +22,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-void CheckOutputs(const RunOutputs& o, OptionsCheck* c) {
+// What every training run checks: its resolution and outputs.
+void CheckRun(int resolution, const RunOutputs& o, OptionsCheck* c) {
+  c->That(resolution == 128 || resolution == 256 || resolution == 512, "resolution is 128, 256 or 512");
   c->That(!o.out.empty(), "out is required").NonNegative("eval_every", o.eval_every);
   c->InRange("eval_frames", o.eval_frames, 1, 100000);
 }
@@ -125,8 +127,7 @@ void FitConfigToModel(const HeadModel& model, AvatarConfig* c) {
 
 void PretrainOptions::Check() const {
   OptionsCheck c("PretrainOptions");
-  c.That(resolution == 128 || resolution == 256 || resolution == 512, "resolution is 128, 256 or 512");
-  CheckOutputs(outputs, &c);
+  CheckRun(resolution, outputs, &c);
   c.ThrowIfErrors();
   fit.Check();
 }
@@ -178,9 +179,8 @@ void SubjectOptions::Check() const {
   OptionsCheck c("SubjectOptions");
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
   c.That(!dataset.empty(), "dataset is required");
-  c.That(resolution == 128 || resolution == 256 || resolution == 512, "resolution is 128, 256 or 512");
   c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
-  CheckOutputs(outputs, &c);
+  CheckRun(resolution, outputs, &c);
   c.ThrowIfErrors();
   fit.Check();
 }

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# A live session as deploy/demo.sh runs it, on loopback: a rendered video of the
+# built-in head through headcast-sender --input (the tracker per frame, codec,
+# gRPC) to headcast-receiver (jitter buffer, avatar, offscreen-free 'none'
+# display); glass-to-glass latency measured per shown frame. Then the demo
+# script itself when the shipped models are present.
+set -u
+bin=$1 src=$2 python=${3:-/usr/bin/python3}
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
+trap 'kill "${rx:-}" 2>/dev/null; rm -rf "$tmp"' EXIT
+json() { "$python" -c "import json,sys; j=json.load(open('$1')); print($2)" 2>/dev/null; }
+
+"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 45 --size 320 > /dev/null 2>&1
+ffmpeg -loglevel error -y -framerate 30 -i "$tmp/seq/rgb/%05d.png" -c:v libx264 -crf 12 -pix_fmt yuv420p "$tmp/seq.mp4"
+"$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null 2>&1
+port=$((20000 + $$ % 20000))
+"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
+  --display none --target-delay 0.05 --display-csv "$tmp/shown.csv" --stats-json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+rx=$!
+for _ in $(seq 200); do grep -q listening "$tmp/rx.log" && break; sleep 0.05; done
+"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq.mp4" --fov 45 \
+  --identity-from "$tmp/a.hcavatar" --stats-json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
+sleep 0.5
+kill -INT "$rx"; wait "$rx"; rx=
+fitted=$(json "$tmp/tx.json" "j['tracking']['frames_fitted']")
+[ "${fitted:-0}" -ge 43 ] && [ "$(json "$tmp/tx.json" "j['frames_sent']")" = "$fitted" ] &&
+  ok "sender tracked $fitted of 45 frames live and sent them all" || bad "sender: $(tail -3 "$tmp/tx.log")"
+received=$(json "$tmp/rx.json" "j['frames_received']")
+p50=$(json "$tmp/rx.json" "j['glass_to_glass_ms_p50']")
+[ "${received:-0}" = "$fitted" ] && awk "BEGIN{exit !($p50 > 0 && $p50 < 1000)}" &&
+  [ "$(tail -n +2 "$tmp/shown.csv" | wc -l)" -gt 20 ] &&
+  ok "receiver got $received frames; glass to glass p50 $p50 ms, logged per shown frame" ||
+  bad "receiver: received=$received p50=$p50 $(tail -3 "$tmp/rx.log")"
+"$bin/headcast-sender" --target "127.0.0.1:1" --plaintext --input "$tmp/nothing.mp4" > /dev/null 2> "$tmp/e.log"
+[ $? -ne 0 ] && grep -q "nothing.mp4" "$tmp/e.log" && ok "a missing input is named" || bad "missing input: $(cat "$tmp/e.log")"
+
+if [ -f "$src/models/demo_avatar.hcavatar" ]; then
+  "$src/deploy/demo.sh" --no-setup --display offscreen --out "$tmp/demo" > "$tmp/demo.out" 2>&1
+  shown=$(json "$tmp/demo/report.json" "j['frames']['shown']")
+  [ "${shown:-0}" -ge 100 ] && [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] &&
+    grep -q "glass to glass p50" "$tmp/demo.out" &&
+    ok "deploy/demo.sh: $shown frames shown, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
+    bad "demo: $(tail -5 "$tmp/demo.out")"
+else
+  echo "skip: no models/demo_avatar.hcavatar (deploy/make_default_models.sh)"
+fi
+checks_summary "live session cli"
