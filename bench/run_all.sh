@@ -23,6 +23,8 @@ while [ $# -gt 0 ]; do
   esac
 done
 mkdir -p "$res"
+work=$(mktemp -d)  # derived data (the converted ICT model) stays out of the repository
+trap 'rm -rf "$work"' EXIT
 repeats=200 link_s=60 train_iterations=30
 [ "$quick" = 1 ] && repeats=40 link_s=20 train_iterations=10
 step() { echo "== $*" >&2; }
@@ -42,9 +44,9 @@ for r in 128 256; do
 done
 data=${HEADCAST_DATA:-$root/../shared/data}
 if [ -f "$data/video/talking_d9.mp4" ] && [ -d "$data/head-models/ict-facekit" ]; then
-  [ -f "$res/ict.npz" ] || "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --out "$res/ict.npz" > /dev/null
+  "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --out "$work/ict.npz" > /dev/null
   step "track (one core)"
-  taskset -c 0 "$bin/headcast-bench" track --video "$data/video/talking_d9.mp4" --head-model "$res/ict.npz" \
+  taskset -c 0 "$bin/headcast-bench" track --video "$data/video/talking_d9.mp4" --head-model "$work/ict.npz" \
     --repeats 100000 --json "$res/track.json" > /dev/null
 else
   echo "{\"skipped\": \"no $data/video/talking_d9.mp4 or ICT-FaceKit\"}" > "$res/track.json"
@@ -69,16 +71,16 @@ step "demo (loopback session)"
 # x264 against headcast on the same test frames.
 if [ -n "$dataset" ] && [ -n "$avatar" ]; then
   step "x264 comparison"
-  "$bin/headcast-train" eval --head-model "$head_model" --avatar "$avatar" --data "$dataset" --out "$res/eval" \
+  "$bin/headcast-train" eval --head-model "$head_model" --avatar "$avatar" --data "$dataset" --out "$work/eval" \
     --write-frames --orbit-frames 0 > /dev/null
+  cp "$work/eval/eval.json" "$res/eval.json"
   points=(--headcast "$("$python" -c "import json; print(json.load(open('$res/netlab_loopback/netlab.json'))['uplink_kbps_on_wire'])"):unconstrained, 30 fps")
   for rate in 8 16 32; do
     f=$res/netlab_${rate}kbit/netlab.json
     [ -f "$f" ] && points+=(--headcast "$("$python" -c "import json; print(json.load(open('$f'))['uplink_kbps_on_wire'])"):$rate kbit/s link")
   done
-  "$python" "$root/bench/x264_compare.py" --frames "$res/eval/frames" "${points[@]}" --out "$res/x264.json" \
+  "$python" "$root/bench/x264_compare.py" --frames "$work/eval/frames" "${points[@]}" --out "$res/x264.json" \
     --plot "$res/x264.png" > /dev/null
-  rm -rf "$res/eval/frames"
 else
   echo '{"skipped": "give --dataset and --avatar"}' > "$res/x264.json"
 fi
