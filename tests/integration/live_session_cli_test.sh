@@ -27,9 +27,11 @@ fitted=$(json "$tmp/tx.json" "j['tracking']['frames_fitted']")
   ok "sender tracked $fitted of 45 frames live and sent them all" || bad "sender: $(tail -3 "$tmp/tx.log")"
 received=$(json "$tmp/rx.json" "j['frames_received']")
 p50=$(json "$tmp/rx.json" "j['glass_to_glass_ms_p50']")
-[ "${received:-0}" = "$fitted" ] && awk "BEGIN{exit !($p50 > 0 && $p50 < 1000)}" &&
-  [ "$(tail -n +2 "$tmp/shown.csv" | wc -l)" -gt 20 ] &&
-  ok "receiver got $received frames; glass to glass p50 $p50 ms, logged per shown frame" ||
+shown=$(json "$tmp/rx.json" "j['rendered']")
+# How many frames are shown depends on the machine's load (the loop skips rather than lags); each is logged.
+[ "${received:-0}" = "$fitted" ] && awk "BEGIN{exit !($p50 > 0 && $p50 < 1000)}" && [ "${shown:-0}" -gt 0 ] &&
+  [ "$(tail -n +2 "$tmp/shown.csv" | wc -l)" -eq "$shown" ] &&
+  ok "receiver got $received frames, showed $shown; glass to glass p50 $p50 ms, logged per shown frame" ||
   bad "receiver: received=$received p50=$p50 $(tail -3 "$tmp/rx.log")"
 "$bin/headcast-sender" --target "127.0.0.1:1" --plaintext --input "$tmp/nothing.mp4" > /dev/null 2> "$tmp/e.log"
 [ $? -ne 0 ] && grep -q "nothing.mp4" "$tmp/e.log" && ok "a missing input is named" || bad "missing input: $(cat "$tmp/e.log")"
