@@ -39,7 +39,7 @@ shown=$(json "$tmp/rx.json" "j['rendered']")
 if [ -f "$src/models/demo_avatar.hcavatar" ]; then
   "$src/deploy/demo.sh" --no-setup --display offscreen --out "$tmp/demo" > "$tmp/demo.out" 2>&1
   shown=$(json "$tmp/demo/report.json" "j['frames']['shown']")
-  [ "${shown:-0}" -ge 100 ] && [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] &&
+  [ "${shown:-0}" -ge 30 ] && [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] &&
     grep -q "glass to glass p50" "$tmp/demo.out" &&
     ok "deploy/demo.sh: $shown frames shown, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
     bad "demo: $(tail -5 "$tmp/demo.out")"
