@@ -115,8 +115,19 @@ def main():
         j = load(r, f"{name}.json")
         if not j:
             continue
-        scal = {k: v for k, v in j.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-        L.append(f"- **{name}** (`{j.get('command', '')}`): " + ", ".join(f"{k} {f(v, 3)}" for k, v in list(scal.items())[:12]))
+        scal = {}
+        def walk(prefix, v):  # numbers anywhere in the result, named by their path
+            if isinstance(v, dict):
+                for k, x in v.items():
+                    walk(f"{prefix}.{k}" if prefix else k, x)
+            elif isinstance(v, list):
+                for i, x in enumerate(v):
+                    walk(f"{prefix}[{i}]", x)
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                scal[prefix] = v
+        walk("", {k: v for k, v in j.items() if k != "machine"})
+        keys = [k for k in scal if any(t in k for t in ("mm", "ms_median", "_ms", "us_median"))] or list(scal)
+        L.append(f"- **{name}** (`{j.get('command', '')}`): " + ", ".join(f"{k} {f(scal[k], 3)}" for k in keys[:24]))
     L.append("")
     open(a.out, "w").write("\n".join(L) + "\n")
 

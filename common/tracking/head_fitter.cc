@@ -160,10 +160,6 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
   if (num_expression_ > 0) {
     problem.AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr,
                              expression.data());
-    for (int k = 0; k < num_expression_; ++k) {
-      problem.SetParameterLowerBound(expression.data(), k, -limit);
-      problem.SetParameterUpperBound(expression.data(), k, limit);
-    }
   }
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
@@ -187,7 +183,10 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
     frame->cam_translation[i] = static_cast<float>(translation[i]);
     frame->jaw[i] = static_cast<float>(jaw[i]);
   }
-  for (int k = 0; k < num_expression_; ++k) frame->expression[k] = static_cast<float>(expression[k]);
+  // Clamped after the solve rather than bounded in it: Ceres' bounded trust
+  // region made the per-frame fit ~3x slower (ICT, 53 components).
+  for (int k = 0; k < num_expression_; ++k)
+    frame->expression[k] = static_cast<float>(std::clamp(expression[k], -limit, limit));
   const Landmarks2d fitted = Project(*frame, cam);
   double sq = 0;
   for (int l = 0; l < kNumLandmarks; ++l) sq += (fitted[l] - observed[l]).squaredNorm();

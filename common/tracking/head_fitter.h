@@ -19,10 +19,10 @@ using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
 struct HeadFitterOptions {
   int num_expression = 0;          // expression components fitted (0: all the model has)
   double expression_prior = 2e-3;  // weight of sum(psi^2) against squared pixels
-  // Bounds on each expression coefficient: the models' useful range (METHOD
-  // trains on [-2, 2]); beyond it a fit is chasing landmark noise, and the
-  // stream refuses |psi| > 5.
-  double expression_limit = 3;
+  // Each fitted expression coefficient is clamped to +-this, inside the
+  // stream's limit (FrameParams::IsValid refuses |psi| > 5): beyond it a fit is
+  // chasing landmark noise. (Tighter clamps cost landmark accuracy on talking_d9.)
+  double expression_limit = 4.5;
   double jaw_prior = 10;           // weight of |jaw|^2 (radians^2)
   double contour_weight = 0.5;     // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;         // Levenberg-Marquardt iterations per frame
