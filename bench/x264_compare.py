@@ -87,8 +87,9 @@ def main():
               "headcast": headcast,
               "scoring": "PSNR and SSIM (11x11 Gaussian, sigma 1.5) on RGB in [0,1], mean over frames"}
     json.dump(result, open(a.out, "w"), indent=2)
-    for h in headcast:
-        print(f"headcast ({h['setting']}): {h['kbps_on_wire']:.1f} kbit/s on the wire, PSNR {hp:.2f} dB, SSIM {hs:.3f}")
+    for point in headcast:
+        print(f"headcast ({point['setting']}): {point['kbps_on_wire']:.1f} kbit/s on the wire, PSNR {hp:.2f} dB, "
+              f"SSIM {hs:.3f}")
     if a.plot:
         import matplotlib
         matplotlib.use("Agg")
@@ -96,7 +97,7 @@ def main():
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
         for ax, key, label in ((ax1, "psnr_db", "PSNR (dB)"), (ax2, "ssim", "SSIM")):
             ax.plot([p["kbps"] for p in points], [p[key] for p in points], "o-", label="x264 zerolatency")
-            ax.plot([h["kbps_on_wire"] for h in headcast], [h[key] for h in headcast], "r*", markersize=14,
+            ax.plot([p["kbps_on_wire"] for p in headcast], [p[key] for p in headcast], "r*", markersize=14,
                     label="headcast (avatar)")
             ax.set_xscale("log")
             ax.set_xlabel("kbit/s")
