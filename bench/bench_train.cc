@@ -10,10 +10,7 @@ namespace headcast::bench {
 
 nlohmann::json RunTrainSuite(const BenchOptions& o) {
   const HeadModel model = LoadHeadModelSpec(o.head_model);
-  AvatarConfig config = AvatarConfig::Default(o.resolution);
-  config.num_shape = std::min(config.num_shape, model.num_shape());
-  config.num_expression = std::min(config.num_expression, model.num_expression());
-  config.num_texture = std::min(config.num_texture, model.num_texture());
+  const AvatarConfig config = FitConfigToModel(AvatarConfig::Default(o.resolution), model);
   const SubjectParams subject = DefaultSubject(model, o.resolution);
   SyntheticDataOptions so;
   so.image_size = o.resolution;

@@ -169,10 +169,7 @@ int main(int argc, char** argv) {
     InitLogging(log_level);
     if (create->parsed()) {
       const HeadModel model = LoadHeadModelSpec(head_model);
-      AvatarConfig config = AvatarConfig::Default(resolution);
-      config.num_shape = std::min(config.num_shape, model.num_shape());
-      config.num_expression = std::min(config.num_expression, model.num_expression());
-      config.num_texture = std::min(config.num_texture, model.num_texture());
+      const AvatarConfig config = FitConfigToModel(AvatarConfig::Default(resolution), model);
       Avatar avatar = Avatar::CreateRandom(config, model, DefaultSubject(model, resolution), seed);
       avatar.Save(out);
       std::cout << "wrote " << out << " (untrained, random weights; " << resolution << "x" << resolution << ")\n";

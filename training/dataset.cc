@@ -9,7 +9,6 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <sstream>
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
@@ -85,14 +84,7 @@ class InputFrames {
   explicit InputFrames(const std::string& input) {
     const fs::path associations = fs::path(input) / "associations.txt";
     if (fs::is_directory(input) && fs::exists(associations)) {
-      std::ifstream in(associations);
-      std::string line;
-      while (std::getline(in, line)) {
-        if (line.empty() || line[0] == '#') continue;
-        std::istringstream fields(line);
-        std::string t, colour;
-        if (fields >> t >> colour) files_.push_back((fs::path(input) / colour).string());
-      }
+      for (const RgbdPair& p : ReadRgbdAssociations(associations.string())) files_.push_back(p.colour);
     } else if (fs::is_directory(input)) {
       files_ = ListImageFiles(input);
     } else {

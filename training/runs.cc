@@ -117,12 +117,6 @@ Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n) {
   return out;
 }
 
-void FitConfigToModel(const HeadModel& model, AvatarConfig* c) {
-  c->num_shape = std::min(c->num_shape, model.num_shape());
-  c->num_expression = std::min(c->num_expression, model.num_expression());
-  c->num_texture = std::min(c->num_texture, model.num_texture());
-}
-
 }  // namespace
 
 void PretrainOptions::Check() const {
@@ -136,7 +130,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   o.config.output_size = o.resolution;
-  FitConfigToModel(model, &o.config);
+  o.config = FitConfigToModel(o.config, model);
   const SubjectParams base = DefaultSubject(model, o.resolution);
   Avatar avatar = o.init.empty() ? Avatar::CreateRandom(o.config, model, base, o.fit.seed)
                                  : Avatar::Load(o.init, model).WithRuntimeSwitches(o.config);
@@ -200,7 +194,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   Avatar avatar = [&] {
     if (o.from_scratch) {
       o.config.output_size = o.resolution;
-      FitConfigToModel(model, &o.config);
+      o.config = FitConfigToModel(o.config, model);
       return Avatar::CreateRandom(o.config, model, subject, o.fit.seed);
     }
     Avatar general = Avatar::Load(o.general, model);

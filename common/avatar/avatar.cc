@@ -41,6 +41,13 @@ SubjectParams DefaultSubject(const HeadModel& model, int output_size) {
   return s;
 }
 
+AvatarConfig FitConfigToModel(AvatarConfig config, const HeadModel& model) {
+  config.num_shape = std::min(config.num_shape, model.num_shape());
+  config.num_expression = std::min(config.num_expression, model.num_expression());
+  config.num_texture = std::min(config.num_texture, model.num_texture());
+  return config;
+}
+
 namespace {
 
 void CheckSubjectMatches(const AvatarConfig& c, const SubjectParams& s, const HeadModel& model) {

@@ -22,6 +22,9 @@ struct AvatarModules;  // the libtorch networks, common/avatar/avatar_model.h
 // and texture, the default light, a 24-degree camera at the output size.
 SubjectParams DefaultSubject(const HeadModel& model, int output_size);
 
+// `config` with its conditioning sizes (beta, psi, tau components) cut to what `model` has.
+AvatarConfig FitConfigToModel(AvatarConfig config, const HeadModel& model);
+
 class Avatar {
  public:
   // Randomly initialised networks (tests, benchmarks); deterministic for a seed.

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <sstream>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -93,6 +95,28 @@ std::vector<std::string> ListImageFiles(const std::string& folder) {
   }
   std::sort(files.begin(), files.end());
   return files;
+}
+
+std::vector<RgbdPair> ReadRgbdAssociations(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open the RGB-D association file");
+  const std::filesystem::path base = std::filesystem::path(path).parent_path();
+  std::vector<RgbdPair> pairs;
+  std::string line;
+  for (int number = 1; std::getline(in, line); ++number) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream fields(line);
+    RgbdPair p;
+    double depth_time;
+    std::string colour, depth;
+    if (!(fields >> p.time >> colour >> depth_time >> depth))
+      throw std::runtime_error(path + ": line " + std::to_string(number) + ": expected 'time colour.png time depth.png'");
+    p.colour = (base / colour).string();
+    p.depth = (base / depth).string();
+    pairs.push_back(p);
+  }
+  if (pairs.empty()) throw std::runtime_error(path + ": no colour/depth pairs listed");
+  return pairs;
 }
 
 }  // namespace headcast

@@ -20,6 +20,15 @@ cv::Mat ToUint8(const cv::Mat& float_image);
 // `folder`, sorted by name: the order of every image-folder input.
 std::vector<std::string> ListImageFiles(const std::string& folder);
 
+// A TUM-style RGB-D association file: lines "t_rgb rgb/x.png t_depth depth/x.png"
+// ('#' comments), paths relative to the file's folder. Throws naming the file
+// and line when it cannot be read or a line is malformed, or when it lists nothing.
+struct RgbdPair {
+  double time = 0;  // the colour image's timestamp, seconds
+  std::string colour, depth;
+};
+std::vector<RgbdPair> ReadRgbdAssociations(const std::string& path);
+
 // Frames of a video file, or throws naming the file if it cannot be opened.
 class VideoReader {
  public:

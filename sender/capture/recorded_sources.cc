@@ -77,24 +77,7 @@ ReadStatus ImageFolderSource::Read(CapturedFrame* frame, std::string* problem) {
 
 RgbdFolderSource::RgbdFolderSource(std::string associations, const SourceOptions& options)
     : associations_(std::move(associations)), options_(options), pacer_(options.realtime, options.fps) {
-  std::ifstream in(associations_);
-  if (!in) throw std::runtime_error(associations_ + ": cannot open the RGB-D association file");
-  const fs::path base = fs::path(associations_).parent_path();
-  std::string line;
-  for (int number = 1; std::getline(in, line); ++number) {
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream ls(line);
-    Pair p;
-    double depth_time;
-    std::string colour, depth;
-    if (!(ls >> p.time >> colour >> depth_time >> depth))
-      throw std::runtime_error(associations_ + ": line " + std::to_string(number) +
-                               ": expected 'time colour.png time depth.png'");
-    p.colour = (base / colour).string();
-    p.depth = (base / depth).string();
-    pairs_.push_back(p);
-  }
-  if (pairs_.empty()) throw std::runtime_error(associations_ + ": no colour/depth pairs listed");
+  pairs_ = ReadRgbdAssociations(associations_);  // throws naming the file
   if (pairs_.size() > 1) {
     const double span = pairs_.back().time - pairs_.front().time;
     if (span > 0) fps_ = (pairs_.size() - 1) / span;
@@ -107,7 +90,7 @@ ReadStatus RgbdFolderSource::Read(CapturedFrame* frame, std::string* problem) {
     if (!options_.loop) return ReadStatus::kEnd;
     next_ = 0;
   }
-  const Pair& p = pairs_[next_++];
+  const RgbdPair& p = pairs_[next_++];
   frame->index = index_;
   frame->capture_time_s = pacer_.Stamp(index_++);
   frame->camera.reset();

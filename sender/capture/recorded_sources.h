@@ -69,13 +69,9 @@ class RgbdFolderSource final : public FrameSource {
   size_t size() const { return pairs_.size(); }
 
  private:
-  struct Pair {
-    double time;
-    std::string colour, depth;
-  };
   std::string associations_;
   SourceOptions options_;
-  std::vector<Pair> pairs_;
+  std::vector<RgbdPair> pairs_;
   double fps_ = 30;
   size_t next_ = 0;
   uint64_t index_ = 0;
