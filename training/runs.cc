@@ -1,6 +1,7 @@
 // headcast-train's subcommands.
 #include "training/runs.h"
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -53,7 +54,9 @@ FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const Trainin
     }
     if (s.step % 10 == 0 || last) {
       char figures[96];
-      std::snprintf(figures, sizeof(figures), "loss %.5f  mse %.5f  test PSNR %.2f dB", s.loss, s.mse, last_psnr);
+      int n = std::snprintf(figures, sizeof(figures), "loss %.5f  mse %.5f", s.loss, s.mse);
+      if (!std::isnan(last_psnr))  // none before the first evaluation (or ever, without --eval-every)
+        std::snprintf(figures + n, sizeof(figures) - n, "  test PSNR %.2f dB", last_psnr);
       progress->Show(s.step, figures);
     }
   });

@@ -91,6 +91,11 @@ int main(int argc, char** argv) {
   pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
   pretrain->add_option("--samples-per-ray", g.config.samples_per_ray, "CNeRF samples per ray")->capture_default_str();
+  pretrain
+      ->add_option("--expressions", g.config.num_expression,
+                   "at most this many expression components condition the avatar (fewer if the model has fewer)")
+      ->check(CLI::Range(0, 400))
+      ->capture_default_str();
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
   pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
   pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
@@ -108,6 +113,11 @@ int main(int argc, char** argv) {
   subject->add_option("--data", s.dataset, "dataset folder from prep")->required();
   subject->add_option("--resolution", s.resolution, "output size (crops of this size must be prepared)")
       ->check(CLI::IsMember({128, 256, 512}))
+      ->capture_default_str();
+  subject
+      ->add_option("--expressions", s.config.num_expression,
+                   "with --from-scratch: at most this many expression components condition the avatar")
+      ->check(CLI::Range(0, 400))
       ->capture_default_str();
   subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
   subject

@@ -72,9 +72,10 @@ Eigen::VectorXf FromVector(const std::vector<float>& v) {
 
 }  // namespace
 
-Avatar Avatar::CreateRandom(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
+Avatar Avatar::CreateRandom(const AvatarConfig& requested, const HeadModel& model, const SubjectParams& subject,
                             uint64_t seed) {
-  config.Check();
+  requested.Check();
+  const AvatarConfig config = FitConfigToModel(requested, model);
   CheckSubjectMatches(config, subject, model);
   torch::manual_seed(seed);
   Avatar a;

@@ -28,6 +28,7 @@ AvatarConfig FitConfigToModel(AvatarConfig config, const HeadModel& model);
 class Avatar {
  public:
   // Randomly initialised networks (tests, benchmarks); deterministic for a seed.
+  // The conditioning sizes are cut to the model's (FitConfigToModel).
   static Avatar CreateRandom(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
                              uint64_t seed = 1);
   // Refuses, with a message naming the file, anything that is not an avatar of

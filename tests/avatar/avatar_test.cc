@@ -248,6 +248,31 @@ TEST_F(AvatarFileTest, RefusesOtherVersionsHeadModelsAndBrokenFiles) {
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
 }
 
+// A model with many blendshapes (ICT-FaceKit has 53, named, not ordered by
+// variance): the avatar must be conditioned on all of them, so that the last
+// one (a mouth shape in ICT) still changes what it renders.
+TEST(AvatarRenderer, EveryExpressionComponentOfTheModelConditionsTheAvatar) {
+  HeadModelData d = Builtin()->data();
+  const int e0 = static_cast<int>(d.expressiondirs.cols()), e = 40;
+  d.expressiondirs.conservativeResize(Eigen::NoChange, e);
+  for (int k = e0; k < e; ++k) d.expressiondirs.col(k) = d.expressiondirs.col(k % e0) * 0.5f;
+  d.expression_names.clear();
+  auto many = std::make_shared<const HeadModel>(std::move(d));
+  AvatarConfig c = Tiny();
+  c.num_expression = AvatarConfig().num_expression;  // the default bound, above 40
+  Avatar avatar = Avatar::CreateRandom(c, *many, DefaultSubject(*many, 128), 4);
+  EXPECT_EQ(avatar.config().num_expression, e);
+  AvatarRenderer r(many, std::move(avatar));
+  FrameParams p;
+  p.expression = Eigen::VectorXf::Zero(e);
+  p.SetCamFromHead(FrontalCamFromHead(0.62));
+  cv::Mat neutral, last;
+  ASSERT_TRUE(r.Render(p, &neutral));
+  p.expression[e - 1] = 3.f;
+  ASSERT_TRUE(r.Render(p, &last));
+  EXPECT_GT(cv::norm(neutral, last, cv::NORM_L1), 0) << "the last expression component did not reach the network";
+}
+
 TEST(AvatarRenderer, RendersAndRefusesBadParameters) {
   AvatarRenderer r(Builtin(), Avatar::CreateRandom(Tiny(), *Builtin(), DefaultSubject(*Builtin(), 128)));
   cv::Mat image;

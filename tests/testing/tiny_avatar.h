@@ -8,6 +8,7 @@ namespace headcast::testing {
 inline AvatarConfig TinyAvatarConfig() {
   AvatarConfig c;
   c.output_size = 128;
+  c.num_expression = 13;  // the built-in head's count
   c.feature_channels = 8;
   c.mlp_width = 16;
   c.mlp_layers = 3;
