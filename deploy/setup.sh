@@ -21,8 +21,8 @@ packages=(
   opencv-doc
   # networking
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
-  # display: real window and headless rendering
-  libglfw3-dev libosmesa6-dev libgl-dev xvfb xauth
+  # display: real window and headless rendering (libopengl-dev: CMake's OpenGL::OpenGL target)
+  libglfw3-dev libosmesa6-dev libgl-dev libopengl-dev libglvnd-dev xvfb xauth
   # utilities
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libzip-dev libjemalloc-dev
   # tests and benchmarks

@@ -130,6 +130,19 @@ cv::Mat Crop(const cv::Mat& image, double x0, double y0, double side, int resolu
 
 }  // namespace
 
+void ClearBelowJawLine(const Landmarks2d& lm, cv::Mat* mask) {
+  const Eigen::Vector2d brow = 0.5 * (lm[19] + lm[24]);
+  Eigen::Vector2d down = lm[8] - brow;
+  if (!(down.norm() > 1e-6)) return;
+  down *= 4.0 * (mask->rows + mask->cols) / down.norm();
+  std::vector<cv::Point> polygon;
+  for (int l = 0; l < kNumContourLandmarks; ++l) polygon.emplace_back(cvRound(lm[l].x()), cvRound(lm[l].y()));
+  const Eigen::Vector2d right_end = lm[kNumContourLandmarks - 1] + down, left_end = lm[0] + down;
+  polygon.emplace_back(cvRound(right_end.x()), cvRound(right_end.y()));
+  polygon.emplace_back(cvRound(left_end.x()), cvRound(left_end.y()));
+  cv::fillPoly(*mask, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
+}
+
 nlohmann::json PrepareDataset(const PrepOptions& o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
@@ -234,12 +247,20 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       RasterVertices in_camera;
       TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
       RasterBuffers silhouette;
-      Rasterize(in_camera, model.data().faces, CropIntrinsics(camera, x0, y0, side, r), RasterOptions{}, &silhouette);
+      const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
+      Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
       cv::Mat reach = silhouette.Mask();
       const int radius = static_cast<int>(std::lround(o.mask_margin * r));
       if (radius > 0)
         cv::dilate(reach, reach, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
       cv::bitwise_and(m, reach, m);
+      if (!o.keep_neck) {
+        const RigidTransform cam_from_head = params.CamFromHead();
+        Landmarks2d jaw;
+        for (int l = 0; l < kNumLandmarks; ++l)
+          jaw[l] = crop_camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
+        ClearBelowJawLine(jaw, &m);
+      }
       WriteImage((rd / "masks" / FrameName(n)).string(), m);
     }
   }
@@ -318,7 +339,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
       {"identity", track_report.value("identity", std::string("?"))},
       {"masks", "the tracker's head mask (GrabCut) within the fitted model's silhouette dilated by " +
-                    std::to_string(o.mask_margin) + " of the crop edge"},
+                    std::to_string(o.mask_margin) + " of the crop edge" +
+                    (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
         {"frames", track_report.value("frames", 0)},

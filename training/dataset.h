@@ -15,6 +15,7 @@
 //                       consecutive training frames (prep --interpolate K), training only
 #pragma once
 
+#include <array>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -43,6 +44,9 @@ struct PrepOptions {
   // head model's silhouette dilated by this fraction of the crop edge: pixels
   // the avatar cannot reach (background caught by GrabCut) are not targets.
   double mask_margin = 0.08;
+  // Keep what GrabCut finds below the jaw line (the neck). Off by default: it
+  // finds the neck in some frames only, which no avatar can learn.
+  bool keep_neck = false;
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;
@@ -57,6 +61,13 @@ struct PrepOptions {
 // Runs the tracker, crops, writes DIR; returns the dataset's report (also in dataset.json).
 // Throws with a clear message: no face anywhere, too few fitted frames for the split, unreadable input.
 nlohmann::json PrepareDataset(const PrepOptions& options);
+
+// Clears `mask` (CV_8U) below the jaw line given by landmarks 0..16 (pixels):
+// under the chin and between the jaw's ends, along the face's downward
+// direction (chin minus brows) to beyond the image. GrabCut takes the neck in
+// some frames and not in others; a target that comes and goes with the
+// shirt's colour cannot be learnt, one that stops at the jaw can.
+void ClearBelowJawLine(const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, cv::Mat* mask);
 
 // One real training or test frame at one resolution.
 struct RealSample {

@@ -10,6 +10,7 @@
 #include "common/headmodel/builtin_head.h"
 #include "tests/testing/test_data.h"
 #include "training/avatar_fit.h"
+#include "training/dataset.h"
 #include "training/image_losses.h"
 #include "training/interpolation.h"
 #include <opencv2/imgproc.hpp>
@@ -234,6 +235,37 @@ std::string WriteRenderedDataset(const std::string& name, int frames, int test) 
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", subject.light}}}};
   std::ofstream(dir + "/dataset.json") << manifest.dump(2);
   return dir;
+}
+
+// Training masks stop at the fitted jaw line, upright or with the head rolled:
+// below the chin is cleared, the face and the sides of the head are kept.
+TEST(Dataset, MasksAreClearedBelowTheJawLineOnly) {
+  const PinholeCamera camera = PinholeCamera::FromFovY(256, 256, 25);
+  for (double roll_deg : {0.0, 30.0}) {
+    FrameParams frame;
+    frame.expression = Eigen::VectorXf::Zero(Model().num_expression());
+    RigidTransform cam_from_head = FrontalCamFromHead(0.62);
+    cam_from_head.rotation = Eigen::AngleAxisd(roll_deg * M_PI / 180, Eigen::Vector3d::UnitZ()) * cam_from_head.rotation;
+    frame.SetCamFromHead(cam_from_head);
+    HeadModelOutput posed;
+    Model().Forward(Model().MakeIdentity(Eigen::VectorXd::Zero(Model().num_shape())),
+                    Eigen::VectorXd::Zero(Model().num_expression()), frame.HeadPose(), &posed);
+    std::array<Eigen::Vector2d, kNumLandmarks> lm;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      lm[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
+    cv::Mat mask(256, 256, CV_8U, cv::Scalar(255));
+    ClearBelowJawLine(lm, &mask);
+    auto at = [&](const Eigen::Vector2d& p) { return mask.at<uint8_t>(cvRound(p.y()), cvRound(p.x())); };
+    const Eigen::Vector2d down = (lm[8] - 0.5 * (lm[19] + lm[24])).normalized();
+    SCOPED_TRACE("roll " + std::to_string(roll_deg));
+    EXPECT_EQ(at(lm[8] + 12 * down), 0) << "under the chin";
+    EXPECT_EQ(at(lm[8] + 40 * down), 0) << "the neck";
+    EXPECT_EQ(at(lm[30]), 255) << "the nose";
+    EXPECT_EQ(at(lm[8] - 6 * down), 255) << "the chin itself";
+    const Eigen::Vector2d out = (lm[0] - lm[16]).normalized();
+    EXPECT_EQ(at(lm[0] + 10 * out), 255) << "beside the jaw (ear, hair)";
+    EXPECT_EQ(at(lm[16] - 10 * out), 255) << "beside the jaw (ear, hair)";
+  }
 }
 
 TEST(Dataset, LoadsAndRefusesWhatItCannotUse) {
