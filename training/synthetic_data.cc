@@ -53,7 +53,13 @@ SyntheticSample SyntheticData::Make(std::mt19937_64& rng) const {
   for (float& l : s.subject.light) l *= static_cast<float>(1 + o.light_jitter * u(rng));
   FrameParams& f = s.frame;
   f.expression = Eigen::VectorXf(model_.num_expression());
-  for (int i = 0; i < model_.num_expression(); ++i) f.expression[i] = noisy(o.base_expression * u(rng));
+  const HeadModelData& d = model_.data();
+  for (int i = 0; i < model_.num_expression(); ++i) {
+    f.expression[i] = noisy(o.base_expression * u(rng));
+    // Blendshape models: only coefficients the tracker gives (its soft box), so
+    // the general model learns the conditioning subjects will send.
+    if (d.HasExpressionRange()) f.expression[i] = std::clamp(f.expression[i], d.expression_min, d.expression_max);
+  }
   const double d2r = M_PI / 180;
   f.neck =
       Eigen::Vector3f(static_cast<float>(o.neck_x_deg * d2r * u(rng)), static_cast<float>(o.neck_y_deg * d2r * u(rng)),

@@ -52,6 +52,26 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
   app->add_option("--report", out->report, "the training report (JSON)");
 }
 
+// The network's size, for a new avatar (a fine-tune keeps its general model's).
+// Checked with the rest of the configuration (AvatarConfig::Check).
+void AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string& when) {
+  app->add_option("--expressions", config->num_expression,
+                  when + "at most this many expression components condition the avatar (fewer if the model has fewer)")
+      ->capture_default_str();
+  app->add_option("--mlp-width", config->mlp_width, when + "CNeRF hidden width")->capture_default_str();
+  app->add_option("--mlp-layers", config->mlp_layers, when + "CNeRF layers before the density head")
+      ->capture_default_str();
+  app->add_option_function<std::vector<int>>(
+         "--renderer-channels",
+         [config](const std::vector<int>& ch) {
+           config->renderer_channels = ch;
+           if (!ch.empty()) config->feature_channels = ch[0];  // the feature map enters the renderer
+         },
+         when + "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8)")
+      ->delimiter(',');
+  app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")->capture_default_str();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -91,12 +111,7 @@ int main(int argc, char** argv) {
   pretrain->add_option("--resolution", g.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
-  pretrain->add_option("--samples-per-ray", g.config.samples_per_ray, "CNeRF samples per ray")->capture_default_str();
-  pretrain
-      ->add_option("--expressions", g.config.num_expression,
-                   "at most this many expression components condition the avatar (fewer if the model has fewer)")
-      ->check(CLI::Range(0, 400))
-      ->capture_default_str();
+  AddArchitectureFlags(pretrain, &g.config, "");
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
   pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
   pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
@@ -115,11 +130,7 @@ int main(int argc, char** argv) {
   subject->add_option("--resolution", s.resolution, "output size (crops of this size must be prepared)")
       ->check(CLI::IsMember({128, 256, 512}))
       ->capture_default_str();
-  subject
-      ->add_option("--expressions", s.config.num_expression,
-                   "with --from-scratch: at most this many expression components condition the avatar")
-      ->check(CLI::Range(0, 400))
-      ->capture_default_str();
+  AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
   subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
   subject
       ->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")

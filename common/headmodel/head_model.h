@@ -5,6 +5,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>  // cross products on mesh rows
 #include <array>
+#include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -52,6 +54,13 @@ struct HeadModelData {
   std::vector<std::string> shape_names;       // S names, or empty
   std::vector<std::string> expression_names;  // E names, or empty
   std::vector<std::string> texture_names;     // T names, or empty
+  // The natural range of every expression coefficient, when the model has one:
+  // ICT-FaceKit's ARKit-style blendshapes mean 0..1 (outside, the shapes are
+  // not faces), PCA models (FLAME, built-in) have none (about +-2, METHOD §1).
+  // A fitting prior, not geometry: it is not part of the fingerprint.
+  float expression_min = -std::numeric_limits<float>::infinity();
+  float expression_max = std::numeric_limits<float>::infinity();
+  bool HasExpressionRange() const { return std::isfinite(expression_min) && std::isfinite(expression_max); }
 };
 
 struct HeadModelParams {

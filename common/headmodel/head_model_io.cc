@@ -154,6 +154,11 @@ HeadModel LoadHeadModel(const std::string& path) {
   d.shape_names = in.Strings("shape_names");
   d.expression_names = in.Strings("expression_names");
   d.texture_names = in.Strings("texture_names");
+  if (in.Has("expression_range")) {
+    const std::vector<float> range = in.Get("expression_range", {2}, false).ToFloats();
+    d.expression_min = range[0];
+    d.expression_max = range[1];
+  }
   try {
     return HeadModel(std::move(d));
   } catch (const std::invalid_argument& e) {
@@ -205,6 +210,10 @@ void SaveHeadModel(const HeadModel& model, const std::string& path) {
   if (!d.shape_names.empty()) a["shape_names"] = StringsToNpy(d.shape_names);
   if (!d.expression_names.empty()) a["expression_names"] = StringsToNpy(d.expression_names);
   if (!d.texture_names.empty()) a["texture_names"] = StringsToNpy(d.texture_names);
+  if (d.HasExpressionRange()) {
+    const float range[2] = {d.expression_min, d.expression_max};
+    a["expression_range"] = NpyArray::From<float>({2}, range);
+  }
   WriteNpz(path, a);
 }
 

@@ -16,6 +16,7 @@
 //   dynamic_lmk_bary_coords float (79,17,3)
 //   vt float (V,2), ft int (F,3)        optional UVs (v down, [0,1])
 //   texture_mean float (H,W,3), texture_basis float (H,W,3,T)  optional albedo, RGB in [0,1]
+//   expression_range float (2,)        optional natural [min, max] of every expression coefficient
 //   name, description, shape_names, expression_names, texture_names:
 //                     uint8 UTF-8 text, names one per line (optional)
 #pragma once

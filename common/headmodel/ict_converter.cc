@@ -175,6 +175,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   };
   read_basis(expr_names, &d.expressiondirs);
   d.expression_names = expr_names;
+  d.expression_min = 0;  // ARKit coefficients
+  d.expression_max = 1;
   std::vector<std::string> id_names;
   for (int k = 0; k < options.max_identity; ++k) {
     char name[32];

@@ -18,7 +18,7 @@ void HeadFitterOptions::Check() const {
   OptionsCheck c("HeadFitterOptions");
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
-  c.InRange("expression_limit", expression_limit, 0.1, 5.0);
+  c.InRange("expression_limit", expression_limit, 0.1, 5.0).NonNegative("expression_range_weight", expression_range_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.ThrowIfErrors();
@@ -96,7 +96,40 @@ class PriorCost : public ceres::CostFunction {
   double weight_;
 };
 
+// Zero inside [lo, hi], weight * (distance outside) beyond: a soft box that
+// keeps a blendshape model's coefficients where its shapes are faces without
+// the bounded trust region's cost (about 3x the time per frame).
+class RangeCost : public ceres::CostFunction {
+ public:
+  RangeCost(int size, double lo, double hi, double weight) : lo_(lo), hi_(hi), weight_(weight) {
+    set_num_residuals(size);
+    mutable_parameter_block_sizes()->push_back(size);
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const int n = num_residuals();
+    for (int i = 0; i < n; ++i) residuals[i] = weight_ * (x[0][i] - std::clamp(x[0][i], lo_, hi_));
+    if (jacobians && jacobians[0]) {
+      std::fill(jacobians[0], jacobians[0] + n * n, 0.0);
+      for (int i = 0; i < n; ++i) jacobians[0][i * n + i] = x[0][i] < lo_ || x[0][i] > hi_ ? weight_ : 0.0;
+    }
+    return true;
+  }
+
+ private:
+  double lo_, hi_, weight_;
+};
+
 }  // namespace
+
+void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression) const {
+  if (num_expression_ == 0) return;
+  problem->AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr, expression);
+  const HeadModelData& d = model_.data();
+  if (d.HasExpressionRange() && options_.expression_range_weight > 0)
+    problem->AddResidualBlock(new RangeCost(num_expression_, d.expression_min, d.expression_max,
+                                            std::sqrt(options_.expression_range_weight)),
+                              nullptr, expression);
+}
 
 Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& cam) const {
   const LandmarkBasis b = MakeBasis(frame.ViewPose());
@@ -157,10 +190,7 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
     problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
                              {rotation, translation, expression.data(), jaw});
   }
-  if (num_expression_ > 0) {
-    problem.AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr,
-                             expression.data());
-  }
+  AddExpressionPriors(&problem, expression.data());
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
   ceres::Solver::Options solver;
@@ -235,8 +265,7 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
                                {pose[f].data(), pose[f].data() + 3, expression[f].data(), pose[f].data() + 6,
                                 shape.data(), &log_focal});
     }
-    problem.AddResidualBlock(new PriorCost(std::max(E, 1), std::sqrt(options_.expression_prior)), nullptr,
-                             expression[f].data());
+    AddExpressionPriors(&problem, expression[f].data());
     problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, pose[f].data() + 6);
     if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(pose[f].data() + 6);
     if (E == 0) problem.SetParameterBlockConstant(expression[f].data());

@@ -12,6 +12,10 @@
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 
+namespace ceres {
+class Problem;
+}
+
 namespace headcast {
 
 using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
@@ -23,6 +27,11 @@ struct HeadFitterOptions {
   // stream's limit (FrameParams::IsValid refuses |psi| > 5): beyond it a fit is
   // chasing landmark noise. (Tighter clamps cost landmark accuracy on talking_d9.)
   double expression_limit = 4.5;
+  // Weight of the squared distance of each coefficient outside the model's
+  // natural range (HeadModelData::expression_min/max; ICT: 0..1), against
+  // squared pixels. Without it ICT fits chase landmarks with eye-look and jaw
+  // blendshapes at -4..+4, which no avatar can be conditioned on.
+  double expression_range_weight = 100;
   double jaw_prior = 10;           // weight of |jaw|^2 (radians^2)
   double contour_weight = 0.5;     // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;         // Levenberg-Marquardt iterations per frame
@@ -71,6 +80,8 @@ class HeadFitter {
   // For the current identity; or, with `shape_free`, for the template with the
   // shape directions too (identity calibration, where shape is an unknown).
   LandmarkBasis MakeBasis(const PoseVector& pose, bool shape_free = false) const;
+  // The expression regulariser and, for models with a natural range, the soft box.
+  void AddExpressionPriors(ceres::Problem* problem, double* expression) const;
   const HeadModel& model_;
   HeadFitterOptions options_;
   HeadIdentity identity_;

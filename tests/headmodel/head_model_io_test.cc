@@ -54,6 +54,16 @@ TEST_F(HeadModelIo, RoundTripsExactly) {
   const HeadModelParams p = testing::RandomParams(Builtin(), 9);
   EXPECT_EQ((loaded.Forward(p).vertices - Builtin().Forward(p).vertices).cwiseAbs().maxCoeff(), 0.f);
   EXPECT_EQ(LoadHeadModelSpec("builtin").fingerprint(), Builtin().fingerprint());
+  EXPECT_FALSE(loaded.data().HasExpressionRange());  // PCA-style: no range, none written
+}
+
+TEST_F(HeadModelIo, ExpressionRangeIsCheckedWhenPresent) {
+  const std::string p = Edited("range", [](NpzArchive* a) {
+    const float backwards[2] = {1.f, 0.f};
+    (*a)["expression_range"] = NpyArray::From<float>({2}, backwards);
+  });
+  const std::string e = LoadError(p);
+  EXPECT_NE(e.find("expression_range"), std::string::npos) << e;
 }
 
 TEST_F(HeadModelIo, MissingKey) {

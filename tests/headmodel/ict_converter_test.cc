@@ -71,6 +71,8 @@ TEST(IctConverter, PartsRestrictionAndRoundTrip) {
   const HeadModel back = LoadHeadModel(path);
   EXPECT_EQ(back.fingerprint(), small.fingerprint());
   EXPECT_EQ(back.data().expression_names, small.data().expression_names);
+  EXPECT_EQ(back.data().expression_min, 0.f);  // ARKit coefficients, kept by the file
+  EXPECT_EQ(back.data().expression_max, 1.f);
   // Landmarks survive the reindexing.
   EXPECT_LT(
       (back.Forward(HeadModelParams{}).landmarks - Ict().Forward(HeadModelParams{}).landmarks).cwiseAbs().maxCoeff(),

@@ -33,6 +33,7 @@ double AngleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
 
 struct RecoveryErrors {
   double angle_deg = 0, lateral_m = 0, depth_m = 0, reprojection_px = 0;
+  double outside_range = 0;  // the farthest a fitted coefficient lies outside the model's expression range
 };
 
 // Projects known heads' landmarks (+1 px noise) and fits them cold, then warm;
@@ -71,10 +72,16 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     double mean = 0;
     for (int l = 0; l < kNumLandmarks; ++l) mean += (reprojected[l] - clean[l]).norm() / kNumLandmarks;
     worst.reprojection_px = std::max(worst.reprojection_px, mean);  // mean over the 68, worst frame
+    for (float e : fit.expression)
+      worst.outside_range = std::max<double>(
+          worst.outside_range,
+          std::max(model.data().expression_min - e, e - model.data().expression_max));  // -inf for PCA models
   }
-  std::printf("%s, worst of %d: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px\n",
-              model.data().name.c_str(), trials, worst.angle_deg, 1e3 * worst.lateral_m, 1e3 * worst.depth_m,
-              worst.reprojection_px);
+  std::printf(
+      "%s, worst of %d: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px, %.3f outside the "
+      "expression range\n",
+      model.data().name.c_str(), trials, worst.angle_deg, 1e3 * worst.lateral_m, 1e3 * worst.depth_m,
+      worst.reprojection_px, worst.outside_range);
   return worst;
 }
 
@@ -99,6 +106,20 @@ TEST(HeadFitter, RecoversIctFaceKitHeads) {
   EXPECT_LT(worst.angle_deg, 2.0);
   EXPECT_LT(worst.lateral_m, 0.002);
   EXPECT_LT(worst.depth_m, 0.015);
+  EXPECT_LT(worst.reprojection_px, 1.5);
+  EXPECT_LT(worst.outside_range, 0.1);  // ARKit coefficients stay in 0..1 (a soft box: measured 0.08)
+}
+
+// A model that declares a natural expression range (as ICT's blendshapes do)
+// gets fits inside it: the built-in head with its coefficients declared 0..1.
+TEST(HeadFitter, KeepsExpressionsInTheModelsRange) {
+  HeadModelData d = Model().data();
+  d.expression_min = 0;
+  d.expression_max = 1;
+  const HeadModel boxed(std::move(d));
+  const RecoveryErrors worst = RecoverSyntheticHeads(boxed, 10, true);
+  EXPECT_LT(worst.outside_range, 0.1);  // a soft box: measured 0.08
+  EXPECT_LT(worst.angle_deg, 1.0);
   EXPECT_LT(worst.reprojection_px, 1.5);
 }
 

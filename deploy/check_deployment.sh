@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# Checks the deployment files on a fresh Debian 12, with Docker:
+#   1. builds the image from deploy/Dockerfile (a clean clone of HEAD, so
+#      nothing from this checkout's build/ or out/ leaks in);
+#   2. runs deploy/demo.sh inside it, as a newcomer would (offscreen), and
+#      copies its outputs to OUT/demo;
+#   3. boots a container with systemd as PID 1, installs the receiver exactly as
+#      deploy/systemd/headcast-receiver.service says (system user, the example
+#      config, certificates from deploy/make_certs.sh, a token), starts the
+#      unit, and drives it with a sender over TLS with the token on loopback.
+#
+#   deploy/check_deployment.sh OUT [BASE_IMAGE]
+#
+# BASE_IMAGE defaults to debian:12. Without a registry, make it from Debian's
+# archive:  debootstrap --variant=minbase bookworm ROOT && tar -C ROOT -c . | docker import - debian:12
+# The container uses the host's network (loopback only): port 50051 must be free.
+set -euo pipefail
+out=$(mkdir -p "${1:?usage: check_deployment.sh OUT [BASE_IMAGE]}" && cd "$1" && pwd)
+base=${2:-debian:12}
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+say() { echo "check_deployment: $*" >&2; }
+
+clone=$(mktemp -d)
+trap 'rm -rf "$clone"; docker rm -f headcast-systemd-check >/dev/null 2>&1 || true' EXIT
+git clone -q "$root" "$clone/headcast"
+[ "$base" = debian:12 ] || sed -i "s|^FROM debian:12|FROM $base|" "$clone/headcast/deploy/Dockerfile"
+
+say "1. docker build (Debian 12, setup.sh installs and builds everything)"
+start=$(date +%s)
+docker build --network host -f "$clone/headcast/deploy/Dockerfile" -t headcast:check "$clone/headcast" \
+  > "$out/docker_build.log" 2>&1 || { tail -20 "$out/docker_build.log" >&2; exit 1; }
+say "   built in $(($(date +%s) - start)) s (log: $out/docker_build.log)"
+
+say "2. deploy/demo.sh inside the image"
+docker run --rm --network host -v "$out:/check" --entrypoint bash headcast:check -c \
+  'deploy/demo.sh --out /check/demo' > "$out/demo.log" 2>&1 || { tail -20 "$out/demo.log" >&2; exit 1; }
+tail -12 "$out/demo.log" >&2
+
+say "3. the receiver as a systemd service"
+docker build --network host -t headcast:check-systemd - > "$out/systemd_image.log" 2>&1 <<'EOF' ||
+FROM headcast:check
+RUN apt-get update && apt-get install -y --no-install-recommends systemd systemd-sysv && rm -rf /var/lib/apt/lists/*
+ENTRYPOINT ["/lib/systemd/systemd"]
+EOF
+  { tail -20 "$out/systemd_image.log" >&2; exit 1; }
+docker run -d --name headcast-systemd-check --privileged --cgroupns=host -v /sys/fs/cgroup:/sys/fs/cgroup:rw \
+  --network host --tmpfs /run --tmpfs /run/lock headcast:check-systemd > /dev/null
+in_box() { docker exec headcast-systemd-check bash -c "$1"; }
+for _ in $(seq 30); do in_box 'systemctl is-system-running 2>/dev/null | grep -qE "running|degraded"' && break; sleep 1; done
+# The unit file's own install steps, then certificates and a token.
+in_box 'set -e; cd /opt/headcast
+  useradd --system --home /var/lib/headcast headcast
+  install -d -o headcast /etc/headcast /var/lib/headcast
+  cp deploy/examples/receiver.toml /etc/headcast/receiver.toml
+  deploy/make_certs.sh /etc/headcast/certs localhost 127.0.0.1 > /dev/null
+  chown -R headcast /etc/headcast/certs
+  echo check-token > /etc/headcast/tokens.txt
+  cp deploy/systemd/headcast-receiver.service /etc/systemd/system/
+  systemctl daemon-reload && systemctl enable --now headcast-receiver' > "$out/systemd.log" 2>&1
+sleep 3
+in_box 'systemctl is-active headcast-receiver' >> "$out/systemd.log" 2>&1 || {
+  in_box 'journalctl -u headcast-receiver --no-pager | tail -20' >&2; exit 1; }
+in_box 'cd /opt/headcast && build/bin/headcast-sender --target localhost:50051 --tls-ca /etc/headcast/certs/ca.pem \
+  --token check-token --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
+in_box 'systemctl stop headcast-receiver; cat /var/lib/headcast/receiver_stats.json' > "$out/receiver_stats.json"
+in_box 'journalctl -u headcast-receiver --no-pager' > "$out/journal.log" 2>&1 || true
+in_box 'cat /tmp/sender.json' > "$out/sender.json"
+python3 - "$out" <<'EOF'
+import json, sys
+out = sys.argv[1]
+rx = json.load(open(out + "/receiver_stats.json"))
+tx = json.load(open(out + "/sender.json"))
+print(f"check_deployment: the service took {rx['sessions_started']} TLS session(s) with the token, received "
+      f"{rx['frames_received']} of the {tx['frames_sent']} frames sent ({rx['frames_bad']} bad), rendered {rx['rendered']}",
+      file=sys.stderr)
+sys.exit(0 if rx["sessions_started"] >= 1 and rx["frames_received"] == tx["frames_sent"] > 0 and rx["rendered"] > 0 else 1)
+EOF
+say "done: $out (docker_build.log, demo/, demo.log, systemd.log, journal.log, receiver_stats.json, sender.json)"
