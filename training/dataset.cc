@@ -239,13 +239,13 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     const FrameParams& params = fitted[next - 1];
     HeadModelOutput posed;
     model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
+    RasterVertices in_camera;
+    TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
       WriteImage((rd / "images" / FrameName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
-      RasterVertices in_camera;
-      TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
       RasterBuffers silhouette;
       const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
       Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
@@ -254,13 +254,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       if (radius > 0)
         cv::dilate(reach, reach, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
       cv::bitwise_and(m, reach, m);
-      if (!o.keep_neck) {
-        const RigidTransform cam_from_head = params.CamFromHead();
-        Landmarks2d jaw;
-        for (int l = 0; l < kNumLandmarks; ++l)
-          jaw[l] = crop_camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
-        ClearBelowJawLine(jaw, &m);
-      }
+      if (!o.keep_neck) ClearBelowJawLine(fitter.Project(params, crop_camera), &m);
       WriteImage((rd / "masks" / FrameName(n)).string(), m);
     }
   }

@@ -132,8 +132,7 @@ void PretrainOptions::Check() const {
 nlohmann::json RunPretrain(PretrainOptions o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
-  o.config.output_size = o.resolution;
-  o.config = FitConfigToModel(o.config, model);
+  o.config.output_size = o.resolution;  // CreateRandom fits the conditioning sizes to the model
   const SubjectParams base = DefaultSubject(model, o.resolution);
   Avatar avatar = o.init.empty() ? Avatar::CreateRandom(o.config, model, base, o.fit.seed)
                                  : Avatar::Load(o.init, model).WithRuntimeSwitches(o.config);
@@ -197,7 +196,6 @@ nlohmann::json RunSubject(SubjectOptions o) {
   Avatar avatar = [&] {
     if (o.from_scratch) {
       o.config.output_size = o.resolution;
-      o.config = FitConfigToModel(o.config, model);
       return Avatar::CreateRandom(o.config, model, subject, o.fit.seed);
     }
     Avatar general = Avatar::Load(o.general, model);

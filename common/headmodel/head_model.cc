@@ -160,7 +160,7 @@ void HeadModel::Validate() const {
     Invalid("shape_names", "count differs from shapedirs components");
   if (!d.expression_names.empty() && static_cast<Eigen::Index>(d.expression_names.size()) != d.expressiondirs.cols())
     Invalid("expression_names", "count differs from expressiondirs components");
-  if (std::isnan(d.expression_min) || std::isnan(d.expression_max) || !(d.expression_min < d.expression_max))
+  if (!(d.expression_min < d.expression_max))  // false for NaN too
     Invalid("expression_range", "needs min < max");
 }
 
