@@ -39,6 +39,7 @@ void FitOptions::Check() const {
   c.InRange("iterations", iterations, 0, 100000000)
       .InRange("batch", batch, 1, 4096)
       .Positive("learning_rate", learning_rate)
+      .InRange("final_lr_fraction", final_lr_fraction, 1e-4, 1.0)
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
       .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
@@ -49,6 +50,11 @@ void FitOptions::Check() const {
   loss.Check();
   mix.Check();
   distributed.Check();
+}
+
+double FitOptions::LearningRateAt(int step) const {
+  if (iterations <= 1) return learning_rate;
+  return learning_rate * std::pow(final_lr_fraction, static_cast<double>(step) / (iterations - 1));
 }
 
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
@@ -244,6 +250,8 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
     modules.train();
     std::uniform_real_distribution<double> u01(0, 1);
     const double p_synthetic = !data.real ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
+    for (auto& group : adam.param_groups())
+      static_cast<torch::optim::AdamOptions&>(group.options()).lr(options.LearningRateAt(step));
     adam.zero_grad();
     StepInfo info;
     info.step = step;

@@ -42,7 +42,13 @@ struct LossOptions {
 struct FitOptions {
   int iterations = 500;         // optimiser steps
   int batch = 4;                // samples per step (gradients accumulated)
-  double learning_rate = 2e-3;  // Adam
+  double learning_rate = 2e-3;  // Adam, at the first step
+  // The rate falls exponentially to learning_rate * final_lr_fraction at the
+  // last step (NeRF's schedule): the late, small steps settle the fine detail
+  // a constant rate keeps shaking. A function of the step alone, so a resumed
+  // run continues on the same curve. 1 keeps it constant.
+  double final_lr_fraction = 0.1;
+  double LearningRateAt(int step) const;
   uint64_t seed = 1;            // ray jitter, mixing, augmentation
   LossOptions loss;
   MixSchedule mix;               // used when both synthetic and real data are given

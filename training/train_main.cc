@@ -19,7 +19,10 @@ using namespace headcast;
 void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
   app->add_option("--iterations", fit->iterations, "optimiser steps")->capture_default_str();
   app->add_option("--batch", fit->batch, "samples per step")->capture_default_str();
-  app->add_option("--lr", fit->learning_rate, "Adam learning rate")->capture_default_str();
+  app->add_option("--lr", fit->learning_rate, "Adam learning rate at the first step")->capture_default_str();
+  app->add_option("--final-lr", fit->final_lr_fraction,
+                  "learning rate at the last step as a fraction of --lr (exponential decay; 1 = constant)")
+      ->capture_default_str();
   app->add_option("--seed", fit->seed, "random seed");
   app->add_option("--vgg", fit->loss.vgg_path,
                   "VGG16 TorchScript file for the perceptual term (else 1 - SSIM stands in for it)");

@@ -32,9 +32,46 @@ double AngleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
 }
 
 struct RecoveryErrors {
-  double angle_deg = 0, lateral_m = 0, depth_m = 0, reprojection_px = 0;
+  double angle_deg = 0, lateral_m = 0, depth_m = 0, reprojection_px = 0;  // the worst trial
   double outside_range = 0;  // the farthest a fitted coefficient lies outside the model's expression range
+  double angle_rms_deg = 0, depth_rms_m = 0;  // root mean square over the trials
+  // The Cramer-Rao bound at the true parameters (RMS over the trials): the
+  // least standard deviation any fit of these landmarks with this noise, these
+  // free parameters and this expression prior can have.
+  double angle_bound_deg = 0, depth_bound_m = 0;
 };
+
+// Information about the pose in 68 landmarks with 1 px noise: the inverse of
+// the Fisher matrix J^T J (+ the priors' curvature, as the fit weighs them) of
+// the projection with respect to rotation, translation, expression and jaw.
+void CramerRaoBound(const HeadFitter& fitter, const HeadModel& model, const FrameParams& truth,
+                    const PinholeCamera& cam, double* angle_sigma_deg, double* depth_sigma_m) {
+  const HeadFitterOptions& o = fitter.options();
+  const int E = static_cast<int>(truth.expression.size());
+  const int P = 6 + E + (model.JointIsArticulated(kJawJoint) ? 3 : 0);
+  auto param = [E](FrameParams& f, int i) -> float& {
+    if (i < 3) return f.cam_rotation[i];
+    if (i < 6) return f.cam_translation[i - 3];
+    if (i < 6 + E) return f.expression[i - 6];
+    return f.jaw[i - 6 - E];
+  };
+  Eigen::MatrixXd J(2 * kNumLandmarks, P);
+  for (int i = 0; i < P; ++i) {
+    FrameParams plus = truth, minus = truth;
+    const float h = i >= 3 && i < 6 ? 1e-4f : 1e-3f;  // metres; radians and coefficients
+    param(plus, i) += h;
+    param(minus, i) -= h;
+    const Landmarks2d a = fitter.Project(plus, cam), b = fitter.Project(minus, cam);
+    for (int l = 0; l < kNumLandmarks; ++l)
+      J.block<2, 1>(2 * l, i) = (l < kNumContourLandmarks ? o.contour_weight : 1.0) * (a[l] - b[l]) / (2.0 * h);
+  }
+  Eigen::MatrixXd fisher = J.transpose() * J;
+  for (int k = 6; k < 6 + E; ++k) fisher(k, k) += o.expression_prior;
+  for (int k = 6 + E; k < P; ++k) fisher(k, k) += o.jaw_prior;
+  const Eigen::MatrixXd covariance = fisher.inverse();
+  *angle_sigma_deg = std::sqrt(covariance.topLeftCorner<3, 3>().trace()) * 180 / M_PI;
+  *depth_sigma_m = std::sqrt(covariance(5, 5));
+}
 
 // Projects known heads' landmarks (+1 px noise) and fits them cold, then warm;
 // the worst errors over the trials. Blendshape models (ICT) get expressions in [0, 0.8].
@@ -64,10 +101,17 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     EXPECT_TRUE(r.ok);
     FitResult again = fitter.Fit(observed, cam, &fit);  // a warm-started frame
     EXPECT_TRUE(again.ok);
-    worst.angle_deg = std::max(worst.angle_deg, AngleDeg(fit.cam_rotation, truth.cam_rotation));
+    const double angle = AngleDeg(fit.cam_rotation, truth.cam_rotation);
+    worst.angle_deg = std::max(worst.angle_deg, angle);
     const Eigen::Vector3f dt = fit.cam_translation - truth.cam_translation;
     worst.lateral_m = std::max<double>(worst.lateral_m, dt.head<2>().norm());
     worst.depth_m = std::max<double>(worst.depth_m, std::abs(dt.z()));
+    double angle_bound, depth_bound;
+    CramerRaoBound(fitter, model, truth, cam, &angle_bound, &depth_bound);
+    worst.angle_rms_deg += angle * angle / trials;
+    worst.depth_rms_m += dt.z() * dt.z() / trials;
+    worst.angle_bound_deg += angle_bound * angle_bound / trials;
+    worst.depth_bound_m += depth_bound * depth_bound / trials;
     const Landmarks2d reprojected = fitter.Project(fit, cam);
     double mean = 0;
     for (int l = 0; l < kNumLandmarks; ++l) mean += (reprojected[l] - clean[l]).norm() / kNumLandmarks;
@@ -77,11 +121,15 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
           worst.outside_range,
           std::max(model.data().expression_min - e, e - model.data().expression_max));  // -inf for PCA models
   }
+  for (double* rms : {&worst.angle_rms_deg, &worst.depth_rms_m, &worst.angle_bound_deg, &worst.depth_bound_m})
+    *rms = std::sqrt(*rms);
   std::printf(
       "%s, worst of %d: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px, %.3f outside the "
-      "expression range\n",
+      "expression range\n  RMS over the trials: angle %.2f deg, depth %.2f mm; Cramer-Rao bound (RMS sigma): angle "
+      "%.2f deg, depth %.2f mm\n",
       model.data().name.c_str(), trials, worst.angle_deg, 1e3 * worst.lateral_m, 1e3 * worst.depth_m,
-      worst.reprojection_px, worst.outside_range);
+      worst.reprojection_px, worst.outside_range, worst.angle_rms_deg, 1e3 * worst.depth_rms_m,
+      worst.angle_bound_deg, 1e3 * worst.depth_bound_m);
   return worst;
 }
 
@@ -89,9 +137,14 @@ TEST(HeadFitter, RecoversPoseAndExpressionFromNoisyLandmarks) {
   const RecoveryErrors worst = RecoverSyntheticHeads(Model(), 10, false);
   EXPECT_LT(worst.angle_deg, 1.0);
   EXPECT_LT(worst.lateral_m, 0.001);
-  // Depth is the weak direction of a monocular fit: measured 6-7 mm worst at
-  // 0.6 m, insensitive to the expression prior (0.01..1) and the Huber scale;
-  // the 5 mm goal is not met yet.
+  // Depth is the weak direction of a monocular fit. At 0.6 m in a 640x480,
+  // 45-degree camera, 1 px noise leaves the depth a standard deviation of
+  // 2.3-3.8 mm however it is fitted (the Cramer-Rao bound per trial), so a
+  // worst of ten within 5 mm is beyond what the landmarks hold (measured 7.2 mm;
+  // unchanged by expression priors 0.01..30). What the fit can do is reach
+  // the bound: its RMS depth error sits at it (measured 3.15 against 2.98 mm).
+  EXPECT_LT(worst.depth_rms_m, 0.005);
+  EXPECT_LT(worst.depth_rms_m, 1.25 * worst.depth_bound_m);
   EXPECT_LT(worst.depth_m, 0.008);
   EXPECT_LT(worst.reprojection_px, 1.5);
 }
@@ -102,7 +155,11 @@ TEST(HeadFitter, RecoversIctFaceKitHeads) {
   io.folder = testing::DataDir() + "/head-models/ict-facekit";
   const HeadModel ict = ConvertIctFaceKit(io);
   const RecoveryErrors worst = RecoverSyntheticHeads(ict, 10, true);
-  // Measured 1.5 deg and 6 mm depth (worst of 10): the 1 deg / 5 mm goals are not met for ICT yet.
+  // 53 blendshapes absorb more of the noise than the built-in head's PCA:
+  // worst of ten measured 1.52 deg and 5.1 mm, RMS 0.76 deg and 2.9 mm, below
+  // the unbiased bound (1.29 deg, 4.49 mm) because the 0..1 box adds information.
+  EXPECT_LT(worst.angle_rms_deg, 1.0);
+  EXPECT_LT(worst.depth_rms_m, 0.005);
   EXPECT_LT(worst.angle_deg, 2.0);
   EXPECT_LT(worst.lateral_m, 0.002);
   EXPECT_LT(worst.depth_m, 0.015);

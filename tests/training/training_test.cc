@@ -59,6 +59,7 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   f.iterations = 40;
   f.batch = 2;
   f.learning_rate = 5e-3;
+  f.final_lr_fraction = 1;  // 40 steps of a tiny network need the whole rate throughout
   const FitResult r = FitOnSynthetic(avatar, Model(), data, f);
   ASSERT_EQ(r.steps.size(), 40u);
   const float first = (r.steps[0].loss + r.steps[1].loss + r.steps[2].loss) / 3, last = (r.steps[37].loss + r.steps[38].loss + r.steps[39].loss) / 3;
@@ -66,6 +67,15 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   const EvalResult after = EvaluateOnSynthetic(avatar, Model(), data, 4);
   EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
   EXPECT_GT(r.samples_per_s, 0);
+}
+
+// Stands for a crash (or kill -9) right after step n: the progress callback
+// runs after that step's checkpoint was written.
+struct Crash {};
+std::function<void(const StepInfo&)> CrashAfter(int n) {
+  return [n](const StepInfo& s) {
+    if (s.step + 1 == n) throw Crash{};
+  };
 }
 
 // Checkpoints: a run stopped after 3 steps and resumed (into an avatar with
@@ -83,10 +93,8 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   ASSERT_EQ(all.steps.size(), 6u);
 
   f.checkpoint_dir = testing::TempDir("ckpt_resumed");
-  f.iterations = 3;
   Avatar first = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
-  FitOnSynthetic(first, Model(), data, f);
-  f.iterations = 6;
+  EXPECT_THROW(FitOnSynthetic(first, Model(), data, f, CrashAfter(3)), Crash);
   f.resume = true;
   Avatar second = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 99);  // other weights
   const FitResult rest = FitOnSynthetic(second, Model(), data, f);
@@ -135,6 +143,22 @@ TEST(MixSchedule, FollowsMethodEquation9) {
   EXPECT_NEAR(subject.SyntheticProbability(500), 0.25, 1e-12);
   EXPECT_THROW((MixSchedule{10, 10, 0.0, 0.25}.Check()), std::invalid_argument);
   EXPECT_THROW((MixSchedule{0, 10, 0.5, 0.25}.Check()), std::invalid_argument);
+}
+
+TEST(FitOptions, LearningRateFallsExponentiallyToItsFinalFraction) {
+  FitOptions f;
+  f.iterations = 1001;
+  f.learning_rate = 2e-3;
+  f.final_lr_fraction = 0.01;
+  EXPECT_DOUBLE_EQ(f.LearningRateAt(0), 2e-3);
+  EXPECT_NEAR(f.LearningRateAt(500), 2e-4, 1e-12);  // half way: sqrt(0.01)
+  EXPECT_NEAR(f.LearningRateAt(1000), 2e-5, 1e-12);
+  f.final_lr_fraction = 1;
+  EXPECT_DOUBLE_EQ(f.LearningRateAt(700), 2e-3);
+  f.final_lr_fraction = 0;
+  EXPECT_THROW(f.Check(), std::invalid_argument);
+  f.final_lr_fraction = 1.5;
+  EXPECT_THROW(f.Check(), std::invalid_argument);
 }
 
 TEST(ImageLosses, SsimAndPsnr) {
@@ -344,10 +368,8 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   EXPECT_GT(synthetic_samples, 0);
   EXPECT_LT(synthetic_samples, 12);
   g.checkpoint_dir = testing::TempDir("ckpt_real_split");
-  g.iterations = 3;
   Avatar first = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
-  TrainAvatar(first, Model(), TrainingData{&synthetic, &real}, g);
-  g.iterations = 6;
+  EXPECT_THROW(TrainAvatar(first, Model(), TrainingData{&synthetic, &real}, g, CrashAfter(3)), Crash);
   g.resume = true;
   Avatar second = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 9);
   const FitResult rest = TrainAvatar(second, Model(), TrainingData{&synthetic, &real}, g);
