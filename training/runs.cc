@@ -260,6 +260,7 @@ void EvalOptions::Check() const {
   c.That(!avatar.empty(), "avatar is required").That(!dataset.empty(), "dataset is required");
   c.That(!out_dir.empty(), "out_dir is required").NonNegative("max_frames", max_frames);
   c.InRange("orbit_frames", orbit_frames, 0, 10000).InRange("orbit_deg", orbit_deg, 0.0, 90.0);
+  c.That(split == "test" || split == "train", "split must be test or train, not '" + split + "'");
   c.ThrowIfErrors();
 }
 
@@ -267,9 +268,19 @@ nlohmann::json RunEval(const EvalOptions& o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   Avatar avatar = Avatar::Load(o.avatar, model);
-  const PreparedDataset data = PreparedDataset::Load(o.dataset, model, avatar.config().output_size);
-  std::vector<int> positions = data.test().empty() ? data.train() : data.test();
-  if (o.max_frames > 0 && static_cast<int>(positions.size()) > o.max_frames) positions.resize(o.max_frames);
+  const PreparedDataset data =
+      PreparedDataset::Load(o.dataset, model, avatar.config().output_size, /*interpolated=*/false);
+  const bool on_test = o.split == "test" && !data.test().empty();
+  std::vector<int> positions = on_test ? data.test() : data.train();
+  if (o.max_frames > 0 && static_cast<int>(positions.size()) > o.max_frames) {
+    if (on_test) {
+      positions.resize(o.max_frames);  // the first of the held-out frames, as always
+    } else {
+      std::vector<int> spread(o.max_frames);  // across the whole training span
+      for (int k = 0; k < o.max_frames; ++k) spread[k] = positions[k * positions.size() / o.max_frames];
+      positions = spread;
+    }
+  }
   fs::create_directories(o.out_dir);
   const fs::path dir = o.out_dir;
   const SubjectParams& subject = avatar.subject();
@@ -308,7 +319,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
         {"avatar", o.avatar},
         {"dataset", o.dataset},
         {"resolution", avatar.config().output_size},
-        {"eval", EvalJson(e, data.test().empty() ? "training frames" : "test split")},
+        {"eval", EvalJson(e, on_test ? "test split" : "training frames")},
         {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};

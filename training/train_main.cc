@@ -21,7 +21,7 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
   app->add_option("--batch", fit->batch, "samples per step")->capture_default_str();
   app->add_option("--lr", fit->learning_rate, "Adam learning rate at the first step")->capture_default_str();
   app->add_option("--final-lr", fit->final_lr_fraction,
-                  "learning rate at the last step as a fraction of --lr (exponential decay; 1 = constant)")
+                  "learning rate at the last step as a fraction of --lr (exponential fall; 1 = constant)")
       ->capture_default_str();
   app->add_option("--seed", fit->seed, "random seed");
   app->add_option("--vgg", fit->loss.vgg_path,
@@ -149,7 +149,10 @@ int main(int argc, char** argv) {
   eval->add_option("--avatar", e.avatar, ".hcavatar")->required();
   eval->add_option("--data", e.dataset, "dataset folder from prep")->required();
   eval->add_option("--out", e.out_dir, "folder for eval.json, per_frame.csv and the videos")->required();
-  eval->add_option("--max-frames", e.max_frames, "evaluate at most N test frames");
+  eval->add_option("--max-frames", e.max_frames, "evaluate at most N frames");
+  eval->add_option("--split", e.split, "test (held-out frames) or train (real training frames)")
+      ->check(CLI::IsMember({"test", "train"}))
+      ->capture_default_str();
   eval->add_option("--drive", e.drive, "a recording (.hcrec) whose expressions drive transfer.mp4");
   eval->add_flag("--write-frames", e.write_frames, "also write the ground-truth and avatar frames (PNG) under OUT/frames");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();

@@ -78,6 +78,15 @@ interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
   ok "interpolation: 11 in-between frames for 12 training frames, trained on, never tested on" ||
   bad "interpolation: $interp frames, $(json "$tmp/i.json" "j['interpolated_frames']")"
 
+# eval --split train: the real training frames only (never the in-between ones); a bad split is refused.
+"$bin/headcast-train" eval --avatar "$tmp/i.hcavatar" --data "$tmp/dsi" --out "$tmp/evt" --split train \
+  --orbit-frames 0 > /dev/null 2> "$tmp/evt.err"
+[ "$(json "$tmp/evt/eval.json" "j['eval']['frames']")" = 12 ] &&
+  [ "$(json "$tmp/evt/eval.json" "j['eval']['on']")" = "training frames" ] &&
+  ok "eval --split train: the 12 real training frames" || bad "eval --split train: $(tail -3 "$tmp/evt.err")"
+out=$("$bin/headcast-train" eval --avatar "$tmp/i.hcavatar" --data "$tmp/dsi" --out "$tmp/evx" --split all 2>&1)
+[ $? -ne 0 ] && grep -q "split" <<<"$out" && ok "eval --split all refused" || bad "split all: $out"
+
 # Bad inputs: clear errors, exit status 1.
 refused() {  # refused WHAT EXPECTED-TEXT COMMAND...
   local what=$1 expected=$2
