@@ -44,7 +44,8 @@ void FitOptions::Check() const {
       .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
       .InRange("z_scale_min", z_scale_min, 0.3, 1.0)
-      .InRange("z_scale_max", z_scale_max, 1.0, 3.0);
+      .InRange("z_scale_max", z_scale_max, 1.0, 3.0)
+      .InRange("threads", threads, 0, 256);
   c.That(!resume || !checkpoint_dir.empty(), "resume needs a checkpoint_dir");
   c.ThrowIfErrors();
   loss.Check();
@@ -218,6 +219,7 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
   if (data.real && data.real->resolution() != config.output_size)
     throw std::invalid_argument("TrainAvatar: dataset crops are " + std::to_string(data.real->resolution()) +
                                 " pixels, the avatar renders " + std::to_string(config.output_size));
+  if (options.threads > 0) torch::set_num_threads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
   std::vector<torch::Tensor> params;

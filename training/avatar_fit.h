@@ -74,6 +74,7 @@ struct FitOptions {
   // b), so any number of ranks trains exactly what one process would. Rank 0
   // writes the checkpoints; every rank resumes from the same folder.
   DistributedOptions distributed;
+  int threads = 0;  // libtorch intra-op threads of this process (0: libtorch's choice)
   void Check() const;
 };
 

@@ -92,7 +92,8 @@ nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
       {"first_step", r.first_step},
       {"final_loss", r.steps.empty() ? 0.f : r.steps.back().loss},
       {"perceptual_term", r.perceptual == "ssim" ? "1 - SSIM (no VGG16 file given; the substitute)" : r.perceptual},
-      {"processes", f.distributed.world_size}};
+      {"processes", f.distributed.world_size},
+      {"threads_per_process", f.threads}};
   if (real) {  // only real frames are augmented and get offsets
     j["z_augmentation"] = f.z_augmentation;
     j["learned_offsets"] = f.learn_offsets;

@@ -6,8 +6,10 @@
 //   plot      CSV logs of several runs in one picture
 #include <CLI/CLI.hpp>
 #include <iostream>
+#include <memory>
 
 #include "common/core/log.h"
+#include "training/local_ranks.h"
 #include "training/run_report.h"
 #include "training/runs.h"
 
@@ -16,7 +18,7 @@ namespace {
 using namespace headcast;
 
 // Flags every training subcommand has: optimiser, loss, checkpoints, outputs.
-void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
+void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* processes) {
   app->add_option("--iterations", fit->iterations, "optimiser steps")->capture_default_str();
   app->add_option("--batch", fit->batch, "samples per step")->capture_default_str();
   app->add_option("--lr", fit->learning_rate, "Adam learning rate at the first step")->capture_default_str();
@@ -38,6 +40,15 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out) {
                   "checkpoint here (atomically) every --checkpoint-every steps");
   app->add_option("--checkpoint-every", fit->checkpoint_every, "steps between checkpoints")->capture_default_str();
   app->add_flag("--resume", fit->resume, "continue from the latest checkpoint in --checkpoint-dir, if any");
+  app->add_option("--processes", *processes,
+                  "data parallel on this machine: start this many processes of one thread each (2 on 2 cores "
+                  "trains ~2x faster than 1)")
+      ->check(CLI::Range(1, 64))
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+      ->capture_default_str();
+  app->add_option("--threads", fit->threads, "libtorch threads of this process (0: libtorch's choice)")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+      ->capture_default_str();
   app->add_option("--rank", fit->distributed.rank, "data parallel: this process's rank (0 writes the outputs)");
   app->add_option("--world-size", fit->distributed.world_size, "data parallel: processes in all")
       ->capture_default_str();
@@ -107,6 +118,7 @@ int main(int argc, char** argv) {
   prep->add_flag("--resume", p.resume, "reuse a finished tracking pass in --out (after an interrupted prep)");
   prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
 
+  int processes = 1;
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");
   PretrainOptions g;
   double neck_deg = 20;
@@ -121,7 +133,7 @@ int main(int argc, char** argv) {
   pretrain->add_option("--mix-n", g.fit.mix.n_end, "METHOD eq. 9: p reaches p_min at step N")->capture_default_str();
   pretrain->add_option("--p-min", g.fit.mix.p_min, "METHOD eq. 9")->capture_default_str();
   pretrain->add_option("--p-max", g.fit.mix.p_max, "METHOD eq. 9")->capture_default_str();
-  AddTrainingFlags(pretrain, &g.fit, &g.outputs);
+  AddTrainingFlags(pretrain, &g.fit, &g.outputs, &processes);
 
   auto* subject = app.add_subcommand("subject", "fine-tune a person's avatar from the general model");
   SubjectOptions s;
@@ -141,7 +153,7 @@ int main(int argc, char** argv) {
   subject->add_flag("!--no-interpolated", s.use_interpolated, "leave out the dataset's interpolated frames");
   subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")
       ->capture_default_str();
-  AddTrainingFlags(subject, &s.fit, &s.outputs);
+  AddTrainingFlags(subject, &s.fit, &s.outputs, &processes);
 
   auto* eval = app.add_subcommand("eval", "evaluate an avatar on a dataset's test split; videos");
   EvalOptions e;
@@ -176,11 +188,21 @@ int main(int argc, char** argv) {
       if (!p.identity_from.empty()) p.calibrate = false;
       report = PrepareDataset(p);
       report.erase("frame_numbers");
-    } else if (pretrain->parsed()) {
+    } else if (pretrain->parsed() || subject->parsed()) {
+      FitOptions& fit = pretrain->parsed() ? g.fit : s.fit;
+      std::unique_ptr<LocalRanks> ranks;
+      if (processes > 1) {
+        if (fit.distributed.world_size > 1)
+          throw std::invalid_argument("--processes starts its own ranks; it does not go with --world-size");
+        if (fit.threads == 0) fit.threads = 1;
+        ranks = std::make_unique<LocalRanks>(processes, std::vector<std::string>(argv + 1, argv + argc));
+        fit.distributed.world_size = processes;
+        fit.distributed.master_addr = "127.0.0.1";
+        fit.distributed.master_port = ranks->port();
+      }
       g.synthetic.neck_x_deg = g.synthetic.neck_y_deg = g.synthetic.neck_z_deg = neck_deg;
-      report = RunPretrain(g);
-    } else if (subject->parsed()) {
-      report = RunSubject(s);
+      report = pretrain->parsed() ? RunPretrain(g) : RunSubject(s);
+      if (ranks) ranks->Wait();
     } else if (eval->parsed()) {
       report = RunEval(e);
     } else if (plot->parsed()) {

@@ -39,6 +39,14 @@ same=$(json "$tmp/two.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/one
 [ "$same" = True ] && [ ! -e "$tmp/r1.hcavatar" ] &&
   ok "two processes (c10d/Gloo over 127.0.0.1) = one process with the combined batch (loss, held-out PSNR)" ||
   bad "data parallel: $same $(tail -3 "$tmp/dp.err")"
+# --processes 2 starts the second rank itself (one thread each) and trains the same.
+"$bin/headcast-train" "${dp[@]}" --processes 2 --out "$tmp/p2.hcavatar" --report "$tmp/p2.json" > "$tmp/p2.out" 2> "$tmp/p2.err"
+same=$(json "$tmp/p2.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/one.json'))['eval']['psnr_db']) < 1e-3 and abs(j['fit']['final_loss'] / json.load(open('$tmp/one.json'))['fit']['final_loss'] - 1) < 1e-4 and j['fit']['processes'] == 2 and j['fit']['threads_per_process'] == 1")
+[ "$same" = True ] && [ "$(grep -c '"psnr_db"' "$tmp/p2.out")" = 1 ] && ! pgrep -f "$tmp/p2.hcavatar" > /dev/null &&
+  ok "--processes 2: the same training, one report, no rank left running" || bad "--processes: $same $(tail -3 "$tmp/p2.err")"
+out=$("$bin/headcast-train" "${dp[@]}" --processes 2 --world-size 2 --out "$tmp/p3.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "does not go with --world-size" <<<"$out" && ok "--processes with --world-size refused" ||
+  bad "--processes --world-size: $out"
 
 "$bin/headcast-headmodel" export builtin --out "$tmp/scan.obj" --shape 0=0.8 > /dev/null 2>&1
 "$bin/headcast-fit-mesh" --mesh "$tmp/scan.obj" --out "$tmp/params.json" --fit shape > /dev/null 2>&1
