@@ -1,6 +1,8 @@
 // Live tracking for the sender.
 #include "sender/live_tracker.h"
 
+#include "common/tracking/tracked_fit.h"
+
 #include <nlohmann/json.hpp>
 
 #include "common/core/timer.h"
@@ -61,20 +63,10 @@ LiveTrackResult LiveTracker::Process(const cv::Mat& bgr, double time_s,
   const FaceObservation obs = tracker_.Track(bgr, time_s);
   r.landmarks_ms = watch.ElapsedMs();
   r.status = obs.status;
-  if (obs.status == FaceStatus::kNoFace) {
-    last_.cam_translation.setZero();  // the next face starts cold
-    return r;
-  }
   watch.Restart();
-  // A newly detected face after a loss starts from PnP, not from the old pose.
-  if (obs.status == FaceStatus::kDetected && !(last_.cam_translation.z() > 0)) last_.expression.resize(0);
-  const FitResult fit = fitter_.Fit(obs.landmarks, *camera_, &last_);
+  r.fitted = FitTrackedFace(fitter_, obs, *camera_, &last_).ok;
   r.fit_ms = watch.ElapsedMs();
-  r.fitted = fit.ok;
-  if (!fit.ok) {
-    last_.cam_translation.setZero();
-    return r;
-  }
+  if (!r.fitted) return r;
   *params = last_;
   return r;
 }

@@ -20,6 +20,7 @@
 #include "common/tracking/head_mask.h"
 #include "common/tracking/mesh_fitter.h"
 #include "common/tracking/rgbd_fitter.h"
+#include "common/tracking/tracked_fit.h"
 #include "proto/recording.h"
 #include "sender/capture/frame_source.h"
 
@@ -124,10 +125,7 @@ int main(int argc, char** argv) {
           have_initial = true;
         }
         const FaceObservation obs = first_tracker.Track(c.bgr, c.capture_time_s);
-        if (obs.status == FaceStatus::kNoFace || !first_fitter.Fit(obs.landmarks, initial, &p).ok) {
-          p.cam_translation.setZero();
-          continue;
-        }
+        if (!FitTrackedFace(first_fitter, obs, initial, &p).ok) continue;
         seen.emplace_back(ViewRotation(AxisAngleToMatrix(p.cam_rotation.cast<double>())).y(), obs.landmarks);
       }
       if (seen.size() < 3) throw std::runtime_error(input + ": too few frames with a face to calibrate the identity");
@@ -290,9 +288,8 @@ int main(int argc, char** argv) {
           spdlog::debug("frame {}: RGB-D fit: {}", frames - 1, r.problem);
         }
         last_rgbd = r;
-      } else if (obs.status != FaceStatus::kNoFace) {
-        if (obs.status == FaceStatus::kDetected && !(params.cam_translation.z() > 0)) params.expression.resize(0);
-        fit = fitter.Fit(obs.landmarks, camera, &params);
+      } else {
+        fit = FitTrackedFace(fitter, obs, camera, &params);
       }
       ms.Add(watch.ElapsedMs());
       ++statuses[obs.status == FaceStatus::kNoFace ? "no_face" : fit.ok ? "fitted" : "fit_failed"];
@@ -339,7 +336,7 @@ int main(int argc, char** argv) {
                      cv::LINE_AA);
         }
       } else {
-        params.cam_translation.setZero();  // lost: the next face starts cold
+        params.cam_translation.setZero();  // lost, or the RGB-D fit failed: the next face starts cold
       }
       cv::putText(shown, std::string(FaceStatusName(obs.status)) + (fit.ok ? " fitted" : ""), {8, 20},
                   cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);

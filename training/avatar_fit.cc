@@ -1,6 +1,8 @@
 // The trainer: samples, losses, the optimiser loop, checkpoints, evaluation.
 #include "training/avatar_fit.h"
 
+#include <dlfcn.h>
+
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -51,6 +53,15 @@ void FitOptions::Check() const {
   loss.Check();
   mix.Check();
   distributed.Check();
+}
+
+void SetComputeThreads(int threads) {
+  torch::set_num_threads(threads);
+  // Debian's libtorch multiplies matrices in OpenBLAS, whose own thread pool
+  // ignores torch::set_num_threads: two single-threaded ranks on two cores
+  // then ran 1.5x slower than with OMP_NUM_THREADS=1. Its setter, when present.
+  using SetThreads = void (*)(int);
+  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(threads);
 }
 
 double FitOptions::LearningRateAt(int step) const {
@@ -219,7 +230,7 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
   if (data.real && data.real->resolution() != config.output_size)
     throw std::invalid_argument("TrainAvatar: dataset crops are " + std::to_string(data.real->resolution()) +
                                 " pixels, the avatar renders " + std::to_string(config.output_size));
-  if (options.threads > 0) torch::set_num_threads(options.threads);
+  if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
   std::vector<torch::Tensor> params;

@@ -38,6 +38,14 @@ int FreeLoopbackPort() {
 LocalRanks::LocalRanks(int processes, const std::vector<std::string>& args) {
   if (processes < 2 || processes > 64) throw std::invalid_argument("--processes must be 2..64 to start copies");
   port_ = FreeLoopbackPort();
+  // One thread for OpenMP and OpenBLAS from the start (their pools are made when the libraries load).
+  std::vector<std::string> env_strings = {"OMP_NUM_THREADS=1", "OPENBLAS_NUM_THREADS=1"};
+  for (char** e = environ; *e; ++e)
+    if (std::strncmp(*e, "OMP_NUM_THREADS=", 16) != 0 && std::strncmp(*e, "OPENBLAS_NUM_THREADS=", 21) != 0)
+      env_strings.emplace_back(*e);
+  std::vector<char*> env;
+  for (std::string& e : env_strings) env.push_back(e.data());
+  env.push_back(nullptr);
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
@@ -54,7 +62,7 @@ LocalRanks::LocalRanks(int processes, const std::vector<std::string>& args) {
     for (std::string& s : a) argv.push_back(s.data());
     argv.push_back(nullptr);
     pid_t pid = 0;
-    const int rc = posix_spawn(&pid, "/proc/self/exe", &actions, nullptr, argv.data(), environ);
+    const int rc = posix_spawn(&pid, "/proc/self/exe", &actions, nullptr, argv.data(), env.data());
     if (rc != 0) {
       posix_spawn_file_actions_destroy(&actions);
       stopping_ = true;

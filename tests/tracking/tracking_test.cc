@@ -16,6 +16,7 @@
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/landmark_costs.h"
+#include "common/tracking/tracked_fit.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -165,6 +166,42 @@ TEST(HeadFitter, RecoversIctFaceKitHeads) {
   EXPECT_LT(worst.depth_m, 0.015);
   EXPECT_LT(worst.reprojection_px, 1.5);
   EXPECT_LT(worst.outside_range, 0.1);  // ARKit coefficients stay in 0..1 (a soft box: measured 0.08)
+}
+
+// The sender's and headcast-track's per-frame rule: warm while tracked, cold after a loss.
+TEST(FitTrackedFace, WarmWhileTrackedColdAfterALoss) {
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 45);
+  HeadFitter fitter(Model());
+  FrameParams truth;
+  truth.expression = Eigen::VectorXf::Zero(Model().num_expression());
+  truth.SetCamFromHead(FrontalCamFromHead(0.6, 10, 0, Model().rest_landmark_centroid()));
+  FaceObservation face;
+  face.status = FaceStatus::kDetected;
+  face.landmarks = fitter.Project(truth, cam);
+  FrameParams p;
+  p.cam_translation.setZero();
+  ASSERT_TRUE(FitTrackedFace(fitter, face, cam, &p).ok);
+  EXPECT_NEAR(p.cam_translation.z(), truth.cam_translation.z(), 1e-3);
+  face.status = FaceStatus::kNoFace;  // lost: not fitted, and the next face starts cold
+  EXPECT_FALSE(FitTrackedFace(fitter, face, cam, &p).ok);
+  EXPECT_EQ(p.cam_translation.z(), 0.f);
+  // A stale expression from before the loss: one solver iteration shows where
+  // each start leads (a fresh detection starts neutral; a tracked face keeps it).
+  HeadFitterOptions one;
+  one.max_iterations = 1;
+  const HeadFitter short_fitter(Model(), one);
+  FrameParams fresh = p, kept = p;
+  fresh.cam_translation.setZero();
+  fresh.expression.setConstant(3.f);
+  kept.expression.setConstant(3.f);
+  face.status = FaceStatus::kDetected;
+  ASSERT_TRUE(FitTrackedFace(short_fitter, face, cam, &fresh).ok);
+  face.status = FaceStatus::kTracked;
+  FitTrackedFace(short_fitter, face, cam, &kept);
+  std::printf("after one iteration: max |psi| %.3f from a fresh detection, %.3f warm from the stale one\n",
+              fresh.expression.cwiseAbs().maxCoeff(), kept.expression.cwiseAbs().maxCoeff());
+  EXPECT_LT(fresh.expression.cwiseAbs().maxCoeff(), 0.3f);
+  EXPECT_GT(kept.expression.cwiseAbs().maxCoeff(), 0.3f);
 }
 
 // A model that declares a natural expression range (as ICT's blendshapes do)
