@@ -74,6 +74,12 @@ int main(int argc, char** argv) {
                  "RGB-D: frames whose fitted shapes give the identity (median); with --calibrate: key frames at most")
       ->capture_default_str();
   app.add_option("--masks", masks_dir, "also write a head mask (face, hair, neck) per fitted frame here, NNNNN.png");
+  HeadMaskOptions mask_options;
+  app.add_option("--mask-hair-height", mask_options.hair_height,
+                 "head masks: hair may reach this far above the brows, in face heights")
+      ->capture_default_str();
+  app.add_option("--mask-head-width", mask_options.head_width, "head masks: the head's width, in jaw widths")
+      ->capture_default_str();
   app.add_flag("!--no-appearance", fit_appearance, "skip the texture/light fit (stored in the recording's header)");
   app.add_flag("--calibrate", calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
@@ -89,6 +95,7 @@ int main(int argc, char** argv) {
   try {
     if (std::sscanf(camera_size.c_str(), "%dx%d", &source_options.width, &source_options.height) != 2)
       throw std::invalid_argument("--camera-size wants WIDTHxHEIGHT, e.g. 1280x720");
+    mask_options.Check();
     InitLogging(log_level);
     const HeadModel model = LoadHeadModelSpec(head_model_spec);
     FaceTrackerOptions tracker_options;
@@ -304,7 +311,7 @@ int main(int argc, char** argv) {
         // Every 15th fitted frame, up to 8, for the texture and light fit.
         const bool sample = fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8;
         if (sample || !masks_dir.empty()) {
-          const cv::Mat mask = HeadMask(frame, obs.raw);
+          const cv::Mat mask = HeadMask(frame, obs.raw, mask_options);
           if (sample) appearance_samples.push_back({frame.clone(), mask, params, camera});
           if (!masks_dir.empty()) {
             char name[32];

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -32,7 +33,8 @@ void PrepOptions::Check() const {
   c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
   c.InRange("interpolate", interpolate, 0, 8)
       .InRange("crop_scale", crop_scale, 1.0, 6.0)
-      .InRange("mask_margin", mask_margin, 0.0, 0.5);
+      .InRange("mask_margin", mask_margin, 0.0, 0.5)
+      .InRange("side_margin", side_margin, 0.0, mask_margin);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -143,6 +145,67 @@ void ClearBelowJawLine(const Landmarks2d& lm, cv::Mat* mask) {
   cv::fillPoly(*mask, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
 }
 
+namespace {
+
+// The half-plane on `up`'s side of the line through `point`, as a mask of `size`.
+cv::Mat HalfPlane(cv::Size size, const Eigen::Vector2d& point, const Eigen::Vector2d& up) {
+  const double far = 4.0 * (size.width + size.height);
+  const Eigen::Vector2d along(-up.y(), up.x());
+  const std::array<Eigen::Vector2d, 4> corners = {point - far * along, point + far * along,
+                                                  point + far * along + far * up, point - far * along + far * up};
+  std::vector<cv::Point> polygon;
+  for (const Eigen::Vector2d& p : corners) polygon.emplace_back(cvRound(p.x()), cvRound(p.y()));
+  cv::Mat out(size, CV_8U, cv::Scalar(0));
+  cv::fillConvexPoly(out, polygon, cv::Scalar(255));
+  return out;
+}
+
+// The face's up direction in the image (brows minus chin), or nothing when degenerate.
+std::optional<Eigen::Vector2d> FaceUp(const Landmarks2d& lm) {
+  const Eigen::Vector2d up = 0.5 * (lm[19] + lm[24]) - lm[8];
+  if (!(up.norm() > 1e-6)) return std::nullopt;
+  return up.normalized();
+}
+
+}  // namespace
+
+void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
+  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
+  if (!up) return;
+  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
+  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
+  const cv::Mat above = HalfPlane(mask->size(), brows, *up);
+  cv::Mat top;
+  cv::bitwise_and(*mask, above, top);
+  std::vector<cv::Point> points;
+  cv::findNonZero(top, points);
+  if (points.size() < 3) return;
+  std::vector<cv::Point> hull;
+  cv::convexHull(points, hull);
+  cv::Mat filled(mask->size(), CV_8U, cv::Scalar(0));
+  cv::fillConvexPoly(filled, hull, cv::Scalar(255));
+  cv::bitwise_and(filled, above, filled);
+  cv::bitwise_or(*mask, filled, *mask);
+}
+
+cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px, int side_px) {
+  auto grown = [&](int radius) {
+    cv::Mat out = silhouette.clone();
+    if (radius > 0)
+      cv::dilate(out, out, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
+    return out;
+  };
+  cv::Mat reach = grown(side_px);
+  Eigen::Vector2d eyes = Eigen::Vector2d::Zero();
+  for (int l = 36; l <= 47; ++l) eyes += lm[l] / 12.0;
+  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
+  if (!up || !eyes.allFinite()) return reach;
+  cv::Mat upper = HalfPlane(silhouette.size(), eyes, *up);
+  cv::bitwise_and(upper, grown(hair_px), upper);
+  cv::bitwise_or(reach, upper, reach);
+  return reach;
+}
+
 nlohmann::json PrepareDataset(const PrepOptions& o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
@@ -246,15 +309,16 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       WriteImage((rd / "images" / FrameName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
-      RasterBuffers silhouette;
       const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
+      const Landmarks2d crop_landmarks = fitter.Project(params, crop_camera);
+      FillHairNotches(crop_landmarks, &m);
+      RasterBuffers silhouette;
       Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
-      cv::Mat reach = silhouette.Mask();
-      const int radius = static_cast<int>(std::lround(o.mask_margin * r));
-      if (radius > 0)
-        cv::dilate(reach, reach, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
-      cv::bitwise_and(m, reach, m);
-      if (!o.keep_neck) ClearBelowJawLine(fitter.Project(params, crop_camera), &m);
+      cv::bitwise_and(m,
+                      MaskReach(silhouette.Mask(), crop_landmarks, static_cast<int>(std::lround(o.mask_margin * r)),
+                                static_cast<int>(std::lround(o.side_margin * r))),
+                      m);
+      if (!o.keep_neck) ClearBelowJawLine(crop_landmarks, &m);
       WriteImage((rd / "masks" / FrameName(n)).string(), m);
     }
   }
@@ -332,8 +396,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"intrinsics", intrinsics},
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
       {"identity", track_report.value("identity", std::string("?"))},
-      {"masks", "the tracker's head mask (GrabCut) within the fitted model's silhouette dilated by " +
-                    std::to_string(o.mask_margin) + " of the crop edge" +
+      {"masks", "the tracker's head mask (GrabCut), convex above the brows, within the fitted model's silhouette "
+                    "dilated by " +
+                    std::to_string(o.mask_margin) + " of the crop edge above the eye line, " +
+                    std::to_string(o.side_margin) + " below it" +
                     (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},

@@ -44,6 +44,11 @@ struct PrepOptions {
   // head model's silhouette dilated by this fraction of the crop edge: pixels
   // the avatar cannot reach (background caught by GrabCut) are not targets.
   double mask_margin = 0.08;
+  // Below the eye line the silhouette grows by this much less: there the head
+  // ends at the cheeks and ears, and GrabCut's extra pieces are background
+  // (a picture frame behind the ear on talking_d9, in most frames but not all).
+  // Long hair that falls beside the face needs it raised to mask_margin.
+  double side_margin = 0.02;
   // Keep what GrabCut finds below the jaw line (the neck). Off by default: it
   // finds the neck in some frames only, which no avatar can learn.
   bool keep_neck = false;
@@ -68,6 +73,18 @@ nlohmann::json PrepareDataset(const PrepOptions& options);
 // some frames and not in others; a target that comes and goes with the
 // shirt's colour cannot be learnt, one that stops at the jaw can.
 void ClearBelowJawLine(const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, cv::Mat* mask);
+
+// Where a training mask may reach: `silhouette` (CV_8U, the fitted model
+// rasterised) grown by `hair_px` above the eye line (landmarks 36..47; the
+// face's up direction is brows minus chin) and by `side_px` below it.
+cv::Mat MaskReach(const cv::Mat& silhouette, const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, int hair_px,
+                  int side_px);
+
+// Fills the notches GrabCut cuts into the top of the hair where a highlight
+// matches the wall's colour: above the brow line (landmarks 17..26) the mask
+// (CV_8U) becomes its convex hull there. The top of a head is convex; below
+// the brows the ears make it not so, and the mask is left alone.
+void FillHairNotches(const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, cv::Mat* mask);
 
 // One real training or test frame at one resolution.
 struct RealSample {

@@ -111,6 +111,9 @@ int main(int argc, char** argv) {
   prep->add_option("--mask-margin", p.mask_margin,
                    "training masks: the model's silhouette grown by this fraction of the crop")
       ->capture_default_str();
+  prep->add_option("--side-margin", p.side_margin,
+                   "below the eye line the silhouette grows only this much (raise it for long hair)")
+      ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
   prep->add_option("--interpolate", p.interpolate,
                    "short videos: frames synthesised between consecutive training frames")

@@ -292,6 +292,56 @@ TEST(Dataset, MasksAreClearedBelowTheJawLineOnly) {
   }
 }
 
+// Above the eye line a mask may reach hair_px beyond the model's silhouette,
+// below it (cheeks, ears, where GrabCut picks up background) only side_px;
+// the line follows a rolled head.
+TEST(Dataset, MaskReachIsWideForHairAndNarrowBesideTheFace) {
+  const Eigen::Vector2d centre(128, 128);
+  for (double roll_deg : {0.0, 30.0}) {
+    const Eigen::Rotation2Dd roll(roll_deg * M_PI / 180);
+    auto place = [&](double x, double y) -> Eigen::Vector2d { return centre + roll * Eigen::Vector2d(x, y); };
+    std::array<Eigen::Vector2d, kNumLandmarks> lm;
+    lm.fill(centre);
+    for (int l = 36; l <= 47; ++l) lm[l] = place(l < 42 ? -20 : 20, -28);  // eyes 28 px above the centre
+    lm[19] = place(-20, -48);
+    lm[24] = place(20, -48);
+    lm[8] = place(0, 52);  // chin
+    cv::Mat silhouette(256, 256, CV_8U, cv::Scalar(0));
+    cv::circle(silhouette, cv::Point(128, 128), 60, cv::Scalar(255), cv::FILLED);
+    const cv::Mat reach = MaskReach(silhouette, lm, 20, 5);
+    auto at = [&](const Eigen::Vector2d& p) { return reach.at<uint8_t>(cvRound(p.y()), cvRound(p.x())); };
+    SCOPED_TRACE("roll " + std::to_string(roll_deg));
+    EXPECT_EQ(at(place(0, -75)), 255) << "hair 15 px above the head";
+    EXPECT_EQ(at(place(0, -85)), 0) << "25 px above the head";
+    EXPECT_EQ(at(place(-66, -36)), 255) << "hair beside the temple, above the eyes";
+    EXPECT_EQ(at(place(63, 0)), 255) << "3 px beside the cheek";
+    EXPECT_EQ(at(place(70, 0)), 0) << "10 px beside the cheek";
+    EXPECT_EQ(at(place(-70, 10)), 0) << "10 px beside the other cheek";
+    EXPECT_EQ(at(centre), 255) << "the face";
+  }
+}
+
+// A notch GrabCut cuts into the top of the hair is filled; one below the brows
+// (between an ear and the cheek, say) is not, nor is the background.
+TEST(Dataset, HairNotchesAboveTheBrowsAreFilled) {
+  std::array<Eigen::Vector2d, kNumLandmarks> lm;
+  lm.fill(Eigen::Vector2d(128, 128));
+  for (int l = 17; l <= 26; ++l) lm[l] = Eigen::Vector2d(100 + 6 * (l - 17), 110);  // brows at y = 110
+  lm[8] = Eigen::Vector2d(128, 190);                                                  // chin
+  cv::Mat mask(256, 256, CV_8U, cv::Scalar(0));
+  cv::circle(mask, cv::Point(128, 128), 70, cv::Scalar(255), cv::FILLED);
+  const std::vector<cv::Point> top_notch = {{100, 50}, {140, 50}, {120, 80}};
+  const std::vector<cv::Point> side_notch = {{190, 140}, {190, 170}, {175, 155}};
+  cv::fillConvexPoly(mask, top_notch, cv::Scalar(0));
+  cv::fillConvexPoly(mask, side_notch, cv::Scalar(0));
+  ASSERT_EQ(mask.at<uint8_t>(65, 120), 0);
+  FillHairNotches(lm, &mask);
+  EXPECT_EQ(mask.at<uint8_t>(65, 120), 255) << "the notch in the hair";
+  EXPECT_EQ(mask.at<uint8_t>(155, 185), 0) << "the notch below the brows";
+  EXPECT_EQ(mask.at<uint8_t>(40, 128), 0) << "above the head";
+  EXPECT_EQ(mask.at<uint8_t>(128, 128), 255) << "the face";
+}
+
 TEST(Dataset, LoadsAndRefusesWhatItCannotUse) {
   const std::string dir = WriteRenderedDataset("dataset_load", 6, 2);
   const PreparedDataset d = PreparedDataset::Load(dir, Model(), 128);
