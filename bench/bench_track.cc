@@ -13,6 +13,14 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
     throw std::invalid_argument("track: give --video (e.g. ../shared/data/video/talking_d9.mp4)");
   const HeadModel model = LoadHeadModelSpec(options.head_model);
   FaceTracker tracker;
+  // Drift: the tracked landmarks against those of a detection on every frame
+  // (untimed), with the box drawn by the last detection's margins (the
+  // default) and by fixed margins.
+  FaceTrackerOptions fixed_margins, every_frame;
+  fixed_margins.box_from_detection = false;
+  every_frame.redetect_interval = 1;
+  FaceTracker fixed_tracker(fixed_margins), reference(every_frame);
+  SampleStats drift, fixed_drift;
   HeadFitter fitter(model);
   VideoReader video(options.video);
   const double fps = video.fps() > 0 ? video.fps() : 30;
@@ -32,6 +40,13 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
     track_ms.Add(t_track);
     fit_ms.Add(watch.ElapsedMs() - t_track);
     ++frames;
+    const FaceObservation fixed_obs = fixed_tracker.Track(frame, frames / fps);
+    const FaceObservation ref = reference.Track(frame, frames / fps);
+    if (ref.status != FaceStatus::kNoFace && obs.status == FaceStatus::kTracked &&
+        fixed_obs.status == FaceStatus::kTracked) {
+      drift.Add(LandmarkErrorIod(obs.raw, ref.raw));
+      fixed_drift.Add(LandmarkErrorIod(fixed_obs.raw, ref.raw));
+    }
     if (fit.ok) {
       ++fitted;
       error.Add(LandmarkErrorIod(fitter.Project(params, camera), obs.raw));
@@ -50,6 +65,16 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   out["ms_per_frame_median"] = total.Median();
   out["ms_per_frame_p95"] = total.Percentile(95);
   out["track_ms_median"] = track_ms.Median();
+  out["drift_what"] =
+      "tracked frames: mean distance of the raw landmarks from those found in a detector box on the same frame, over "
+      "the outer-eye-corner distance; box from the last detection's margins (default) and from fixed margins";
+  out["drift_frames"] = drift.count();
+  out["drift_iod_mean"] = drift.Mean();
+  out["drift_iod_p95"] = drift.Percentile(95);
+  out["drift_iod_max"] = drift.Max();
+  out["fixed_margins_drift_iod_mean"] = fixed_drift.Mean();
+  out["fixed_margins_drift_iod_p95"] = fixed_drift.Percentile(95);
+  out["fixed_margins_drift_iod_max"] = fixed_drift.Max();
   out["fit_ms_median"] = fit_ms.Median();
   return out;
 }

@@ -97,6 +97,10 @@ def main():
             L.append(f"| {res}² | {f(j.get('pretrain_samples_per_s'), 2)} | {f(j.get('finetune_samples_per_s'), 2)} | {j.get('finetune_data')} |")
     L.append("")
 
+    real = os.path.join(r, "real_person.md")  # bench/real_person.sh: too long for this run, kept apart
+    if os.path.exists(real):
+        L += ["## A real person's avatar (`bench/real_person.sh`)", "", open(real).read().strip(), ""]
+
     x = load(r, "x264.json")
     L += ["## headcast against x264 on the same footage", ""]
     if x and "x264" in x:

@@ -67,7 +67,14 @@ struct FaceTracker::Impl {
   Landmarks2d previous{};
   std::vector<OneEuroFilter> filters;
 
-  cv::Rect BoxFromLandmarks(const Landmarks2d& l) const {
+  // The box around landmarks as fractions of their bounding box's width and
+  // height beyond each side (negative: inside). The fixed values are a rough
+  // detector convention; with box_from_detection each detection measures them.
+  struct Margins {
+    double left = 0.05, top = 0.15, right = 0.05, bottom = 0.05;
+  } margins;
+
+  static cv::Rect2d Bounds(const Landmarks2d& l) {
     double x0 = 1e9, y0 = 1e9, x1 = -1e9, y1 = -1e9;
     for (const auto& p : l) {
       x0 = std::min(x0, p.x());
@@ -75,10 +82,27 @@ struct FaceTracker::Impl {
       x1 = std::max(x1, p.x());
       y1 = std::max(y1, p.y());
     }
-    // The 68 points span brows to chin; the detector's box reaches a little above.
-    const double w = x1 - x0, h = y1 - y0;
-    return cv::Rect(cv::Point(static_cast<int>(x0 - 0.05 * w), static_cast<int>(y0 - 0.15 * h)),
-                    cv::Point(static_cast<int>(x1 + 0.05 * w), static_cast<int>(y1 + 0.05 * h)));
+    return cv::Rect2d(x0, y0, x1 - x0, y1 - y0);
+  }
+
+  cv::Rect BoxFromLandmarks(const Landmarks2d& l) const {
+    const cv::Rect2d b = Bounds(l);
+    return cv::Rect(cv::Point(static_cast<int>(std::lround(b.x - margins.left * b.width)),
+                              static_cast<int>(std::lround(b.y - margins.top * b.height))),
+                    cv::Point(static_cast<int>(std::lround(b.x + b.width + margins.right * b.width)),
+                              static_cast<int>(std::lround(b.y + b.height + margins.bottom * b.height))));
+  }
+
+  // Remembers how the detector's `box` sits around the landmarks found in it.
+  void MeasureMargins(const cv::Rect& box, const Landmarks2d& l) {
+    const cv::Rect2d b = Bounds(l);
+    if (!(b.width > 1 && b.height > 1)) return;
+    // Clamped: one odd detection must not make a box that loses the face.
+    auto fraction = [](double px, double size) { return std::clamp(px / size, -0.3, 0.6); };
+    margins.left = fraction(b.x - box.x, b.width);
+    margins.top = fraction(b.y - box.y, b.height);
+    margins.right = fraction(box.x + box.width - (b.x + b.width), b.width);
+    margins.bottom = fraction(box.y + box.height - (b.y + b.height), b.height);
   }
 };
 
@@ -111,7 +135,7 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   cv::Mat gray;
   cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
   cv::Rect box;
-  const bool detect = !m.tracking || m.since_detection >= m.options.redetect_interval;
+  const bool detect = !m.tracking || m.since_detection + 1 >= m.options.redetect_interval;
   if (detect) {
     // HOG's cost grows with the pixel count; faces in a call fill much of the frame.
     // Small images are enlarged (up to 2x): HOG finds faces from about 80 px.
@@ -168,6 +192,7 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   for (int l = 0; l < kNumLandmarks; ++l)
     obs.landmarks[l] = Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
                                        m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
+  if (detect && m.options.box_from_detection) m.MeasureMargins(box, obs.raw);
   obs.box = found;
   m.previous = obs.raw;
   m.tracking = true;

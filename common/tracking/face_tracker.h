@@ -15,7 +15,13 @@ namespace headcast {
 struct FaceTrackerOptions {
   std::string predictor_path = "/usr/share/dlib/shape_predictor_68_face_landmarks.dat";
   int detect_width = 320;          // the detector sees the frame scaled to this width (at most 2x up), pixels
-  int redetect_interval = 30;      // frames between detections while tracking
+  int redetect_interval = 30;      // while tracking the detector runs every this many frames (1: every frame)
+  // While tracking, the box handed to the shape predictor is drawn around the
+  // previous landmarks with the margins the detector's own box had at the last
+  // detection. The predictor was trained on detector boxes: a box of another
+  // convention makes it see a bigger (or smaller) face each frame, and the
+  // landmarks drift until the next detection. Off: fixed margins (comparisons).
+  bool box_from_detection = true;
   double min_face_px = 40;         // smaller faces are ignored, pixels (full frame)
   double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
