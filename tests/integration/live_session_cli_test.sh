@@ -17,7 +17,7 @@ port=$((20000 + $$ % 20000))
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
   --display none --target-delay 0.05 --display-csv "$tmp/shown.csv" --stats-json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
 rx=$!
-for _ in $(seq 200); do grep -q listening "$tmp/rx.log" && break; sleep 0.05; done
+wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq.mp4" --fov 45 \
   --identity-from "$tmp/a.hcavatar" --stats-json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5

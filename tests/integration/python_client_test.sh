@@ -3,19 +3,19 @@
 # gRPC on 127.0.0.1; the receiver's own recording of what it got must match.
 set -u
 bin=$1; python=$2; src=$3
-tmp=$(mktemp -d)
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 port=$((20000 + RANDOM % 20000))
 cleanup() { [ -n "${rpid:-}" ] && kill "$rpid" 2>/dev/null; wait 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
 "$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null
 "$bin/headcast-avatar" synth-params --frames 45 --out "$tmp/talk.hcrec" > /dev/null
 "$bin/headcast-receiver" --plaintext --listen "127.0.0.1:$port" --token pytoken --avatar demo="$tmp/a.hcavatar" \
-  --display none --record "$tmp/received.hcrec" --duration 8 > "$tmp/receiver.json" 2> "$tmp/receiver.log" &
+  --display none --record "$tmp/received.hcrec" --duration 120 > "$tmp/receiver.json" 2> "$tmp/receiver.log" &
 rpid=$!
-for _ in $(seq 50); do grep -q "listening" "$tmp/receiver.log" && break; sleep 0.1; done
+wait_for "$tmp/receiver.log" listening || exit 1
 "$python" "$src/tests/integration/python_client.py" --proto-dir "$src/proto" --target "127.0.0.1:$port" \
   --token pytoken --avatar-id demo --recording "$tmp/talk.hcrec" > "$tmp/client.json" || { cat "$tmp/client.json" "$tmp/receiver.log"; exit 1; }
-wait "$rpid"; rpid=
+kill -TERM "$rpid"; wait "$rpid"; rpid=  # SIGTERM: no fixed window to race under load
 cat "$tmp/client.json"
 # Compare what the receiver recorded with what was sent (within the client's steps).
 "$python" - "$tmp/talk.hcrec" "$tmp/received.hcrec" "$src/proto" <<'PY'

@@ -23,7 +23,7 @@ stats-json = "$tmp/receiver.json"
 TOML
 "$bin/headcast-receiver" --config "$tmp/receiver.toml" > /dev/null 2> "$tmp/receiver.log" &
 rpid=$!
-for _ in $(seq 50); do grep -q listening "$tmp/receiver.log" && break; sleep 0.1; done
+wait_for "$tmp/receiver.log" listening || bad "receiver never listened"
 cat > "$tmp/sender.toml" <<TOML
 target = "localhost:$port"
 tls-ca = "$tmp/certs/ca.pem"
