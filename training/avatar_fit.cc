@@ -42,6 +42,8 @@ void FitOptions::Check() const {
       .InRange("batch", batch, 1, 4096)
       .Positive("learning_rate", learning_rate)
       .InRange("final_lr_fraction", final_lr_fraction, 1e-4, 1.0)
+      .That(weight_average == 0 || (weight_average > 0 && weight_average < 1),
+            "weight_average is 0 (off) or a decay in (0, 1)")
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
       .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
@@ -67,6 +69,10 @@ void SetComputeThreads(int threads) {
 double FitOptions::LearningRateAt(int step) const {
   if (iterations <= 1) return learning_rate;
   return learning_rate * std::pow(final_lr_fraction, static_cast<double>(step) / (iterations - 1));
+}
+
+double FitOptions::WeightAverageDecayAt(int step) const {
+  return std::min(weight_average, (1.0 + step) / (10.0 + step));
 }
 
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
@@ -135,6 +141,36 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
   return o;
 }
 
+// The moving average of the weights (FitOptions::weight_average) and the
+// swap that puts it into the avatar: Tensor::set_data exchanges storages, so
+// a swap copies nothing and the optimiser's state stays keyed to the same
+// parameters.
+class WeightAverage {
+ public:
+  explicit WeightAverage(const std::vector<torch::Tensor>& params) : params_(params) {
+    torch::NoGradGuard no_grad;
+    for (const auto& p : params_) average_.push_back(p.detach().clone());
+  }
+  void Update(double decay) {
+    torch::NoGradGuard no_grad;
+    for (size_t i = 0; i < params_.size(); ++i) average_[i].mul_(decay).add_(params_[i].detach(), 1 - decay);
+  }
+  void Swap() {
+    for (size_t i = 0; i < params_.size(); ++i) {
+      torch::Tensor live = params_[i].detach();  // keeps the live storage
+      params_[i].set_data(average_[i]);
+      average_[i] = live;
+    }
+    swapped_ = !swapped_;
+  }
+  bool swapped() const { return swapped_; }
+  std::vector<torch::Tensor>& average() { return average_; }  // while not swapped
+
+ private:
+  std::vector<torch::Tensor> params_, average_;
+  bool swapped_ = false;
+};
+
 // Each sample's draws (synthetic or real, which frame, augmentation, ray
 // jitter) from its own generator: a resumed run, or one split over ranks,
 // makes exactly the draws of one uninterrupted process.
@@ -158,7 +194,7 @@ void WriteAtomically(const fs::path& path, const std::string& text) {
 }
 
 void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam,
-                    const Offsets& offsets) {
+                    const Offsets& offsets, WeightAverage* average) {
   const fs::path staging = dir / ("staging-" + std::to_string(next_step));
   fs::remove_all(staging);
   fs::create_directories(staging);
@@ -168,6 +204,7 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   archive.save_to((staging / "optimizer.pt").string());
   if (offsets.enabled())
     torch::save(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance}, (staging / "offsets.pt").string());
+  if (average) torch::save(average->average(), (staging / "average.pt").string());
   WriteAtomically(staging / "state.json", nlohmann::json{{"next_step", next_step}}.dump() + "\n");
   const fs::path final_dir = dir / ("step-" + std::to_string(next_step));
   fs::remove_all(final_dir);
@@ -180,7 +217,7 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
 
 // Restores weights and optimiser state; returns the step to continue from (0 without a checkpoint).
 int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, torch::optim::Adam& adam,
-                   Offsets* offsets) {
+                   Offsets* offsets, WeightAverage* average) {
   std::ifstream latest(dir / "LATEST");
   if (!latest) return 0;
   std::string name;
@@ -208,6 +245,17 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
       if (!fits(saved_offsets, now))
         throw std::runtime_error("the checkpoint's per-frame offsets are for another dataset");
       for (size_t i = 0; i < now.size(); ++i) now[i].copy_(saved_offsets[i]);
+    }
+    if (average) {  // a checkpoint made without averaging starts the average at its weights
+      if (fs::exists(ckpt / "average.pt")) {
+        std::vector<torch::Tensor> saved_average;
+        torch::load(saved_average, (ckpt / "average.pt").string());
+        if (!fits(saved_average, average->average()))
+          throw std::runtime_error("the checkpoint's averaged weights differ from this avatar's networks");
+        for (size_t i = 0; i < saved_average.size(); ++i) average->average()[i].copy_(saved_average[i]);
+      } else {
+        for (size_t i = 0; i < to.size(); ++i) average->average()[i].copy_(to[i]);
+      }
     }
     torch::serialize::InputArchive archive;
     archive.load_from((ckpt / "optimizer.pt").string());
@@ -251,7 +299,10 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
     result.perceptual = "vgg16 " + options.loss.vgg_path;
   }
   RaySampler sampler(config);
-  if (options.resume) result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets);
+  std::unique_ptr<WeightAverage> average;
+  if (options.weight_average > 0) average = std::make_unique<WeightAverage>(modules.parameters());
+  if (options.resume)
+    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, average.get());
   const DistributedOptions& dp = options.distributed;
   const bool writes = dp.rank == 0;
   if (!options.checkpoint_dir.empty() && writes) fs::create_directories(options.checkpoint_dir);
@@ -315,14 +366,20 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
       info.synthetic = static_cast<int>(std::lround(group->Sum(info.synthetic)));
     }
     adam.step();
+    if (average) average->Update(options.WeightAverageDecayAt(step));
     result.steps.push_back(info);
     if (writes && !options.checkpoint_dir.empty() &&
         ((step + 1) % options.checkpoint_every == 0 || step + 1 == options.iterations)) {
       modules.eval();
-      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets);
+      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets, average.get());
     }
-    if (progress) progress(info);
+    if (progress) {
+      if (average) average->Swap();  // the callback sees (and may evaluate) the average
+      progress(info);
+      if (average) average->Swap();
+    }
   }
+  if (average) average->Swap();  // the avatar keeps the average
   result.seconds = watch.ElapsedSeconds();
   const int steps = options.iterations - result.first_step;
   result.samples_per_s = result.seconds > 0 ? steps * options.batch / result.seconds : 0;

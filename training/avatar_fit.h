@@ -50,6 +50,14 @@ struct FitOptions {
   // constant — the fine-tune is still underfitting when it ends.
   double final_lr_fraction = 1;
   double LearningRateAt(int step) const;
+  // Polyak averaging: with a decay d in (0, 1) the run keeps an exponential
+  // moving average of the weights (decay min(d, (1 + n) / (10 + n)) at step n,
+  // so the start weights fade out early); the avatar holds the average in the
+  // progress callback and at the end (checkpoints keep both, to resume
+  // exactly). A constant rate's step-to-step noise averages out without
+  // slowing the learning the way a falling rate does. 0: off.
+  double weight_average = 0;
+  double WeightAverageDecayAt(int step) const;
   uint64_t seed = 1;            // ray jitter, mixing, augmentation
   LossOptions loss;
   MixSchedule mix;               // used when both synthetic and real data are given

@@ -87,6 +87,7 @@ nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
       {"batch", f.batch},
       {"learning_rate", f.learning_rate},
       {"final_lr_fraction", f.final_lr_fraction},
+      {"weight_average", f.weight_average},
       {"seconds", r.seconds},
       {"samples_per_s", r.samples_per_s},
       {"first_step", r.first_step},

@@ -25,6 +25,9 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--final-lr", fit->final_lr_fraction,
                   "learning rate at the last step as a fraction of --lr (exponential fall; 1 = constant)")
       ->capture_default_str();
+  app->add_option("--weight-average", fit->weight_average,
+                  "keep and save a moving average of the weights with this decay per step (e.g. 0.999; 0 = off)")
+      ->capture_default_str();
   app->add_option("--seed", fit->seed, "random seed");
   app->add_option("--vgg", fit->loss.vgg_path,
                   "VGG16 TorchScript file for the perceptual term (else 1 - SSIM stands in for it)");

@@ -119,6 +119,67 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   }
 }
 
+std::vector<torch::Tensor> Copy(const std::vector<torch::Tensor>& params) {
+  std::vector<torch::Tensor> out;
+  for (const auto& p : params) out.push_back(p.detach().clone());
+  return out;
+}
+
+double MaxDifference(const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
+  double diff = 0;
+  for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
+  return diff;
+}
+
+// Weight averaging leaves the training itself alone (the loss curve is the
+// plain run's) and hands out, after every step and at the end, the moving
+// average of the plain run's weights; a resumed run ends with the same average.
+TEST(FitOnSynthetic, WeightAverageIsTheMovingAverageOfThePlainRunsWeights) {
+  SyntheticDataOptions o;
+  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 2);
+  FitOptions f;
+  f.iterations = 6;
+  f.batch = 1;
+  Avatar plain = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  std::vector<torch::Tensor> expected = Copy(plain.modules().parameters());
+  std::vector<std::vector<torch::Tensor>> expected_after;  // the average after each step
+  f.weight_average = 0.6;
+  const FitOptions averaging = f;
+  f.weight_average = 0;
+  const FitResult plain_run = FitOnSynthetic(plain, Model(), data, f, [&](const StepInfo& s) {
+    const double d = averaging.WeightAverageDecayAt(s.step);
+    const auto live = plain.modules().parameters();
+    for (size_t i = 0; i < live.size(); ++i) expected[i] = d * expected[i] + (1 - d) * live[i].detach();
+    expected_after.push_back(Copy(expected));
+  });
+  EXPECT_DOUBLE_EQ(averaging.WeightAverageDecayAt(0), 0.1);  // the start weights fade fast
+  EXPECT_DOUBLE_EQ(averaging.WeightAverageDecayAt(1000), 0.6);
+  ASSERT_GT(MaxDifference(expected, plain.modules().parameters()), 1e-4);  // the average is not the end point
+
+  f = averaging;
+  f.checkpoint_every = 3;
+  f.checkpoint_dir = testing::TempDir("ckpt_average");
+  Avatar averaged = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  std::vector<double> seen;
+  const FitResult run = FitOnSynthetic(averaged, Model(), data, f, [&](const StepInfo& s) {
+    seen.push_back(MaxDifference(averaged.modules().parameters(), expected_after[s.step]));
+  });
+  ASSERT_EQ(run.steps.size(), 6u);
+  for (int i = 0; i < 6; ++i) EXPECT_NEAR(run.steps[i].loss, plain_run.steps[i].loss, 1e-5 * plain_run.steps[i].loss);
+  for (size_t i = 0; i < seen.size(); ++i) EXPECT_LT(seen[i], 1e-5) << "after step " << i;
+  EXPECT_LT(MaxDifference(averaged.modules().parameters(), expected), 1e-5);
+
+  f.checkpoint_dir = testing::TempDir("ckpt_average_resumed");
+  Avatar first = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
+  EXPECT_THROW(FitOnSynthetic(first, Model(), data, f, CrashAfter(3)), Crash);
+  f.resume = true;
+  Avatar second = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 99);
+  FitOnSynthetic(second, Model(), data, f);
+  EXPECT_LT(MaxDifference(second.modules().parameters(), expected), 1e-5);
+  f.weight_average = 1;
+  EXPECT_THROW(f.Check(), std::invalid_argument);
+}
+
 TEST(Avatar, RuntimeSwitchesKeepTheWeights) {
   Avatar a = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
   AvatarConfig c = Tiny();
