@@ -68,6 +68,18 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   EXPECT_GT(r.samples_per_s, 0);
 }
 
+std::vector<torch::Tensor> Copy(const std::vector<torch::Tensor>& params) {
+  std::vector<torch::Tensor> out;
+  for (const auto& p : params) out.push_back(p.detach().clone());
+  return out;
+}
+
+double MaxDifference(const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
+  double diff = 0;
+  for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
+  return diff;
+}
+
 // Stands for a crash (or kill -9) right after step n: the progress callback
 // runs after that step's checkpoint was written.
 struct Crash {};
@@ -101,10 +113,7 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   EXPECT_EQ(rest.first_step, 3);
   ASSERT_EQ(rest.steps.size(), 3u);
   for (int i = 0; i < 3; ++i) EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
-  const auto a = straight.modules().parameters(), b = second.modules().parameters();
-  double diff = 0;
-  for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
-  EXPECT_LT(diff, 1e-5);
+  EXPECT_LT(MaxDifference(straight.modules().parameters(), second.modules().parameters()), 1e-5);
   // A corrupt checkpoint is refused by name.
   std::string latest;
   std::getline(std::ifstream(f.checkpoint_dir + "/LATEST"), latest);
@@ -117,18 +126,6 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("cannot resume"), std::string::npos) << e.what();
   }
-}
-
-std::vector<torch::Tensor> Copy(const std::vector<torch::Tensor>& params) {
-  std::vector<torch::Tensor> out;
-  for (const auto& p : params) out.push_back(p.detach().clone());
-  return out;
-}
-
-double MaxDifference(const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
-  double diff = 0;
-  for (size_t i = 0; i < a.size(); ++i) diff = std::max(diff, (a[i] - b[i]).abs().max().item<double>());
-  return diff;
 }
 
 // Weight averaging leaves the training itself alone (the loss curve is the
