@@ -16,7 +16,7 @@ data=${HEADCAST_DATA:-$root/../shared/data}
 command="bench/real_person.sh $*"
 [ $# -ge 1 ] || { sed -n 2,10p "$0" >&2; exit 2; }
 out=$1; shift
-general="" iterations=4000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit test_frames=150
+general="" iterations=8000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit test_frames=150
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;

@@ -75,6 +75,10 @@ double FitOptions::WeightAverageDecayAt(int step) const {
   return std::min(weight_average, (1.0 + step) / (10.0 + step));
 }
 
+double SubjectWeightAverage(int iterations) {
+  return iterations < 9 ? 0.0 : std::min(0.999, 1.0 - 8.0 / iterations);
+}
+
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
   const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
   cv::Mat out(image_bgr.size(), CV_8UC3,

@@ -26,8 +26,8 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
                   "learning rate at the last step as a fraction of --lr (exponential fall; 1 = constant)")
       ->capture_default_str();
   app->add_option("--weight-average", fit->weight_average,
-                  "keep and save a moving average of the weights with this decay per step (e.g. 0.999; 0 = off)")
-      ->capture_default_str();
+                  "keep and save a moving average of the weights with this decay per step (0 = off; "
+                  "pretrain's default 0, subject's 1 - 8/iterations, at most 0.999)");
   app->add_option("--seed", fit->seed, "random seed");
   app->add_option("--vgg", fit->loss.vgg_path,
                   "VGG16 TorchScript file for the perceptual term (else 1 - SSIM stands in for it)");
@@ -196,6 +196,8 @@ int main(int argc, char** argv) {
       report.erase("frame_numbers");
     } else if (pretrain->parsed() || subject->parsed()) {
       FitOptions& fit = pretrain->parsed() ? g.fit : s.fit;
+      if (subject->parsed() && subject->get_option("--weight-average")->count() == 0)
+        fit.weight_average = SubjectWeightAverage(fit.iterations);
       std::unique_ptr<LocalRanks> ranks;
       if (processes > 1) {
         if (fit.distributed.world_size > 1)

@@ -151,6 +151,10 @@ TEST(FitOnSynthetic, WeightAverageIsTheMovingAverageOfThePlainRunsWeights) {
   });
   EXPECT_DOUBLE_EQ(averaging.WeightAverageDecayAt(0), 0.1);  // the start weights fade fast
   EXPECT_DOUBLE_EQ(averaging.WeightAverageDecayAt(1000), 0.6);
+  EXPECT_DOUBLE_EQ(SubjectWeightAverage(8000), 0.999);  // a fine-tune averages over its last eighth
+  EXPECT_DOUBLE_EQ(SubjectWeightAverage(1000), 0.992);
+  EXPECT_DOUBLE_EQ(SubjectWeightAverage(20000), 0.999);
+  EXPECT_EQ(SubjectWeightAverage(8), 0.0);
   ASSERT_GT(MaxDifference(expected, plain.modules().parameters()), 1e-4);  // the average is not the end point
 
   f = averaging;
