@@ -84,7 +84,7 @@ L = [f"{result['video']} with ICT-FaceKit: {ds['split']['train']} training frame
      f"held out; {iterations} fine-tune steps from `{result['general_model']}` with 2 processes. Made by `{command}`.", "",
      "| resolution | test PSNR (dB) | test SSIM | prep (s) | fine-tune (s) | avatar creation (min) |", "|---|---|---|---|---|---|"]
 for r, v in result["resolutions"].items():
-    L.append(f"| {r}² | {v['test_psnr_db']:.2f} | {v['test_ssim']:.3f} | {prep} | {v['finetune_seconds']:.0f} | "
+    L.append(f"| {r}² | {v['test_psnr_db']:.3f} | {v['test_ssim']:.3f} | {prep} | {v['finetune_seconds']:.0f} | "
              f"{v['creation_minutes']:.1f} |")
 if pretrain:
     L += ["", f"The general model took {float(pretrain):.0f} s (once per head model)."]
