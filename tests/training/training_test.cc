@@ -80,6 +80,14 @@ double MaxDifference(const std::vector<torch::Tensor>& a, const std::vector<torc
   return diff;
 }
 
+// The short runs of the resume and averaging tests.
+FitOptions SixSingleSampleSteps() {
+  FitOptions f;
+  f.iterations = 6;
+  f.batch = 1;
+  return f;
+}
+
 // Stands for a crash (or kill -9) right after step n: the progress callback
 // runs after that step's checkpoint was written.
 struct Crash {};
@@ -92,11 +100,8 @@ std::function<void(const StepInfo&)> CrashAfter(int n) {
 // Checkpoints: a run stopped after 3 steps and resumed (into an avatar with
 // other random weights) continues exactly where the uninterrupted run goes.
 TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
-  SyntheticDataOptions o;
-  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 2);
-  FitOptions f;
-  f.iterations = 6;
-  f.batch = 1;
+  SyntheticData data(Model(), SyntheticDataOptions{}, DefaultSubject(Model(), 128), 2);
+  FitOptions f = SixSingleSampleSteps();
   f.final_lr_fraction = 0.1;  // the falling rate resumes on its curve too
   f.checkpoint_every = 3;
   f.checkpoint_dir = testing::TempDir("ckpt_straight");
@@ -132,11 +137,8 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
 // plain run's) and hands out, after every step and at the end, the moving
 // average of the plain run's weights; a resumed run ends with the same average.
 TEST(FitOnSynthetic, WeightAverageIsTheMovingAverageOfThePlainRunsWeights) {
-  SyntheticDataOptions o;
-  SyntheticData data(Model(), o, DefaultSubject(Model(), 128), 2);
-  FitOptions f;
-  f.iterations = 6;
-  f.batch = 1;
+  SyntheticData data(Model(), SyntheticDataOptions{}, DefaultSubject(Model(), 128), 2);
+  FitOptions f = SixSingleSampleSteps();
   Avatar plain = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
   std::vector<torch::Tensor> expected = Copy(plain.modules().parameters());
   std::vector<std::vector<torch::Tensor>> expected_after;  // the average after each step
