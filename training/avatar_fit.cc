@@ -165,14 +165,11 @@ class WeightAverage {
       params_[i].set_data(average_[i]);
       average_[i] = live;
     }
-    swapped_ = !swapped_;
   }
-  bool swapped() const { return swapped_; }
-  std::vector<torch::Tensor>& average() { return average_; }  // while not swapped
+  const std::vector<torch::Tensor>& average() const { return average_; }  // between swaps
 
  private:
   std::vector<torch::Tensor> params_, average_;
-  bool swapped_ = false;
 };
 
 // Each sample's draws (synthetic or real, which frame, augmentation, ray
@@ -219,6 +216,14 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   if (!previous.empty() && previous != final_dir.filename().string()) fs::remove_all(dir / previous);
 }
 
+// Copies `from` into `to` (same count and shapes, else throws `mismatch`).
+void CopyInto(const std::vector<torch::Tensor>& from, const std::vector<torch::Tensor>& to, const char* mismatch) {
+  bool fits = from.size() == to.size();
+  for (size_t i = 0; fits && i < to.size(); ++i) fits = from[i].sizes().equals(to[i].sizes());
+  if (!fits) throw std::runtime_error(mismatch);
+  for (size_t i = 0; i < to.size(); ++i) to[i].copy_(from[i]);
+}
+
 // Restores weights and optimiser state; returns the step to continue from (0 without a checkpoint).
 int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, torch::optim::Adam& adam,
                    Offsets* offsets, WeightAverage* average) {
@@ -231,36 +236,20 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
     const nlohmann::json state = nlohmann::json::parse(std::ifstream(ckpt / "state.json"));
     const int next_step = state.at("next_step").get<int>();
     const Avatar saved = Avatar::Load((ckpt / "avatar.hcavatar").string(), model);
-    const std::vector<torch::Tensor> from = saved.modules().parameters();
     const std::vector<torch::Tensor> to = avatar.modules().parameters();
-    auto fits = [](const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
-      if (a.size() != b.size()) return false;
-      for (size_t i = 0; i < a.size(); ++i)
-        if (!a[i].sizes().equals(b[i].sizes())) return false;
-      return true;
-    };
-    if (!fits(from, to)) throw std::runtime_error("the checkpoint's networks differ from this avatar's");
     torch::NoGradGuard no_grad;
-    for (size_t i = 0; i < to.size(); ++i) to[i].copy_(from[i]);
-    if (offsets->enabled()) {
-      std::vector<torch::Tensor> saved_offsets;
-      torch::load(saved_offsets, (ckpt / "offsets.pt").string());
-      const std::vector<torch::Tensor> now = {offsets->geometry, offsets->appearance};
-      if (!fits(saved_offsets, now))
-        throw std::runtime_error("the checkpoint's per-frame offsets are for another dataset");
-      for (size_t i = 0; i < now.size(); ++i) now[i].copy_(saved_offsets[i]);
-    }
-    if (average) {  // a checkpoint made without averaging starts the average at its weights
-      if (fs::exists(ckpt / "average.pt")) {
-        std::vector<torch::Tensor> saved_average;
-        torch::load(saved_average, (ckpt / "average.pt").string());
-        if (!fits(saved_average, average->average()))
-          throw std::runtime_error("the checkpoint's averaged weights differ from this avatar's networks");
-        for (size_t i = 0; i < saved_average.size(); ++i) average->average()[i].copy_(saved_average[i]);
-      } else {
-        for (size_t i = 0; i < to.size(); ++i) average->average()[i].copy_(to[i]);
-      }
-    }
+    CopyInto(saved.modules().parameters(), to, "the checkpoint's networks differ from this avatar's");
+    auto load = [&](const char* file) {
+      std::vector<torch::Tensor> tensors;
+      torch::load(tensors, (ckpt / file).string());
+      return tensors;
+    };
+    if (offsets->enabled())
+      CopyInto(load("offsets.pt"), {offsets->geometry, offsets->appearance},
+               "the checkpoint's per-frame offsets are for another dataset");
+    if (average)  // a checkpoint made without averaging starts the average at its weights
+      CopyInto(fs::exists(ckpt / "average.pt") ? load("average.pt") : to, average->average(),
+               "the checkpoint's averaged weights differ from this avatar's networks");
     torch::serialize::InputArchive archive;
     archive.load_from((ckpt / "optimizer.pt").string());
     adam.load(archive);
