@@ -5,6 +5,7 @@
 #include "bench/bench.h"
 #include "common/headmodel/head_model_io.h"
 #include "training/avatar_fit.h"
+#include "training/image_losses.h"
 
 namespace headcast::bench {
 
@@ -51,6 +52,23 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
     out["finetune_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
     out["finetune_data"] = real ? "prepared dataset " + o.dataset + " (real frames, 25 % renders falling to 0)"
                                 : "the subject's own renders (no --data given)";
+  }
+  // The SSIM term's forward and backward pass on one output-sized image, the
+  // separable window the training uses beside the 2D window, alternating.
+  {
+    torch::manual_seed(1);
+    const torch::Tensor target = torch::rand({1, 3, o.resolution, o.resolution});
+    SampleStats separable, full;
+    for (int i = 0; i < 41; ++i) {
+      for (const bool sep : {true, false}) {
+        const torch::Tensor x = torch::rand({1, 3, o.resolution, o.resolution}).requires_grad_(true);
+        Stopwatch watch;
+        (sep ? Ssim(x, target) : SsimFullWindow(x, target)).backward();
+        if (i > 0) (sep ? separable : full).Add(watch.ElapsedMs());  // the first is warm-up
+      }
+    }
+    out["ssim_ms_median"] = separable.Median();
+    out["ssim_full_window_ms_median"] = full.Median();
   }
   out["threads"] = torch::get_num_threads();
   return out;

@@ -90,11 +90,13 @@ def main():
               f". Uplink {f(d['uplink_kbps'].get('payload'), 2)} kbit/s payload, {f(d['uplink_kbps'].get('on_wire'), 2)} kbit/s on the wire.",
               "", f"![latency]({rel}/demo/latency.png)", ""]
 
-    L += ["## Training", "", "| resolution | pretrain samples/s | fine-tune samples/s | fine-tune data |", "|---|---|---|---|"]
+    L += ["## Training", "", "| resolution | pretrain samples/s | fine-tune samples/s | SSIM term ms (separable / 2D window) | fine-tune data |",
+          "|---|---|---|---|---|"]
     for res in (128, 256):
         j = load(r, f"train_{res}.json")
         if j:
-            L.append(f"| {res}² | {f(j.get('pretrain_samples_per_s'), 2)} | {f(j.get('finetune_samples_per_s'), 2)} | {j.get('finetune_data')} |")
+            L.append(f"| {res}² | {f(j.get('pretrain_samples_per_s'), 2)} | {f(j.get('finetune_samples_per_s'), 2)} | "
+                     f"{f(j.get('ssim_ms_median'), 1)} / {f(j.get('ssim_full_window_ms_median'), 1)} | {j.get('finetune_data')} |")
     L.append("")
 
     real = os.path.join(r, "real_person.md")  # bench/real_person.sh: too long for this run, kept apart

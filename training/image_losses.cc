@@ -30,6 +30,18 @@ torch::Tensor GaussianBlur(const torch::Tensor& x, const torch::Tensor& taps) {
   return F::conv2d(rows, taps.view({1, 1, -1, 1}).expand({k, 1, taps.size(0), 1}), groups);
 }
 
+// The SSIM map's mean from the windowed means, second moments and cross moment.
+torch::Tensor SsimFromMoments(const torch::Tensor& mu_a, const torch::Tensor& mu_b, const torch::Tensor& aa,
+                              const torch::Tensor& bb, const torch::Tensor& ab) {
+  const double c1 = 0.01 * 0.01, c2 = 0.03 * 0.03;
+  const torch::Tensor var_a = aa - mu_a * mu_a;
+  const torch::Tensor var_b = bb - mu_b * mu_b;
+  const torch::Tensor cov = ab - mu_a * mu_b;
+  const torch::Tensor map =
+      ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
+  return map.mean();
+}
+
 }  // namespace
 
 torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b) {
@@ -40,15 +52,18 @@ torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b) {
   // gradient costs no backward pass), one for the cross term.
   const std::vector<torch::Tensor> moments_a = GaussianBlur(torch::cat({a, a * a}, 1), taps).split(c, 1);
   const std::vector<torch::Tensor> moments_b = GaussianBlur(torch::cat({b, b * b}, 1), taps).split(c, 1);
-  const torch::Tensor& mu_a = moments_a[0];
-  const torch::Tensor& mu_b = moments_b[0];
-  const double c1 = 0.01 * 0.01, c2 = 0.03 * 0.03;
-  const torch::Tensor var_a = moments_a[1] - mu_a * mu_a;
-  const torch::Tensor var_b = moments_b[1] - mu_b * mu_b;
-  const torch::Tensor cov = GaussianBlur(a * b, taps) - mu_a * mu_b;
-  const torch::Tensor map =
-      ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a * mu_a + mu_b * mu_b + c1) * (var_a + var_b + c2));
-  return map.mean();
+  return SsimFromMoments(moments_a[0], moments_b[0], moments_a[1], moments_b[1], GaussianBlur(a * b, taps));
+}
+
+torch::Tensor SsimFullWindow(const torch::Tensor& a, const torch::Tensor& b) {
+  TORCH_CHECK(a.dim() == 4 && a.sizes() == b.sizes(), "SsimFullWindow: two (B, C, H, W) images of one size");
+  const int64_t c = a.size(1);
+  const torch::Tensor g = GaussianTaps().to(a.dtype());
+  const torch::Tensor window = torch::outer(g, g).expand({c, 1, g.size(0), g.size(0)}).contiguous();
+  auto blur = [&](const torch::Tensor& x) {
+    return torch::nn::functional::conv2d(x, window, torch::nn::functional::Conv2dFuncOptions().groups(c));
+  };
+  return SsimFromMoments(blur(a), blur(b), blur(a * a), blur(b * b), blur(a * b));
 }
 
 double Psnr(const torch::Tensor& a, const torch::Tensor& b) {

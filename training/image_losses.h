@@ -12,7 +12,13 @@ namespace headcast {
 
 // Mean SSIM of two (B, 3, H, W) images in [0, 1]: 11x11 Gaussian window
 // (sigma 1.5), C1 = 0.01^2, C2 = 0.03^2, per channel, averaged; differentiable.
+// The window is applied as a 1x11 and an 11x1 pass (the same value, 22
+// multiply-adds a pixel instead of 121).
 torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b);
+
+// The same SSIM by its definition: one 2D 11x11 convolution per statistic.
+// What Ssim is checked (tests) and timed (headcast-bench train) against.
+torch::Tensor SsimFullWindow(const torch::Tensor& a, const torch::Tensor& b);
 
 // PSNR in dB of two images in [0, 1].
 double Psnr(const torch::Tensor& a, const torch::Tensor& b);
