@@ -16,7 +16,7 @@ bin=$root/build/bin
 python=${HEADCAST_PYTHON:-/usr/bin/python3}
 data=${HEADCAST_DATA:-$root/../shared/data}
 command="bench/real_person.sh $*"
-[ $# -ge 1 ] || { sed -n 2,10p "$0" >&2; exit 2; }
+[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 general="" iterations=10000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit test_frames=150
 while [ $# -gt 0 ]; do
