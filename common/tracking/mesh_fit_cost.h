@@ -227,12 +227,14 @@ struct FreeBlocks {
 
 // All model vertices posed by `state`, in the target's frame.
 RowMatrixX3f PoseAll(const MeshBasis& basis, const FitState& state);
-std::vector<std::vector<int>> VertexFaces(const HeadModel& model);
+// Closest point on triangle abc to p, as barycentrics.
+Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                   const Eigen::Vector3d& c);
 // For every point: the closest point on the posed model surface within
 // `max_distance`, mostly point-to-plane along the point's normal (when it has
 // one), skipped when the surfaces face different ways.
 std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
-                                          const std::vector<std::vector<int>>& vertex_faces, const RowMatrixX3f& points,
+                                          const RowMatrixX3f& points,
                                           const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
                                           const Eigen::VectorXf& nu, double max_distance);
 // One Ceres solve over `pairs` (weighted, robust loss, priors); returns the iterations used.

@@ -105,77 +105,81 @@ struct CloudAdaptor {
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
 
-// For every target vertex: the closest point on the posed model surface
-// (searching the faces around its 8 nearest model vertices).
+// For every target point: the closest point on the posed model surface. Each
+// face is bounded by a sphere around its centroid; the nearest centroids give
+// a first distance, and only faces whose sphere comes closer than it are
+// measured exactly -- the same answer as measuring every face, at a few
+// triangle tests per point.
 std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
-                                          const std::vector<std::vector<int>>& vertex_faces, const RowMatrixX3f& points,
-                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
-                                          const Eigen::VectorXf& nu, double max_distance) {
+                                          const RowMatrixX3f& points, const RowMatrixX3f& point_normals,
+                                          const Eigen::VectorXf& omega, const Eigen::VectorXf& nu,
+                                          double max_distance) {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
   constexpr double kMinNormalAgreement = 0.5;  // cos 60 degrees
   const RowMatrixX3f model_normals = VertexNormals(posed, model.data().faces);
-  CloudAdaptor cloud{posed};
-  KdTree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  tree.buildIndex();
   const auto& faces = model.data().faces;
-  // Faces much larger than the typical one can hold a point's closest spot
-  // while none of their vertices is among its nearest: always checked.
-  std::vector<int> large_faces;
+  std::vector<Correspondence> out;
   RowMatrixX3f centroids(faces.rows(), 3);
+  std::vector<float> radius(faces.rows());
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
+    centroids.row(f) = c;
+    radius[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
+                          (posed.row(faces(f, 2)) - c).norm()});
+  }
+  // A radius search on centroids finds every face within `reach` of a point
+  // when it searches reach + the faces' largest radius. Faces much larger than
+  // the typical one would widen every search: they are checked on their own.
+  std::vector<int> large_faces;
   float threshold = 0;
   {
-    std::vector<float> radius(faces.rows());
-    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-      const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
-      centroids.row(f) = c;
-      radius[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
-                            (posed.row(faces(f, 2)) - c).norm()});
-    }
     std::vector<float> sorted = radius;
     std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
     threshold = 3 * sorted[sorted.size() / 2];
     for (Eigen::Index f = 0; f < faces.rows(); ++f)
       if (radius[f] > threshold) large_faces.push_back(static_cast<int>(f));
   }
-  // Every other face lies within `threshold` of its centroid: a radius search
-  // on centroids around the first candidate finds the true closest face.
   CloudAdaptor centroid_cloud{centroids};
   KdTree centroid_tree(3, centroid_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
   centroid_tree.buildIndex();
   std::vector<std::pair<unsigned, float>> nearby;
-  std::vector<Correspondence> out;
-  constexpr int kNeighbours = 8;
+  constexpr int kNeighbours = 4;
   for (Eigen::Index j = 0; j < points.rows(); ++j) {
     const Eigen::Vector3f tf = points.row(j).transpose();
-    unsigned index[kNeighbours];
-    float dist2[kNeighbours];
-    const size_t found = tree.knnSearch(tf.data(), kNeighbours, index, dist2);
     const Eigen::Vector3d t = tf.cast<double>();
     double best = INFINITY;
     Correspondence c;
     auto try_face = [&](int f) {
-        const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
-        const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
-        const Eigen::Vector3d cc = posed.row(faces(f, 2)).cast<double>().transpose();
-        const Eigen::Vector3d bary = ClosestBarycentric(t, a, b, cc);
-        const double d = (bary[0] * a + bary[1] * b + bary[2] * cc - t).squaredNorm();
-        if (d < best) {
-          best = d;
-          c.vertices = {faces(f, 0), faces(f, 1), faces(f, 2)};
-          c.bary = bary;
-        }
+      const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
+      const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
+      const Eigen::Vector3d cc = posed.row(faces(f, 2)).cast<double>().transpose();
+      const Eigen::Vector3d bary = ClosestBarycentric(t, a, b, cc);
+      const double d = (bary[0] * a + bary[1] * b + bary[2] * cc - t).squaredNorm();
+      if (d < best) {
+        best = d;
+        c.vertices = {faces(f, 0), faces(f, 1), faces(f, 2)};
+        c.bary = bary;
+      }
     };
-    for (size_t m = 0; m < found; ++m)
-      for (int f : vertex_faces[index[m]]) try_face(f);
-    for (int f : large_faces) try_face(f);
-    if (std::isfinite(best)) {
-      const float reach = static_cast<float>(std::sqrt(best)) + threshold;
-      nanoflann::SearchParams params;
-      params.sorted = false;
-      centroid_tree.radiusSearch(tf.data(), reach * reach, nearby, params);
-      for (const auto& [f, d2] : nearby) try_face(static_cast<int>(f));
-    }
+    // Can face f (its centroid d2 away, squared) hold a point closer than the best so far?
+    auto may_be_closer = [&](int f, float d2) {
+      const double reach = std::sqrt(best) + radius[static_cast<size_t>(f)];
+      return d2 < reach * reach;
+    };
+    unsigned index[kNeighbours];
+    float dist2[kNeighbours];
+    const size_t found = centroid_tree.knnSearch(tf.data(), kNeighbours, index, dist2);
+    for (size_t m = 0; m < found; ++m) try_face(static_cast<int>(index[m]));
+    // Only a face within max_distance can pair: no need to search farther.
+    const float reach = static_cast<float>(std::min(std::sqrt(best), max_distance)) + threshold;
+    nanoflann::SearchParams params;
+    params.sorted = false;  // sorting costs more than the exact tests it would save
+    centroid_tree.radiusSearch(tf.data(), reach * reach, nearby, params);
+    for (const auto& [f, d2] : nearby)
+      if (may_be_closer(static_cast<int>(f), d2)) try_face(static_cast<int>(f));
+    for (int f : large_faces)
+      if (may_be_closer(f, (centroids.row(f).transpose() - tf).squaredNorm())) try_face(f);
     if (!(best <= max_distance * max_distance)) continue;
     c.count = 3;
     c.target = t;
@@ -201,13 +205,6 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
     out.push_back(c);
   }
   return out;
-}
-
-std::vector<std::vector<int>> VertexFaces(const HeadModel& model) {
-  std::vector<std::vector<int>> vertex_faces(model.num_vertices());
-  for (int f = 0; f < model.num_faces(); ++f)
-    for (int k = 0; k < 3; ++k) vertex_faces[model.data().faces(f, k)].push_back(f);
-  return vertex_faces;
 }
 
 Eigen::Matrix4d Umeyama(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to, bool scale) {
@@ -524,7 +521,6 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
         throw std::invalid_argument("the mesh landmarks are (nearly) collinear: no rigid alignment from them");
       SetRigid(Umeyama(from, to, o.fit_scale), &st);
     }
-    const std::vector<std::vector<int>> vertex_faces = VertexFaces(model);
     const RowMatrixX3f target_normals = VertexNormals(target.vertices, target.faces);
     double previous = INFINITY;
     std::vector<Correspondence> pairs;
@@ -532,7 +528,7 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
       // Wider gates while the alignment is rough.
       const double gate = o.max_correspondence_m * (round < 2 ? 3.0 : 1.0);
       pairs =
-          ClosestPoints(model, PoseAll(basis, st), vertex_faces, target.vertices, target_normals, omega, nu, gate);
+          ClosestPoints(model, PoseAll(basis, st), target.vertices, target_normals, omega, nu, gate);
       r.iterations += SolveOnce(basis, pairs, settings, round == 0 ? FreeBlocks::RigidOnly() : all_free, &st);
       ++r.rounds;
       MeasureRms(PoseAll(basis, st), pairs, &r);

@@ -18,7 +18,8 @@ void RgbdFitOptions::Check() const {
   c.InRange("num_expression", num_expression, 0, 100000).NonNegative("landmark_weight", landmark_weight);
   c.Positive("point_weight", point_weight).Positive("max_point_distance_m", max_point_distance_m);
   c.Positive("robust_scale_m", robust_scale_m).InRange("block2_rounds", block2_rounds, 1, 100);
-  c.InRange("block3_rounds", block3_rounds, 0, 100).InRange("cloud_stride", cloud_stride, 1, 64);
+  c.InRange("block3_rounds", block3_rounds, 0, 100).InRange("cloud_points", cloud_points, 50, 10000000);
+  c.InRange("shape_cloud_points", shape_cloud_points, 50, 10000000);
   c.InRange("warm_rounds", warm_rounds, 1, 100).InRange("warm_max_iterations", warm_max_iterations, 1, 1000);
   c.NonNegative("cloud_margin_m", cloud_margin_m).Positive("head_depth_m", head_depth_m);
   c.Positive("contour_tolerance_m", contour_tolerance_m).NonNegative("shape_prior", shape_prior);
@@ -42,10 +43,9 @@ float DepthAt(const cv::Mat& depth_m, const Eigen::Vector2d& pixel, int radius) 
 
 struct RgbdFitter::Impl {
   MeshBasis basis;
-  std::vector<std::vector<int>> vertex_faces;
   Eigen::VectorXf nu;
   Eigen::VectorXd identity;
-  Impl(const HeadModel& model, int ne) : basis(model, model.num_shape(), ne), vertex_faces(VertexFaces(model)) {
+  Impl(const HeadModel& model, int ne) : basis(model, model.num_shape(), ne) {
     nu = Eigen::VectorXf::Ones(model.num_vertices());
     identity = Eigen::VectorXd::Zero(model.num_shape());
   }
@@ -104,6 +104,17 @@ void BuildCloud(const cv::Mat& depth, const PinholeCamera& cam, const cv::Rect& 
   }
 }
 
+// The pixel stride that leaves about `target` of the box's depths within [z_near, z_far].
+int CloudStride(const cv::Mat& depth, const cv::Rect& box, float z_near, float z_far, int target) {
+  int valid = 0;
+  for (int y = box.y; y < box.y + box.height; y += 2)
+    for (int x = box.x; x < box.x + box.width; x += 2) {
+      const float z = depth.at<float>(y, x);
+      valid += z >= z_near && z <= z_far;
+    }
+  return std::clamp(static_cast<int>(std::lround(std::sqrt(4.0 * valid / target))), 1, 64);
+}
+
 }  // namespace
 
 RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
@@ -152,9 +163,12 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   const cv::Rect box = cv::Rect(cv::Point(static_cast<int>(u_lo - margin_px), static_cast<int>(v_lo - forehead_px)),
                                 cv::Point(static_cast<int>(u_hi + margin_px), static_cast<int>(v_hi + margin_px))) &
                        cv::Rect(0, 0, depth_m.cols, depth_m.rows);
+  const float z_lo = z_near - 0.03f, z_hi = z_near + static_cast<float>(options_.head_depth_m);
   RowMatrixX3f cloud, cloud_normals;
-  BuildCloud(depth_m, camera, box, z_near - 0.03f, z_near + static_cast<float>(options_.head_depth_m),
-             options_.cloud_stride, &cloud, &cloud_normals);
+  BuildCloud(depth_m, camera, box, z_lo, z_hi, CloudStride(depth_m, box, z_lo, z_hi,
+                                                        options_.fit_shape ? options_.shape_cloud_points
+                                                                           : options_.cloud_points), &cloud,
+             &cloud_normals);
   r.cloud_points = static_cast<int>(cloud.rows());
   if (r.cloud_points < 50) {
     r.problem = "only " + std::to_string(r.cloud_points) + " depth points on the face";
@@ -253,7 +267,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   for (int round = 0; round < rounds; ++round) {
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
-    points = ClosestPoints(model_, PoseAll(basis, st), impl_->vertex_faces, cloud, cloud_normals, ones, impl_->nu,
+    points = ClosestPoints(model_, PoseAll(basis, st), cloud, cloud_normals, ones, impl_->nu,
                            gate);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
@@ -271,7 +285,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   }
   const RowMatrixX3f posed = PoseAll(basis, st);
   // The accuracy: each point's distance to the final surface (fresh closest points).
-  points = ClosestPoints(model_, posed, impl_->vertex_faces, cloud, cloud_normals, ones, impl_->nu,
+  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu,
                          options_.max_point_distance_m);
   r.paired_points = static_cast<int>(points.size());
   r.accuracy_m = MeasurePairs(posed, points).all_m;

@@ -191,6 +191,58 @@ TEST(MeshFitCost, AnalyticJacobiansMatchNumericOnes) {
   EXPECT_LT((residual - expected).norm(), 1e-6);
 }
 
+// The pruned search (centroid spheres) finds the same closest surface point
+// as measuring every face, for points on, near and far from the surface.
+TEST(MeshFitCost, ClosestPointsAreTheClosestOfAllFaces) {
+  using namespace mesh_fit_internal;
+  const HeadModel& model = Builtin();
+  const RowMatrixX3f posed = model.Forward(HeadModelParams{}).vertices;
+  const auto& faces = model.data().faces;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> g(0, 1);
+  const int n = 400;
+  RowMatrixX3f points(n, 3);
+  for (int i = 0; i < n; ++i) {
+    const int f = static_cast<int>(u(rng) * faces.rows()) % static_cast<int>(faces.rows());
+    double a = u(rng), b = u(rng);
+    if (a + b > 1) a = 1 - a, b = 1 - b;
+    const Eigen::RowVector3f on = (1 - a - b) * posed.row(faces(f, 0)) + a * posed.row(faces(f, 1)) +
+                                  b * posed.row(faces(f, 2));
+    // On the surface, within 2 cm of it, or up to 20 cm away.
+    const double offset = i % 3 == 0 ? 0.0 : i % 3 == 1 ? 0.02 * u(rng) : 0.2 * u(rng);
+    points.row(i) = on + static_cast<float>(offset) * Eigen::RowVector3f(g(rng), g(rng), g(rng)).normalized();
+  }
+  std::vector<double> brute(n, INFINITY);  // every face measured
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d t = points.row(i).cast<double>().transpose();
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+      const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
+      const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
+      const Eigen::Vector3d c = posed.row(faces(f, 2)).cast<double>().transpose();
+      const Eigen::Vector3d w = ClosestBarycentric(t, a, b, c);
+      brute[i] = std::min(brute[i], (w[0] * a + w[1] * b + w[2] * c - t).norm());
+    }
+  }
+  const RowMatrixX3f no_normals = RowMatrixX3f::Zero(n, 3);
+  const Eigen::VectorXf ones = Eigen::VectorXf::Ones(model.num_vertices());
+  // Ungated, and gated at 1 cm (which lets the search skip faces far from every point).
+  for (const double gate : {1.0, 0.01}) {
+    const std::vector<Correspondence> pairs = ClosestPoints(model, posed, points, no_normals, ones, ones, gate);
+    const int within = static_cast<int>(std::count_if(brute.begin(), brute.end(), [&](double d) { return d <= gate; }));
+    EXPECT_EQ(static_cast<int>(pairs.size()), within) << "gate " << gate;
+    for (const Correspondence& p : pairs) {
+      int i = 0;
+      while (i < n && points.row(i).cast<double>().transpose() != p.target) ++i;
+      ASSERT_LT(i, n);
+      Eigen::Vector3d found = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) found += p.bary[k] * posed.row(p.vertices[k]).cast<double>().transpose();
+      EXPECT_NEAR((found - p.target).norm(), brute[i], 1e-7) << "point " << i << ", gate " << gate;
+    }
+  }
+  EXPECT_GT(std::count_if(brute.begin(), brute.end(), [](double d) { return d > 0.01; }), n / 5);  // the gate drops some
+}
+
 TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
   const HeadModel& model = Builtin();
   for (unsigned seed : {1u, 2u, 3u}) {
