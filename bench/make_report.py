@@ -116,8 +116,21 @@ def main():
     else:
         L += [f"Not run: {x.get('skipped') if x else 'no result'}.", ""]
 
+    g = load(r, "rgbd.json")
+    if g:
+        L += ["## RGB-D fit per frame (METHOD §3)", "", f"`{g.get('command', '')}`: {g.get('what', '')}.", "",
+              "| depth noise, cloud | points | ms median | ms p95 | first frame ms | accuracy (mm) | face RMS (mm) | head position (mm) |",
+              "|---|---|---|---|---|---|---|---|"]
+        for k, v in g.items():
+            if isinstance(v, dict) and "ms_per_frame_median" in v:
+                L.append(f"| {k} | {f(v.get('cloud_points_median'), 0)} | {f(v['ms_per_frame_median'], 1)} | "
+                         f"{f(v.get('ms_per_frame_p95'), 1)} | {f(v.get('first_frame_ms'), 0)} | "
+                         f"{f(v.get('accuracy_mm_median'), 3)} | {f(v.get('face_rms_mm_median'), 3)} | "
+                         f"{f(v.get('head_position_error_mm_median'), 3)} |")
+        L.append("")
+
     L += ["## Other suites", ""]
-    for name in ("headmodel", "raster", "meshfit", "rgbd"):
+    for name in ("headmodel", "raster", "meshfit"):
         j = load(r, f"{name}.json")
         if not j:
             continue
