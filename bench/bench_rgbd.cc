@@ -78,7 +78,8 @@ nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, dou
     }
     RowMatrixX3f truth_cam(posed.vertices.rows(), 3);
     for (Eigen::Index v = 0; v < truth_cam.rows(); ++v)
-      truth_cam.row(v) = f.CamFromHead().Apply(posed.vertices.row(v).cast<double>().transpose()).cast<float>().transpose();
+      truth_cam.row(v) =
+          f.CamFromHead().Apply(posed.vertices.row(v).cast<double>().transpose()).cast<float>().transpose();
     accuracy_mm.Add(1e3 * fit.accuracy_m);
     position_mm.Add(1e3 * (fit.translation - f.CamFromHead().translation).norm());
     face_mm.Add(1e3 * FaceRms(s, fit, truth_cam));

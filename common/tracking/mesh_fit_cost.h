@@ -233,8 +233,7 @@ Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector
 // For every point: the closest point on the posed model surface within
 // `max_distance`, mostly point-to-plane along the point's normal (when it has
 // one), skipped when the surfaces face different ways.
-std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
-                                          const RowMatrixX3f& points,
+std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
                                           const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
                                           const Eigen::VectorXf& nu, double max_distance);
 // One Ceres solve over `pairs` (weighted, robust loss, priors); returns the iterations used.

@@ -110,10 +110,9 @@ using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<
 // a first distance, and only faces whose sphere comes closer than it are
 // measured exactly -- the same answer as measuring every face, at a few
 // triangle tests per point.
-std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed,
-                                          const RowMatrixX3f& points, const RowMatrixX3f& point_normals,
-                                          const Eigen::VectorXf& omega, const Eigen::VectorXf& nu,
-                                          double max_distance) {
+std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
+                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
+                                          const Eigen::VectorXf& nu, double max_distance) {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
   constexpr double kMinNormalAgreement = 0.5;  // cos 60 degrees

@@ -164,10 +164,9 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                                 cv::Point(static_cast<int>(u_hi + margin_px), static_cast<int>(v_hi + margin_px))) &
                        cv::Rect(0, 0, depth_m.cols, depth_m.rows);
   const float z_lo = z_near - 0.03f, z_hi = z_near + static_cast<float>(options_.head_depth_m);
+  const int target_points = options_.fit_shape ? options_.shape_cloud_points : options_.cloud_points;
   RowMatrixX3f cloud, cloud_normals;
-  BuildCloud(depth_m, camera, box, z_lo, z_hi, CloudStride(depth_m, box, z_lo, z_hi,
-                                                        options_.fit_shape ? options_.shape_cloud_points
-                                                                           : options_.cloud_points), &cloud,
+  BuildCloud(depth_m, camera, box, z_lo, z_hi, CloudStride(depth_m, box, z_lo, z_hi, target_points), &cloud,
              &cloud_normals);
   r.cloud_points = static_cast<int>(cloud.rows());
   if (r.cloud_points < 50) {
@@ -267,8 +266,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   for (int round = 0; round < rounds; ++round) {
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
-    points = ClosestPoints(model_, PoseAll(basis, st), cloud, cloud_normals, ones, impl_->nu,
-                           gate);
+    points = ClosestPoints(model_, PoseAll(basis, st), cloud, cloud_normals, ones, impl_->nu, gate);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
       return r;
@@ -285,8 +283,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   }
   const RowMatrixX3f posed = PoseAll(basis, st);
   // The accuracy: each point's distance to the final surface (fresh closest points).
-  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu,
-                         options_.max_point_distance_m);
+  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu, options_.max_point_distance_m);
   r.paired_points = static_cast<int>(points.size());
   r.accuracy_m = MeasurePairs(posed, points).all_m;
   const auto lmk = landmark_pairs(true, 1.0);

@@ -125,7 +125,8 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     for (int k = 0; k < truth.expression.size(); ++k)
       truth.expression[k] = static_cast<float>(blendshapes ? 0.4 * (1 + u(rng)) * (u(rng) > 0.6) : 0.8 * u(rng));
     if (model.JointIsArticulated(kJawJoint)) truth.jaw = Eigen::Vector3f(static_cast<float>(0.15 * (1 + u(rng))), 0, 0);
-    truth.SetCamFromHead(FrontalCamFromHead(scene.distance_m + 0.1 * u(rng), 25 * u(rng), 10 * u(rng), model.rest_landmark_centroid()));
+    truth.SetCamFromHead(
+        FrontalCamFromHead(scene.distance_m + 0.1 * u(rng), 25 * u(rng), 10 * u(rng), model.rest_landmark_centroid()));
     const Landmarks2d clean = fitter.Project(truth, cam);
     Landmarks2d observed;
     for (int l = 0; l < kNumLandmarks; ++l) observed[l] = clean[l] + Eigen::Vector2d(noise(rng), noise(rng));
