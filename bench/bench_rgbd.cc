@@ -17,6 +17,9 @@ namespace headcast::bench {
 namespace {
 
 struct RgbdScene {
+  explicit RgbdScene(const HeadModel& m) : model(m), albedo(AlbedoTexture(m)), face(DefaultImportance(m)) {
+    motion.distance = 0.55;
+  }
   const HeadModel& model;
   PinholeCamera camera = PinholeCamera::FromFovY(640, 480, 45);
   cv::Mat albedo;
@@ -99,10 +102,7 @@ nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, dou
 
 nlohmann::json RunRgbdSuite(const BenchOptions& options) {
   const HeadModel model = MakeBuiltinHead();
-  RgbdScene scene{model};
-  scene.albedo = AlbedoTexture(model);
-  scene.motion.distance = 0.55;
-  scene.face = DefaultImportance(model);
+  const RgbdScene scene(model);
   const int frames = std::max(2, options.repeats);
   nlohmann::json out;
   out["suite"] = "rgbd";
