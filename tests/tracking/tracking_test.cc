@@ -4,9 +4,11 @@
 #include <ceres/gradient_checker.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <vector>
 
 #include "common/core/image_io.h"
 #include "common/core/rotation.h"
@@ -208,7 +210,6 @@ TEST(HeadFitter, RecoversIctFaceKitHeads) {
   EXPECT_LT(worst.outside_range, 0.1);  // ARKit coefficients stay in 0..1 (a soft box: measured 0.08)
 }
 
-// The sender's and headcast-track's per-frame rule: warm while tracked, cold after a loss.
 // The figures (pose within 1 degree, translation within 5 mm,
 // reprojection within 1.5 px) at the real clips' framing, over 100 heads each.
 TEST(HeadFitter, RecoversHeadsFramedAsInTheRealClips) {
@@ -226,6 +227,7 @@ TEST(HeadFitter, RecoversHeadsFramedAsInTheRealClips) {
   check(RecoverSyntheticHeads(ConvertIctFaceKit(io), 100, true, TalkingHeadScene()));
 }
 
+// The sender's and headcast-track's per-frame rule: warm while tracked, cold after a loss.
 TEST(FitTrackedFace, WarmWhileTrackedColdAfterALoss) {
   const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 45);
   HeadFitter fitter(Model());
