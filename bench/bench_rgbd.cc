@@ -10,35 +10,27 @@
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
 #include "common/headmodel/synthetic_motion.h"
-#include "common/tracking/mesh_fitter.h"
 #include "common/tracking/rgbd_fitter.h"
+#include "common/tracking/synthetic_scan.h"
 
 namespace headcast::bench {
 namespace {
 
 struct RgbdScene {
-  explicit RgbdScene(const HeadModel& m) : model(m), albedo(AlbedoTexture(m)), face(DefaultImportance(m)) {
-    motion.distance = 0.55;
-  }
+  explicit RgbdScene(const HeadModel& m) : model(m), albedo(AlbedoTexture(m)) { motion.distance = 0.55; }
   const HeadModel& model;
   PinholeCamera camera = PinholeCamera::FromFovY(640, 480, 45);
   cv::Mat albedo;
   SyntheticMotionOptions motion;
-  Eigen::VectorXf face;  // DefaultImportance: >= 1 on the face
 };
 
-// RMS distance (m) over the face's vertices between the fit and the truth, in the camera frame.
-double FaceRms(const RgbdScene& s, const RgbdFitResult& fit, const RowMatrixX3f& truth_cam) {
-  const HeadModelOutput fitted = s.model.Forward(fit.params);
-  double ss = 0;
-  int n = 0;
-  for (int v = 0; v < s.model.num_vertices(); ++v) {
-    if (s.face[v] < 1) continue;
-    const Eigen::Vector3d a = fit.rotation * fitted.vertices.row(v).cast<double>().transpose() + fit.translation;
-    ss += (a - truth_cam.row(v).cast<double>().transpose()).squaredNorm();
-    ++n;
-  }
-  return std::sqrt(ss / std::max(1, n));
+// RMS distance over the face's vertices between the fit and the truth (camera frame), mm.
+double FaceRmsMm(const HeadModel& model, const RgbdFitResult& fit, const RowMatrixX3f& truth_cam) {
+  MeshFitResult placed;
+  placed.params = fit.params;
+  placed.rotation = fit.rotation;
+  placed.translation = fit.translation;
+  return FaceRmsAgainstTruthMm(model, placed, truth_cam);
 }
 
 nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, double noise_mm) {
@@ -85,7 +77,7 @@ nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, dou
           f.CamFromHead().Apply(posed.vertices.row(v).cast<double>().transpose()).cast<float>().transpose();
     accuracy_mm.Add(1e3 * fit.accuracy_m);
     position_mm.Add(1e3 * (fit.translation - f.CamFromHead().translation).norm());
-    face_mm.Add(1e3 * FaceRms(s, fit, truth_cam));
+    face_mm.Add(FaceRmsMm(s.model, fit, truth_cam));
     points.Add(fit.cloud_points);
     last = fit;
   }

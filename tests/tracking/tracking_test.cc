@@ -143,7 +143,6 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     const Eigen::Vector3f dt = fit.cam_translation - truth.cam_translation;
     worst.lateral_m = std::max<double>(worst.lateral_m, dt.head<2>().norm());
     worst.depth_m = std::max<double>(worst.depth_m, std::abs(dt.z()));
-    worst.translation_m = std::max<double>(worst.translation_m, dt.norm());
     angles.push_back(angle);
     translations.push_back(dt.norm());
     double angle_bound, depth_bound;
@@ -165,6 +164,7 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     *rms = std::sqrt(*rms);
   worst.angle_p95_deg = Percentile(angles, 0.95);
   worst.translation_p95_m = Percentile(translations, 0.95);
+  worst.translation_m = *std::max_element(translations.begin(), translations.end());
   std::printf(
       "%s, worst of %d: angle %.2f deg, lateral %.2f mm, depth %.2f mm, reprojection %.2f px, %.3f outside the "
       "expression range\n  RMS over the trials: angle %.2f deg, depth %.2f mm; Cramer-Rao bound (RMS sigma): angle "
