@@ -44,7 +44,7 @@ nlohmann::json RunQualitySuite(const BenchOptions& options) {
   for (const Variant& v : variants) {
     SyntheticData data(model, data_options, base, 7);
     Avatar avatar = Avatar::CreateRandom(v.config, model, base, 3);
-    const FitResult r = FitOnSynthetic(avatar, model, data, fit);
+    const TrainResult r = FitOnSynthetic(avatar, model, data, fit);
     const EvalResult e = EvaluateOnSynthetic(avatar, model, data, 20);
     nlohmann::json row = {{"variant", v.name},
                           {"psnr_db", e.psnr_mean},

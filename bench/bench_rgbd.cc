@@ -98,9 +98,10 @@ nlohmann::json RunRgbdSuite(const BenchOptions& options) {
   const int frames = std::max(2, options.repeats);
   nlohmann::json out;
   out["suite"] = "rgbd";
-  out["what"] = "RgbdFitter::Fit per frame, 640x480, built-in head, landmarks = projected model landmarks + 1 px "
-                "noise, wall at 1.4 m; identity frozen after the first frame; ms on this machine; face_rms: the "
-                "fitted face's vertices against the truth; *_cloud_3000: a denser cloud, side by side";
+  out["what"] =
+      "RgbdFitter::Fit per frame, 640x480, built-in head, landmarks = projected model landmarks + 1 px "
+      "noise, wall at 1.4 m; identity frozen after the first frame; ms on this machine; face_rms: the "
+      "fitted face's vertices against the truth; *_cloud_3000: a denser cloud, side by side";
   out["frames"] = frames;
   const int default_points = RgbdFitOptions{}.cloud_points;
   for (const int cloud_points : {default_points, 3000})

@@ -1,10 +1,10 @@
 // Benchmark suite "track": the sender's per-frame tracking cost (face tracker,
-// landmarks, head-model fit) on a video, as headcast-track runs it.
+// landmarks, head-model fit) on a video, through the FrameTracker the sender and
+// headcast-track use.
 #include "bench/bench.h"
 #include "common/core/image_io.h"
 #include "common/headmodel/head_model_io.h"
-#include "common/tracking/face_tracker.h"
-#include "common/tracking/head_fitter.h"
+#include "common/tracking/frame_tracker.h"
 
 namespace headcast::bench {
 
@@ -12,7 +12,7 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   if (options.video.empty())
     throw std::invalid_argument("track: give --video (e.g. ../shared/data/video/talking_d9.mp4)");
   const HeadModel model = LoadHeadModelSpec(options.head_model);
-  FaceTracker tracker;
+  FrameTracker tracker(model);
   // Drift: the tracked landmarks against those of a detection on every frame
   // (untimed), with the box drawn by the last detection's margins (the
   // default) and by fixed margins.
@@ -21,7 +21,6 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   every_frame.redetect_interval = 1;
   FaceTracker fixed_tracker(fixed_margins), reference(every_frame);
   SampleStats drift, fixed_drift;
-  HeadFitter fitter(model);
   VideoReader video(options.video);
   const double fps = video.fps() > 0 ? video.fps() : 30;
   SampleStats total, track_ms, fit_ms, error;
@@ -30,15 +29,11 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   cv::Mat frame;
   while (video.Read(&frame) && (options.repeats <= 0 || frames < options.repeats)) {
     const PinholeCamera camera = PinholeCamera::FromFovY(frame.cols, frame.rows, 40);
-    Stopwatch watch;
-    const FaceObservation obs = tracker.Track(frame, frames / fps);
-    const double t_track = watch.ElapsedMs();
-    FitResult fit;
-    if (obs.status != FaceStatus::kNoFace) fit = fitter.Fit(obs.landmarks, camera, &params);
-    if (!fit.ok) params.cam_translation.setZero();
-    total.Add(watch.ElapsedMs());
-    track_ms.Add(t_track);
-    fit_ms.Add(watch.ElapsedMs() - t_track);
+    const TrackedFrame t = tracker.Track(frame, cv::Mat(), frames / fps, camera, &params);
+    const FaceObservation& obs = t.face;
+    total.Add(t.landmarks_ms + t.fit_ms);
+    track_ms.Add(t.landmarks_ms);
+    fit_ms.Add(t.fit_ms);
     ++frames;
     const FaceObservation fixed_obs = fixed_tracker.Track(frame, frames / fps);
     const FaceObservation ref = reference.Track(frame, frames / fps);
@@ -47,15 +42,16 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
       drift.Add(LandmarkErrorIod(obs.raw, ref.raw));
       fixed_drift.Add(LandmarkErrorIod(fixed_obs.raw, ref.raw));
     }
-    if (fit.ok) {
+    if (t.fitted) {
       ++fitted;
-      error.Add(LandmarkErrorIod(fitter.Project(params, camera), obs.raw));
+      error.Add(LandmarkErrorIod(tracker.fitter().Project(params, camera), obs.raw));
     }
   }
   nlohmann::json out;
   out["suite"] = "track";
   out["what"] =
-      "FaceTracker::Track + HeadFitter::Fit per frame (detect/track + 68 landmarks + fit), ms; run under taskset -c 0 "
+      "FrameTracker::Track per frame (detect/track + 68 landmarks + fit, as the sender and headcast-track run it), ms; "
+      "run under taskset -c 0 "
       "for one core";
   out["video"] = options.video;
   out["head_model"] = model.data().name;

@@ -35,6 +35,23 @@ RecordingWriter::RecordingWriter(const std::string& path, const RecordingInfo& i
     throw std::runtime_error(path + ": cannot write recording header");
 }
 
+RecordingInfo MakeRecordingInfo(const HeadModel& model, double fps, const SubjectParams& subject, std::string source) {
+  RecordingInfo info;
+  info.head_model_name = model.data().name;
+  info.head_model_fingerprint = model.fingerprint();
+  info.num_expression = model.num_expression();
+  info.fps = fps;
+  info.subject = subject;
+  info.source = std::move(source);
+  return info;
+}
+
+void WriteRecording(const std::string& path, const RecordingInfo& info, const std::vector<FrameParams>& frames) {
+  RecordingWriter writer(path, info);
+  for (const FrameParams& f : frames) writer.Write(f);
+  writer.Close();
+}
+
 RecordingWriter::~RecordingWriter() { Close(); }
 
 void RecordingWriter::Write(const FrameParams& frame) {

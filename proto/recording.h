@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 #include "proto/headcast.pb.h"
 
@@ -23,6 +24,12 @@ struct RecordingInfo {
   SubjectParams subject;
   std::string source;
 };
+
+// The header of a recording of `model`'s parameters.
+RecordingInfo MakeRecordingInfo(const HeadModel& model, double fps, const SubjectParams& subject, std::string source);
+
+// Writes a whole recording; throws naming the file.
+void WriteRecording(const std::string& path, const RecordingInfo& info, const std::vector<FrameParams>& frames);
 
 class RecordingWriter {
  public:

@@ -169,7 +169,8 @@ int main(int argc, char** argv) {
     InitLogging(log_level);
     if (create->parsed()) {
       const HeadModel model = LoadHeadModelSpec(head_model);
-      Avatar avatar = Avatar::CreateRandom(AvatarConfig::Default(resolution), model, DefaultSubject(model, resolution), seed);
+      Avatar avatar =
+          Avatar::CreateRandom(AvatarConfig::Default(resolution), model, DefaultSubject(model, resolution), seed);
       avatar.Save(out);
       std::cout << "wrote " << out << " (untrained, random weights; " << resolution << "x" << resolution << ")\n";
     } else if (info->parsed()) {

@@ -4,8 +4,10 @@
 #include <csignal>
 #include <fstream>
 #include <iostream>
+#include <mutex>
+#include <nlohmann/json.hpp>
 
-#include "common/avatar/avatar_renderer.h"
+#include "common/avatar/avatar_backend.h"
 #include "common/core/log.h"
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
@@ -34,146 +36,169 @@ class SessionSource : public FrameParamsSource {
   ReceiverServer* server_;
 };
 
+struct ReceiverFlags {
+  std::string log_level, head_model_spec = "builtin", display = "window", video, record, stats_json, token_file;
+  std::string latency_csv, display_csv;
+  std::vector<std::string> avatars, tokens;
+  ReceiverServerOptions server;
+  double render_fps = 30, duration = 0;
+  int threads = 1;
+};
+
+void AddFlags(CLI::App& app, ReceiverFlags& f) {
+  app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
+  ReceiverServerOptions& s = f.server;
+  app.add_option("--log", f.log_level, "log level");
+  app.add_option("--listen", s.listen, "host:port to listen on")->capture_default_str();
+  app.add_option("--token", f.tokens, "accepted bearer token (repeatable)");
+  app.add_option("--token-file", f.token_file, "file with accepted bearer tokens, one per line");
+  app.add_flag("--plaintext", s.plaintext, "no TLS (loopback addresses only)");
+  app.add_flag("--allow-no-token", s.allow_no_token, "accept senders without a token (plaintext loopback only)");
+  app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain");
+  app.add_option("--tls-key", s.tls_key, "PEM private key");
+  app.add_option("--tls-client-ca", s.tls_client_ca, "PEM CA: require client certificates signed by it");
+  app.add_option("--max-sessions", s.max_sessions, "concurrent sessions at most")->capture_default_str();
+  app.add_option("--target-delay", s.target_delay_s, "jitter-buffer delay, seconds")->capture_default_str();
+  app.add_option("--head-model", f.head_model_spec, "head model of the avatars: builtin or .npz")
+      ->capture_default_str();
+  app.add_option("--avatar", f.avatars, "ID=PATH.hcavatar (repeatable); senders name the ID")->required();
+  app.add_option("--display", f.display, "window, offscreen, video, none")->capture_default_str();
+  app.add_option("--video", f.video, "also write what is shown to this MP4");
+  app.add_option("--record", f.record, "record the first session's received parameters (.hcrec)");
+  app.add_option("--render-fps", f.render_fps, "display rate")->capture_default_str();
+  app.add_option("--threads", f.threads, "libtorch threads")->capture_default_str();
+  app.add_option("--duration", f.duration, "stop after this many seconds (0: run until interrupted)");
+  app.add_option("--stats-json", f.stats_json, "write render and server statistics here at the end");
+  app.add_option("--latency-csv", f.latency_csv,
+                 "log every received frame: arrival time, session, sequence, capture-to-arrival ms (same-host clocks)");
+  app.add_option("--display-csv", f.display_csv,
+                 "log every shown frame: shown time, sequence, glass-to-glass ms (capture to shown, same-host clocks), "
+                 "render ms");
+}
+
+// What the sessions' threads write as frames arrive: the first session's
+// parameters (--record) and every frame's arrival latency (--latency-csv).
+class StreamTaps {
+ public:
+  StreamTaps(const ReceiverFlags& f, const HeadModel& model, const SubjectParams& subject) {
+    if (!f.latency_csv.empty()) {
+      latency_log_.open(f.latency_csv);
+      if (!latency_log_) throw std::runtime_error(f.latency_csv + ": cannot write");
+      latency_log_ << "arrival_s,session,sequence,latency_ms\n";
+    }
+    if (!f.record.empty())
+      recorder_ = std::make_unique<RecordingWriter>(
+          f.record, MakeRecordingInfo(model, 30, subject, "headcast-receiver (received stream)"));
+  }
+  bool active() const { return recorder_ || latency_log_.is_open(); }
+  void operator()(const std::string& id, const FrameParams& f) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (recorded_session_.empty()) recorded_session_ = id;
+    if (recorder_ && id == recorded_session_) recorder_->Write(f);
+    if (latency_log_.is_open()) {
+      const double now = SteadyNowSeconds();
+      latency_log_ << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s)
+                   << "\n";
+    }
+  }
+  void Close() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (recorder_) recorder_->Close();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::unique_ptr<RecordingWriter> recorder_;
+  std::string recorded_session_;
+  std::ofstream latency_log_;
+};
+
+nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
+  return {{"rendered", stats.rendered},
+          {"fps", stats.fps()},
+          {"render_ms_median", stats.render_ms.Median()},
+          {"show_ms_median", stats.show_ms.Median()},
+          {"glass_to_glass_ms_p50", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Median()},
+          {"glass_to_glass_ms_p95", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Percentile(95)},
+          {"sessions_started", c.sessions_started},
+          {"sessions_rejected", c.sessions_rejected},
+          {"frames_received", c.frames_received},
+          {"frames_bad", c.frames_bad},
+          {"payload_bytes_received", c.bytes_received}};
+}
+
+int Run(ReceiverFlags& f) {
+  InitLogging(f.log_level);
+  std::signal(SIGINT, [](int) { g_stop = true; });
+  std::signal(SIGTERM, [](int) { g_stop = true; });
+  if (!f.token_file.empty()) {
+    std::istringstream in(ReadFileBytes(f.token_file));
+    for (std::string line; std::getline(in, line);)
+      if (!line.empty()) f.tokens.push_back(line);
+  }
+  f.server.tokens = f.tokens;
+  auto model = std::make_shared<const HeadModel>(LoadHeadModelSpec(f.head_model_spec));
+  AvatarBackendOptions backend_options;
+  backend_options.threads = f.threads;
+  // Every avatar is opened (and so checked) at start; the first is shown.
+  std::map<std::string, AvatarEntry> catalog;
+  std::unique_ptr<AvatarBackend> shown;
+  for (const std::string& arg : f.avatars) {
+    const auto eq = arg.find('=');
+    if (eq == std::string::npos) throw std::invalid_argument("--avatar wants ID=PATH, got '" + arg + "'");
+    std::unique_ptr<AvatarBackend> avatar = OpenAvatarBackend(arg.substr(eq + 1), model, backend_options);
+    catalog[arg.substr(0, eq)] = {model->fingerprint(), model->num_expression()};
+    if (!shown) shown = std::move(avatar);
+  }
+  ReceiverServer server(f.server, catalog);
+  StreamTaps taps(f, *model, shown->subject());
+  if (taps.active()) server.SetFrameObserver([&](const std::string& id, const FrameParams& p) { taps(id, p); });
+  server.Start();
+  DisplayOptions display_options;
+  display_options.kind = ParseDisplayKind(f.display);
+  display_options.video_path = f.video;
+  display_options.video_fps = f.render_fps;
+  display_options.title = "headcast receiver";
+  auto display = MakeDisplay(display_options);
+  RenderLoopOptions loop;
+  loop.target_fps = f.render_fps;
+  loop.max_seconds = f.duration;
+  std::ofstream display_log;
+  if (!f.display_csv.empty()) {
+    display_log.open(f.display_csv);
+    if (!display_log) throw std::runtime_error(f.display_csv + ": cannot write");
+    display_log << "shown_s,sequence,glass_to_glass_ms,render_ms\n";
+    loop.on_shown = [&](const FrameParams& p, double glass_ms, double render_ms) {
+      display_log << std::fixed << SteadyNowSeconds() << "," << p.sequence << "," << glass_ms << "," << render_ms
+                  << "\n";
+    };
+  }
+  SessionSource source(&server);
+  const RenderLoopStats stats = RunRenderLoop(*shown, source, *display, loop, [&](DisplayOverlay* o) {
+    server.SetRenderFps(o->fps);
+    const auto sessions = server.Sessions();
+    o->note = sessions.empty() ? "no session" : sessions.front().id + " " + sessions.front().sender_name;
+  });
+  server.Shutdown();
+  taps.Close();
+  const nlohmann::json report = Report(stats, server.counters());
+  std::cout << report.dump(2) << "\n";
+  if (!f.stats_json.empty()) std::ofstream(f.stats_json) << report.dump(2) << "\n";
+  return 0;
+}
+
 }  // namespace
 }  // namespace headcast
 
 int main(int argc, char** argv) {
-  using namespace headcast;
   CLI::App app{"headcast-receiver: receive head-model parameters over gRPC and show the avatar"};
-  app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
-  std::string log_level, head_model_spec = "builtin", display = "window", video, record, stats_json, token_file;
-  std::vector<std::string> avatars_args, tokens;
-  ReceiverServerOptions server_options;
-  double render_fps = 30, duration = 0;
-  int threads = 1;
-  app.add_option("--log", log_level, "log level");
-  app.add_option("--listen", server_options.listen, "host:port to listen on")->capture_default_str();
-  app.add_option("--token", tokens, "accepted bearer token (repeatable)");
-  app.add_option("--token-file", token_file, "file with accepted bearer tokens, one per line");
-  app.add_flag("--plaintext", server_options.plaintext, "no TLS (loopback addresses only)");
-  app.add_flag("--allow-no-token", server_options.allow_no_token,
-               "accept senders without a token (plaintext loopback only)");
-  app.add_option("--tls-cert", server_options.tls_cert, "PEM certificate chain");
-  app.add_option("--tls-key", server_options.tls_key, "PEM private key");
-  app.add_option("--tls-client-ca", server_options.tls_client_ca, "PEM CA: require client certificates signed by it");
-  app.add_option("--max-sessions", server_options.max_sessions, "concurrent sessions at most")->capture_default_str();
-  app.add_option("--target-delay", server_options.target_delay_s, "jitter-buffer delay, seconds")
-      ->capture_default_str();
-  app.add_option("--head-model", head_model_spec, "head model of the avatars: builtin or .npz")->capture_default_str();
-  app.add_option("--avatar", avatars_args, "ID=PATH.hcavatar (repeatable); senders name the ID")->required();
-  app.add_option("--display", display, "window, offscreen, video, none")->capture_default_str();
-  app.add_option("--video", video, "also write what is shown to this MP4");
-  app.add_option("--record", record, "record the first session's received parameters (.hcrec)");
-  app.add_option("--render-fps", render_fps, "display rate")->capture_default_str();
-  app.add_option("--threads", threads, "libtorch threads")->capture_default_str();
-  app.add_option("--duration", duration, "stop after this many seconds (0: run until interrupted)");
-  app.add_option("--stats-json", stats_json, "write render and server statistics here at the end");
-  std::string latency_csv;
-  app.add_option("--latency-csv", latency_csv,
-                 "log every received frame: arrival time, session, sequence, capture-to-arrival ms (same-host clocks)");
-  std::string display_csv;
-  app.add_option("--display-csv", display_csv,
-                 "log every shown frame: shown time, sequence, glass-to-glass ms (capture to shown, same-host clocks), "
-                 "render ms");
+  headcast::ReceiverFlags flags;
+  headcast::AddFlags(app, flags);
   CLI11_PARSE(app, argc, argv);
   try {
-    InitLogging(log_level);
-    std::signal(SIGINT, [](int) { g_stop = true; });
-    std::signal(SIGTERM, [](int) { g_stop = true; });
-    if (!token_file.empty()) {
-      std::istringstream in(ReadFileBytes(token_file));
-      for (std::string line; std::getline(in, line);)
-        if (!line.empty()) tokens.push_back(line);
-    }
-    server_options.tokens = tokens;
-    auto model = std::make_shared<const HeadModel>(LoadHeadModelSpec(head_model_spec));
-    std::map<std::string, AvatarEntry> catalog;
-    std::optional<Avatar> shown;
-    for (const std::string& arg : avatars_args) {
-      const auto eq = arg.find('=');
-      if (eq == std::string::npos) throw std::invalid_argument("--avatar wants ID=PATH, got '" + arg + "'");
-      Avatar avatar = Avatar::Load(arg.substr(eq + 1), *model);
-      catalog[arg.substr(0, eq)] = {model->fingerprint(), model->num_expression()};
-      if (!shown) shown.emplace(std::move(avatar));
-    }
-    ReceiverServer server(server_options, catalog);
-    std::unique_ptr<RecordingWriter> recorder;
-    std::mutex record_mutex;
-    std::string recorded_session;
-    std::ofstream latency_log;
-    if (!latency_csv.empty()) {
-      latency_log.open(latency_csv);
-      if (!latency_log) throw std::runtime_error(latency_csv + ": cannot write");
-      latency_log << "arrival_s,session,sequence,latency_ms\n";
-    }
-    if (!record.empty() || !latency_csv.empty()) {
-      RecordingInfo info;
-      info.head_model_name = model->data().name;
-      info.head_model_fingerprint = model->fingerprint();
-      info.num_expression = model->num_expression();
-      info.subject = shown->subject();
-      info.source = "headcast-receiver (received stream)";
-      if (!record.empty()) recorder = std::make_unique<RecordingWriter>(record, info);
-      server.SetFrameObserver([&](const std::string& id, const FrameParams& f) {
-        std::lock_guard<std::mutex> lock(record_mutex);
-        if (recorded_session.empty()) recorded_session = id;
-        if (recorder && id == recorded_session) recorder->Write(f);
-        if (latency_log.is_open()) {
-          const double now = SteadyNowSeconds();
-          latency_log << std::fixed << now << "," << id << "," << f.sequence << "," << 1e3 * (now - f.capture_time_s)
-                      << "\n";
-        }
-      });
-    }
-    server.Start();
-    AvatarRendererOptions renderer_options;
-    renderer_options.threads = threads;
-    AvatarRenderer renderer(model, std::move(*shown), renderer_options);
-    DisplayOptions display_options;
-    display_options.kind = ParseDisplayKind(display);
-    display_options.video_path = video;
-    display_options.video_fps = render_fps;
-    display_options.title = "headcast receiver";
-    auto shown_display = MakeDisplay(display_options);
-    RenderLoopOptions loop;
-    loop.target_fps = render_fps;
-    loop.max_seconds = duration;
-    std::ofstream display_log;
-    if (!display_csv.empty()) {
-      display_log.open(display_csv);
-      if (!display_log) throw std::runtime_error(display_csv + ": cannot write");
-      display_log << "shown_s,sequence,glass_to_glass_ms,render_ms\n";
-      loop.on_shown = [&](const FrameParams& f, double glass_ms, double render_ms) {
-        display_log << std::fixed << SteadyNowSeconds() << "," << f.sequence << "," << glass_ms << "," << render_ms
-                    << "\n";
-      };
-    }
-    SessionSource source(&server);
-    const RenderLoopStats stats = RunRenderLoop(renderer, source, *shown_display, loop, [&](DisplayOverlay* o) {
-      server.SetRenderFps(o->fps);
-      const auto sessions = server.Sessions();
-      o->note = sessions.empty() ? "no session" : sessions.front().id + " " + sessions.front().sender_name;
-    });
-    server.Shutdown();
-    if (recorder) recorder->Close();
-    const ServerCounters c = server.counters();
-    nlohmann::json report = {
-        {"rendered", stats.rendered},
-        {"fps", stats.fps()},
-        {"render_ms_median", stats.render_ms.Median()},
-        {"show_ms_median", stats.show_ms.Median()},
-        {"glass_to_glass_ms_p50", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Median()},
-        {"glass_to_glass_ms_p95", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Percentile(95)},
-        {"sessions_started", c.sessions_started},
-        {"sessions_rejected", c.sessions_rejected},
-        {"frames_received", c.frames_received},
-        {"frames_bad", c.frames_bad},
-        {"payload_bytes_received", c.bytes_received}};
-    std::cout << report.dump(2) << "\n";
-    if (!stats_json.empty()) std::ofstream(stats_json) << report.dump(2) << "\n";
+    return headcast::Run(flags);
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 1;
   }
-  return 0;
 }

@@ -34,7 +34,7 @@ void RenderLoopOptions::Check() const {
   c.ThrowIfErrors();
 }
 
-RenderLoopStats RunRenderLoop(AvatarRenderer& renderer, FrameParamsSource& source, Display& display,
+RenderLoopStats RunRenderLoop(AvatarBackend& avatar, FrameParamsSource& source, Display& display,
                               const RenderLoopOptions& options, const std::function<void(DisplayOverlay*)>& overlay) {
   options.Check();
   using Clock = std::chrono::steady_clock;
@@ -56,7 +56,7 @@ RenderLoopStats RunRenderLoop(AvatarRenderer& renderer, FrameParamsSource& sourc
       Stopwatch frame_watch;
       AvatarTimings t;
       std::string why;
-      if (renderer.Render(*params, &image, &t, &why)) {
+      if (avatar.Render(*params, &image, &t, &why)) {
         Stopwatch show_watch;
         DisplayOverlay o;
         if (fps_window.ElapsedSeconds() >= 0.5) {

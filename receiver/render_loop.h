@@ -6,7 +6,7 @@
 #include <optional>
 #include <vector>
 
-#include "common/avatar/avatar_renderer.h"
+#include "common/avatar/avatar_backend.h"
 #include "common/core/timer.h"
 #include "receiver/display/display.h"
 
@@ -60,7 +60,7 @@ struct RenderLoopStats {
 
 // Runs until the source finishes, the display asks to quit, or max_seconds.
 // `overlay` (optional) supplies extra overlay figures (latency, kbit/s).
-RenderLoopStats RunRenderLoop(AvatarRenderer& renderer, FrameParamsSource& source, Display& display,
+RenderLoopStats RunRenderLoop(AvatarBackend& avatar, FrameParamsSource& source, Display& display,
                               const RenderLoopOptions& options,
                               const std::function<void(DisplayOverlay*)>& overlay = nullptr);
 

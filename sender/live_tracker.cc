@@ -1,74 +1,42 @@
 // Live tracking for the sender.
 #include "sender/live_tracker.h"
 
-#include "common/tracking/tracked_fit.h"
-
-#include <nlohmann/json.hpp>
-
-#include "common/core/timer.h"
-#include "common/core/zip_archive.h"
-#include "common/tracking/mesh_fitter.h"
+#include <spdlog/spdlog.h>
 
 namespace headcast {
-namespace {
 
-FaceTrackerOptions TrackerOptions(const LiveTrackerOptions& o) {
-  FaceTrackerOptions t;
-  if (!o.predictor.empty()) t.predictor_path = o.predictor;
-  return t;
-}
-
-}  // namespace
-
-Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model) {
-  const bool avatar = path.size() > 9 && path.compare(path.size() - 9, 9, ".hcavatar") == 0;
-  if (!avatar) return ReadIdentityFromMeshFit(path, model);
-  // The manifest only: the sender does not load networks.
-  nlohmann::json manifest;
-  try {
-    const ZipEntries entries = ReadZip(path);
-    const auto it = entries.find("manifest.json");
-    if (it == entries.end()) throw std::runtime_error("no manifest.json");
-    manifest = nlohmann::json::parse(it->second);
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": not a readable avatar (" + e.what() + ")");
+std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOptions& o,
+                                                           const std::optional<PinholeCamera>& source_camera, int width,
+                                                           int height) {
+  if (o.camera) return {*o.camera, "given intrinsics"};
+  if (source_camera) return {*source_camera, "the source's calibration"};
+  if (o.contract) {
+    if (const std::optional<PinholeCamera> k = ContractCameraFor(*o.contract, width, height))
+      return {*k, "the avatar's training camera"};
+    spdlog::warn(
+        "the avatar was trained with a {}x{} camera; these frames are {}x{} (another aspect): tracking with "
+        "a {:.0f} degree field of view instead",
+        o.contract->source.width, o.contract->source.height, width, height, o.fov_deg);
   }
-  const std::string fingerprint = manifest.value("head_model", nlohmann::json::object()).value("fingerprint", "");
-  if (fingerprint != model.fingerprint())
-    throw std::runtime_error(path + ": an avatar for head model " + fingerprint + ", not " + model.data().name + " (" +
-                             model.fingerprint() + ")");
-  const std::vector<double> shape = manifest.at("subject").at("shape").get<std::vector<double>>();
-  Eigen::VectorXd beta = Eigen::VectorXd::Zero(model.num_shape());
-  for (size_t k = 0; k < shape.size() && static_cast<int>(k) < model.num_shape(); ++k) {
-    if (!std::isfinite(shape[k])) throw std::runtime_error(path + ": non-finite shape");
-    beta[static_cast<Eigen::Index>(k)] = shape[k];
-  }
-  return beta;
+  return {PinholeCamera::FromFovY(width, height, o.fov_deg), "the field of view"};
 }
 
 LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& options)
-    : options_(options), tracker_(TrackerOptions(options)), fitter_(model), camera_(options.camera) {
-  if (options.identity.size() > 0) fitter_.SetIdentity(options.identity);
-  last_.cam_translation.setZero();  // cold start
+    : options_(options), tracker_(model, options.tracker), camera_(options.camera) {
+  if (options.identity.size() > 0) tracker_.SetIdentity(options.identity);
 }
 
-LiveTrackResult LiveTracker::Process(const cv::Mat& bgr, double time_s,
-                                     const std::optional<PinholeCamera>& source_camera, FrameParams* params) {
-  if (!camera_)
-    camera_ = source_camera ? *source_camera : PinholeCamera::FromFovY(bgr.cols, bgr.rows, options_.fov_deg);
+LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params) {
+  const cv::Mat& bgr = frame.bgr;
+  if (!camera_) {
+    auto [camera, why] = ChooseTrackingCamera(options_, frame.camera, bgr.cols, bgr.rows);
+    spdlog::info("tracking with {} ({})", why, camera.ToString());
+    camera_ = camera;
+  }
   camera_->width = bgr.cols;  // given intrinsics: the frame says how big it is
   camera_->height = bgr.rows;
-  LiveTrackResult r;
-  Stopwatch watch;
-  const FaceObservation obs = tracker_.Track(bgr, time_s);
-  r.landmarks_ms = watch.ElapsedMs();
-  r.status = obs.status;
-  watch.Restart();
-  r.fitted = FitTrackedFace(fitter_, obs, *camera_, &last_).ok;
-  r.fit_ms = watch.ElapsedMs();
-  if (!r.fitted) return r;
-  *params = last_;
-  return r;
+  const TrackedFrame t = tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params);
+  return {t.fitted, t.face.status, t.landmarks_ms, t.fit_ms};
 }
 
 }  // namespace headcast

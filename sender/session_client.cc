@@ -1,7 +1,6 @@
-// The sender's gRPC client.
+// The sender's sessions (transport-free; gRPC comes in through the connector).
 #include "sender/session_client.h"
 
-#include <grpcpp/grpcpp.h>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -11,10 +10,10 @@
 #include "common/core/bounded_queue.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
-#include "common/core/zip_archive.h"
 #include "proto/convert.h"
-#include "proto/headcast.grpc.pb.h"
+#include "proto/headcast.pb.h"
 #include "proto/protocol.h"
+#include "sender/grpc_uplink.h"
 
 namespace headcast {
 
@@ -26,7 +25,8 @@ void SenderOptions::Check() const {
   c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
   c.NonNegative("max_kbps", max_kbps).InRange("wire_overhead_bytes", wire_overhead_bytes, 0, 10000);
-  c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000).InRange("stats_interval_s", stats_interval_s, 0, 60);
+  c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000)
+      .InRange("stats_interval_s", stats_interval_s, 0, 60);
   c.That(!plaintext || IsLoopbackAddress(target),
          "plaintext is only allowed to a loopback target (got " + target + ")");
   c.That(plaintext || !tls_ca.empty(),
@@ -41,6 +41,7 @@ double Seconds() { return SteadyNowSeconds(); }
 struct SenderClient::Impl {
   SenderOptions options;
   CodecLayout layout;
+  std::unique_ptr<UplinkConnector> connector;
   BoundedQueue<FrameParams> queue;
   std::thread worker;
   std::atomic<bool> stop{false};
@@ -53,37 +54,10 @@ struct SenderClient::Impl {
 
   uint64_t sent_before_session = 0;
 
-  Impl(SenderOptions o, CodecLayout l) : options(std::move(o)), layout(std::move(l)), queue(options.queue_frames) {
+  Impl(SenderOptions o, CodecLayout l, std::unique_ptr<UplinkConnector> c)
+      : options(std::move(o)), layout(std::move(l)), connector(std::move(c)), queue(options.queue_frames) {
     budget_kbps = options.max_kbps;
     counters.budget_kbps = options.max_kbps;
-  }
-
-  std::shared_ptr<grpc::Channel> MakeChannel() const {
-    grpc::ChannelArguments args;
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(options.keepalive_s * 1000));
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 5000);
-    args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-    args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-    // No bandwidth-delay-product probing: its pings cost more than our frames on narrow links.
-    args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
-    // Reconnect quickly after a receiver restart.
-    args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
-    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
-    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_max_s * 1000));
-    if (!options.tls_server_name.empty()) args.SetSslTargetNameOverride(options.tls_server_name);
-    std::shared_ptr<grpc::ChannelCredentials> credentials;
-    if (options.plaintext) {
-      credentials = grpc::InsecureChannelCredentials();
-    } else {
-      grpc::SslCredentialsOptions ssl;
-      ssl.pem_root_certs = ReadFileBytes(options.tls_ca);
-      if (!options.tls_client_cert.empty()) {
-        ssl.pem_cert_chain = ReadFileBytes(options.tls_client_cert);
-        ssl.pem_private_key = ReadFileBytes(options.tls_client_key);
-      }
-      credentials = grpc::SslCredentials(ssl);
-    }
-    return grpc::CreateCustomChannel(options.target, credentials, args);
   }
 
   void SetError(const std::string& e) {
@@ -92,30 +66,29 @@ struct SenderClient::Impl {
   }
 
   // One session: returns when the stream breaks or we stop.
-  void RunSession(const std::shared_ptr<grpc::Channel>& channel) {
-    auto stub = v1::Headcast::NewStub(channel);
-    grpc::ClientContext context;
-    if (!options.token.empty()) context.AddMetadata("authorization", "Bearer " + options.token);
-    auto stream = stub->Session(&context);
+  void RunSession(UplinkChannel& stream) {
     v1::Uplink hello;
     hello.mutable_hello()->set_protocol_version(kProtocolVersion);
     hello.mutable_hello()->set_avatar_id(options.avatar_id);
     hello.mutable_hello()->set_sender_name(options.sender_name);
     hello.mutable_hello()->set_stats_interval_s(options.stats_interval_s);
     ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
-    if (!stream->Write(hello)) {
-      SetError("cannot reach the receiver at " + options.target);
-      stream->Finish();
+    if (!stream.Write(hello)) {
+      SetError("cannot reach the receiver at " + connector->Describe());
+      stream.Cancel();
+      stream.Finish();
       return;
     }
     // Wait for Welcome or Reject (with a deadline: a silent receiver must not hang us).
     std::atomic<int> welcomed{0};  // 0 waiting, 1 welcomed, -1 refused/closed
+    // The reader is owned: joined below on every path (nothing in it throws).
     std::thread reader([&] {
       v1::Downlink d;
-      while (stream->Read(&d)) {
+      while (stream.Read(&d)) {
         std::lock_guard<std::mutex> lock(mutex);
         if (d.has_welcome()) {
           welcomed = 1;
+          ++counters.connects;  // counted here: a session may end before the sending side looks
           counters.streaming = true;
           cv.notify_all();
         } else if (d.has_reject()) {
@@ -147,7 +120,7 @@ struct SenderClient::Impl {
         }
       }
       std::lock_guard<std::mutex> lock(mutex);
-      if (welcomed == 0) welcomed = -1;
+      welcomed = -1;  // refused, or the stream ended: the send loop stops too
       counters.streaming = false;
       cv.notify_all();
     });
@@ -156,11 +129,7 @@ struct SenderClient::Impl {
       cv.wait_for(lock, std::chrono::duration<double>(options.welcome_timeout_s),
                   [&] { return welcomed != 0 || stop; });
     }
-    if (welcomed == 1) {
-      std::lock_guard<std::mutex> lock(mutex);
-      ++counters.connects;
-    }
-    if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", options.target, options.avatar_id);
+    if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", connector->Describe(), options.avatar_id);
     ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame
     {
       std::lock_guard<std::mutex> lock(mutex);
@@ -206,7 +175,7 @@ struct SenderClient::Impl {
       up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
       up.mutable_frames()->set_first_capture_time_s(first_capture);
       last_send = Seconds();
-      const bool ok = stream->Write(up);
+      const bool ok = stream.Write(up);
       {
         std::lock_guard<std::mutex> lock(mutex);
         if (ok) {
@@ -217,35 +186,35 @@ struct SenderClient::Impl {
         cv.notify_all();
       }
       if (!ok) {
-        SetError("stream to " + options.target + " broke");
+        SetError("stream to " + connector->Describe() + " broke");
         break;
       }
     }
     if (welcomed == 1 && stop) {
       v1::Uplink bye;
       bye.mutable_bye()->set_reason(bye_reason);
-      stream->Write(bye);
+      stream.Write(bye);
     }
-    stream->WritesDone();
-    context.TryCancel();
+    stream.CloseWrites();
+    stream.Cancel();
     reader.join();
-    const grpc::Status status = stream->Finish();
-    if (!status.ok() && !stop) SetError(status.error_message());
+    const std::string ended = stream.Finish();
+    if (!ended.empty() && !stop) SetError(ended);
   }
 
   void Run() {
     double backoff = options.reconnect_initial_s;
-    std::shared_ptr<grpc::Channel> channel;
-    try {
-      channel = MakeChannel();
-    } catch (const std::exception& e) {
-      SetError(e.what());
-      spdlog::error("sender: {}", e.what());
-      return;
-    }
     while (!stop) {
       const double started = Seconds();
-      RunSession(channel);
+      std::string error;
+      std::unique_ptr<UplinkChannel> channel = connector->Open(&error);
+      if (!channel) {
+        SetError(error);
+        spdlog::error("sender: {}", error);
+        return;
+      }
+      RunSession(*channel);
+      channel.reset();
       if (stop) break;
       {
         std::lock_guard<std::mutex> lock(mutex);
@@ -260,10 +229,14 @@ struct SenderClient::Impl {
   }
 };
 
-SenderClient::SenderClient(SenderOptions options, CodecLayout layout) {
+SenderClient::SenderClient(SenderOptions options, CodecLayout layout)
+    : SenderClient(options, std::move(layout), MakeGrpcUplinkConnector(options)) {}
+
+SenderClient::SenderClient(SenderOptions options, CodecLayout layout, std::unique_ptr<UplinkConnector> connector) {
   options.Check();
   layout.Check();
-  impl_ = std::make_unique<Impl>(std::move(options), std::move(layout));
+  if (!connector) throw std::invalid_argument("SenderClient: no connector");
+  impl_ = std::make_unique<Impl>(std::move(options), std::move(layout), std::move(connector));
 }
 
 SenderClient::~SenderClient() { Stop("sender closed"); }

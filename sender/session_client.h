@@ -1,6 +1,9 @@
-// The sender's gRPC client: Hello/Welcome, frames coded and sent as produced,
-// several per message when the link is narrow, the oldest dropped when
-// backlogged (latency never builds), reconnection with back-off.
+// The sender's side of the protocol, free of any transport: Hello/Welcome,
+// frames coded and sent as produced, several per message when the link is
+// narrow, paced to a link budget, the oldest dropped when backlogged (latency
+// never builds), reconnection with back-off. Each connection attempt opens a
+// channel through an UplinkConnector: gRPC by default (sender/grpc_uplink.h),
+// an in-memory channel in tests.
 #pragma once
 
 #include <atomic>
@@ -9,6 +12,7 @@
 
 #include "common/codec/param_codec.h"
 #include "common/headmodel/params.h"
+#include "proto/message_channel.h"
 
 namespace headcast {
 
@@ -29,12 +33,12 @@ struct SenderOptions {
   // frames batch up (and the oldest are dropped) instead of queueing in the
   // network; it is lowered when the receiver reports a backlog and recovers slowly.
   double max_kbps = 0;
-  // Per message on the wire, measured (netlab + tcpdump): ~140 B for the message
-  // (Ethernet, IP, TCP, TLS, HTTP/2, gRPC, proto) and ~66 B for the TCP ACK the
-  // sender returns for the receiver's per-message HTTP/2 WINDOW_UPDATEs.
+  // Bytes per message on the wire beyond the payload: the message's framing
+  // (Ethernet, IP, TCP, TLS, HTTP/2, gRPC, proto) and the TCP ACK the sender
+  // returns for the receiver's per-message HTTP/2 WINDOW_UPDATE (bench/DEFAULTS.md).
   int wire_overhead_bytes = 205;
   // Uplink bytes each downlink message (Stats) costs: the TCP ACK plus the HTTP/2
-  // WINDOW_UPDATE gRPC answers with and its ACK (measured ~181 B with TLS).
+  // WINDOW_UPDATE gRPC answers with and its ACK (bench/DEFAULTS.md).
   int downlink_overhead_bytes = 180;
   // How often we want Stats, seconds (0: the receiver's choice). Narrow links
   // ask for fewer: see NarrowLinkDefaults().
@@ -64,9 +68,22 @@ struct SenderCounters {
   uint64_t receiver_frames = 0, receiver_bad = 0, receiver_lost = 0, receiver_late = 0;
 };
 
+// Opens one session's channel to the receiver, once per connection attempt.
+class UplinkConnector {
+ public:
+  virtual ~UplinkConnector() = default;
+  // A channel, or nullptr with *error saying why: a configuration error
+  // (unreadable TLS material, say) after which the client stops trying.
+  virtual std::unique_ptr<UplinkChannel> Open(std::string* error) = 0;
+  virtual std::string Describe() const = 0;  // where it connects, for messages
+};
+
 class SenderClient {
  public:
+  // Over gRPC to options.target (TLS or plaintext, keepalive, the bearer token as metadata).
   SenderClient(SenderOptions options, CodecLayout layout);
+  // Over whatever `connector` opens.
+  SenderClient(SenderOptions options, CodecLayout layout, std::unique_ptr<UplinkConnector> connector);
   ~SenderClient();  // stops
   void Start();     // connects in the background and keeps reconnecting
   // Never blocks: queues the frame, dropping the oldest if the queue is full.

@@ -75,9 +75,7 @@ double FitOptions::WeightAverageDecayAt(int step) const {
   return std::min(weight_average, (1.0 + step) / (10.0 + step));
 }
 
-double SubjectWeightAverage(int iterations) {
-  return iterations < 9 ? 0.0 : std::min(0.999, 1.0 - 8.0 / iterations);
-}
+double SubjectWeightAverage(int iterations) { return iterations < 9 ? 0.0 : std::min(0.999, 1.0 - 8.0 / iterations); }
 
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
   const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
@@ -89,26 +87,18 @@ cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
 
 namespace {
 
+// A training sample: the frame through the one preparation path, and its target.
 struct PreparedSample {
-  RayBatch rays;
-  RigidTransform cam_from_head;
-  AvatarConditioning conditioning;
+  AvatarFrameInputs inputs;
   torch::Tensor target;
 };
 
 PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
                        const FrameParams& frame, const cv::Mat& target_bgr, RaySampler* sampler, std::mt19937* rng) {
   PreparedSample p;
-  p.cam_from_head = frame.CamFromHead();
-  HeadModelOutput posed;
-  model.Forward(model.MakeIdentity(subject.shape.cast<double>()), frame.expression.cast<double>(), frame.HeadPose(),
-                &posed);
-  RasterVertices v;
-  TransformToCamera(posed.vertices, p.cam_from_head, &v);
-  const int f = config.feature_size();
-  sampler->Sample(v, model.data().faces, subject.intrinsics.Resized(f, f), p.cam_from_head, rng, &p.rays);
-  p.conditioning = MakeConditioning(config, subject, frame);
-  if (!target_bgr.empty()) p.target = BgrToImageTensor(target_bgr);
+  PrepareAvatarFrame(config, model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame, sampler, rng,
+                     &p.inputs);
+  p.target = BgrToImageTensor(target_bgr);
   return p;
 }
 
@@ -261,8 +251,8 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
 
 }  // namespace
 
-FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
-                      const std::function<void(const StepInfo&)>& progress) {
+TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
+                        const std::function<void(const StepInfo&)>& progress) {
   options.Check();
   if (!data.synthetic && !data.real) throw std::invalid_argument("TrainAvatar: no training data");
   if (data.real && data.real->train().empty())
@@ -285,7 +275,7 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
   }
   torch::optim::Adam adam(params, torch::optim::AdamOptions(options.learning_rate));
   std::unique_ptr<PerceptualLoss> vgg;
-  FitResult result;
+  TrainResult result;
   result.perceptual = "ssim";
   if (!options.loss.vgg_path.empty()) {
     vgg = std::make_unique<PerceptualLoss>(options.loss.vgg_path);
@@ -337,11 +327,11 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
       if (real_index >= 0 && offsets.enabled()) {
         const torch::Tensor g = offsets.geometry.narrow(0, real_index, 1) * offsets.geometry_mask;
         const torch::Tensor a = offsets.appearance.narrow(0, real_index, 1) * offsets.appearance_mask;
-        p.conditioning.geometry = p.conditioning.geometry + g;
-        p.conditioning.appearance = p.conditioning.appearance + a;
+        p.inputs.conditioning.geometry = p.inputs.conditioning.geometry + g;
+        p.inputs.conditioning.appearance = p.inputs.conditioning.appearance + a;
         offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
       }
-      const AvatarOutput out = RunAvatar(modules, p.rays, p.cam_from_head, p.conditioning);
+      const AvatarOutput out = RunAvatar(modules, p.inputs.rays, p.inputs.cam_from_head, p.inputs.conditioning);
       const torch::Tensor mse = torch::mse_loss(out.image, p.target);
       torch::Tensor loss = w.mse_weight * mse + offset_penalty;
       if (vgg)
@@ -380,26 +370,46 @@ FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData
   return result;
 }
 
-FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
-                         const std::function<void(const StepInfo&)>& progress) {
+TrainResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
+                           const std::function<void(const StepInfo&)>& progress) {
   return TrainAvatar(avatar, model, TrainingData{&data, nullptr}, options, progress);
 }
 
 namespace {
 
-// Runs the avatar on a prepared sample; adds the figures against its target to `r`.
-cv::Mat Score(Avatar& avatar, const PreparedSample& p, SampleStats* ms, EvalResult* r) {
-  Stopwatch watch;
-  const AvatarOutput out = RunAvatar(avatar.modules(), p.rays, p.cam_from_head, p.conditioning);
-  ms->Add(watch.ElapsedMs());
-  const double mse = torch::mse_loss(out.image, p.target).item<double>();
-  r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
-  r->ssim.push_back(Ssim(out.image, p.target).item<double>());
-  r->mse_mean += mse;
-  cv::Mat bgr;
-  ImageTensorToBgr(out.image, &bgr);
-  return bgr;
-}
+// Renders `frame` as the receiver shows it (RenderAvatarFrame: the same
+// preparation, networks and 8-bit picture) and scores that picture against
+// `target_bgr`; adds the figures to `r`.
+class Scorer {
+ public:
+  Scorer(Avatar& avatar, const HeadModel& model, const SubjectParams& subject)
+      : avatar_(avatar),
+        model_(model),
+        subject_(subject),
+        sampler_(avatar.config()),
+        identity_(model.MakeIdentity(subject.shape.cast<double>())) {}
+  cv::Mat Score(const FrameParams& frame, const cv::Mat& target_bgr, SampleStats* ms, EvalResult* r) {
+    Stopwatch watch;
+    cv::Mat bgr;
+    RenderAvatarFrame(avatar_.modules(), avatar_.config(), model_, identity_, subject_, frame, &sampler_, &buffers_,
+                      &bgr);
+    ms->Add(watch.ElapsedMs());
+    const torch::Tensor shown = BgrToImageTensor(bgr), target = BgrToImageTensor(target_bgr);
+    const double mse = torch::mse_loss(shown, target).item<double>();
+    r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
+    r->ssim.push_back(Ssim(shown, target).item<double>());
+    r->mse_mean += mse;
+    return bgr;
+  }
+
+ private:
+  Avatar& avatar_;
+  const HeadModel& model_;
+  const SubjectParams& subject_;
+  RaySampler sampler_;
+  HeadIdentity identity_;
+  AvatarFrameInputs buffers_;
+};
 
 void Finish(const SampleStats& ms, EvalResult* r) {
   r->count = static_cast<int>(r->psnr.size());
@@ -418,12 +428,11 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
                                uint64_t first) {
   avatar.modules().eval();
   torch::InferenceMode inference;
-  RaySampler sampler(avatar.config());
   SampleStats ms;
   EvalResult r;
   for (int i = 0; i < count; ++i) {
     const SyntheticSample s = data.At(first + i);
-    Score(avatar, Prepare(avatar.config(), model, s.subject, s.frame, s.image_bgr, &sampler, nullptr), &ms, &r);
+    Scorer(avatar, model, s.subject).Score(s.frame, s.image_bgr, &ms, &r);
   }
   Finish(ms, &r);
   return r;
@@ -434,14 +443,13 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
                              const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render) {
   avatar.modules().eval();
   torch::InferenceMode inference;
-  RaySampler sampler(avatar.config());
   SampleStats ms;
   EvalResult r;
+  Scorer scorer(avatar, model, data.subject());
   for (int i : positions) {
     const RealSample& s = data.At(i);
     const cv::Mat target = MaskedTarget(s.image_bgr, s.mask);
-    const cv::Mat bgr =
-        Score(avatar, Prepare(avatar.config(), model, data.subject(), s.params, target, &sampler, nullptr), &ms, &r);
+    const cv::Mat bgr = scorer.Score(s.params, target, &ms, &r);
     if (render) render(i, target, bgr);
   }
   Finish(ms, &r);
@@ -453,9 +461,10 @@ cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectPar
   avatar.modules().eval();
   torch::InferenceMode inference;
   RaySampler sampler(avatar.config());
-  const PreparedSample p = Prepare(avatar.config(), model, subject, frame, cv::Mat(), &sampler, nullptr);
+  AvatarFrameInputs buffers;
   cv::Mat bgr;
-  ImageTensorToBgr(RunAvatar(avatar.modules(), p.rays, p.cam_from_head, p.conditioning).image, &bgr);
+  RenderAvatarFrame(avatar.modules(), avatar.config(), model, model.MakeIdentity(subject.shape.cast<double>()), subject,
+                    frame, &sampler, &buffers, &bgr);
   return bgr;
 }
 

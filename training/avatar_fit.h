@@ -58,7 +58,7 @@ struct FitOptions {
   // slowing the learning the way a falling rate does. 0: off.
   double weight_average = 0;
   double WeightAverageDecayAt(int step) const;
-  uint64_t seed = 1;            // ray jitter, mixing, augmentation
+  uint64_t seed = 1;  // ray jitter, mixing, augmentation
   LossOptions loss;
   MixSchedule mix;               // used when both synthetic and real data are given
   bool learn_offsets = true;     // per-frame offsets on beta, theta, psi, tau, lambda of real frames
@@ -87,9 +87,8 @@ struct FitOptions {
 };
 
 // A fine-tune's default weight_average: an average over about the last eighth
-// of the run (1 - 8/iterations, at most 0.999; off below 9 steps). On
-// talking_d9 at 256² (4000, 8000 and 10000 steps) 0.999 measured 25.88, 25.997 and 26.14 dB
-// against 25.81-25.85 for the plain weights at 4000.
+// of the run (1 - 8/iterations, at most 0.999; off below 9 steps); what it
+// gained is in bench/DEFAULTS.md.
 double SubjectWeightAverage(int iterations);
 
 // Where samples come from; either may be null, not both.
@@ -105,7 +104,7 @@ struct StepInfo {
   int synthetic = 0;  // samples of the batch that were synthetic
 };
 
-struct FitResult {
+struct TrainResult {
   int first_step = 0;  // where this run started (after a resume)
   std::vector<StepInfo> steps;
   std::string perceptual;  // "vgg16 PATH" or "ssim"
@@ -119,12 +118,12 @@ void SetComputeThreads(int threads);
 // Trains `avatar` (every parameter not frozen). `progress(info)` after each
 // step, with the avatar in its state after the step. Throws naming the file
 // when a checkpoint to resume from is corrupt or made for another avatar.
-FitResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
-                      const std::function<void(const StepInfo&)>& progress = nullptr);
+TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
+                        const std::function<void(const StepInfo&)>& progress = nullptr);
 
 // Synthetic only (the first stage of pretraining, benchmarks, tests).
-FitResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
-                         const std::function<void(const StepInfo&)>& progress = nullptr);
+TrainResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
+                           const std::function<void(const StepInfo&)>& progress = nullptr);
 
 struct EvalResult {
   double psnr_mean = 0;  // dB, RGB in [0, 1]

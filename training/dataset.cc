@@ -1,16 +1,14 @@
 // Dataset preparation and loading.
 #include "training/dataset.h"
 
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
-#include <optional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
+#include "common/core/check.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/options.h"
@@ -18,6 +16,7 @@
 #include "common/headmodel/head_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/offline_tracker.h"
 #include "proto/recording.h"
 #include "training/interpolation.h"
 #include "training/run_report.h"
@@ -52,65 +51,6 @@ PinholeCamera CropIntrinsics(const PinholeCamera& camera, double x0, double y0, 
 }
 
 namespace {
-
-// Runs a program with its arguments (no shell: no quoting problems); returns its exit status.
-int RunProgram(const std::vector<std::string>& argv) {
-  std::vector<char*> args;
-  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-  args.push_back(nullptr);
-  const pid_t pid = fork();
-  if (pid < 0) throw std::runtime_error("cannot start " + argv[0]);
-  if (pid == 0) {
-    dup2(2, 1);  // the child's reports go to our stderr: our stdout carries our own report
-    execv(args[0], args.data());
-    std::fprintf(stderr, "cannot run %s\n", args[0]);
-    _exit(127);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-std::string FrameName(int frame) {
-  char name[32];
-  std::snprintf(name, sizeof(name), "%05d.png", frame);
-  return name;
-}
-
-// The frames of the input in the tracker's numbering: readable frames counted
-// from 0 (an unreadable image is skipped and not counted; a video ends at its
-// first undecodable frame), exactly as headcast-track's recorded sources do.
-// RGB-D folders: the colour images their associations.txt lists.
-class InputFrames {
- public:
-  explicit InputFrames(const std::string& input) {
-    const fs::path associations = fs::path(input) / "associations.txt";
-    if (fs::is_directory(input) && fs::exists(associations)) {
-      for (const RgbdPair& p : ReadRgbdAssociations(associations.string())) files_.push_back(p.colour);
-    } else if (fs::is_directory(input)) {
-      files_ = ListImageFiles(input);
-    } else {
-      video_ = std::make_unique<VideoReader>(input);
-    }
-  }
-  bool Next(cv::Mat* frame) {
-    if (video_) return video_->Read(frame);
-    while (next_ < files_.size()) {
-      try {
-        *frame = ReadImage(files_[next_++]);
-        return true;
-      } catch (const std::exception&) {
-        // skipped, as the tracker skipped it
-      }
-    }
-    return false;
-  }
-
- private:
-  std::unique_ptr<VideoReader> video_;
-  std::vector<std::string> files_;
-  size_t next_ = 0;
-};
 
 double Percentile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
@@ -206,49 +146,71 @@ cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px,
   return reach;
 }
 
+namespace {
+
+// 1. The offline tracking pass, in-process: every fitted frame and its head
+// mask are kept as lossless PNGs (full_frames/, full_masks/) for the crops,
+// whose box is known only once every frame is fitted; params.hcrec and
+// track_report.json (written last: a finished pass) beside them.
+struct TrackedInput {
+  std::vector<FrameParams> fitted;
+  RecordingInfo info;
+  nlohmann::json report;
+};
+
+TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
+  const fs::path dir = o.out_dir;
+  const fs::path frames_dir = dir / "full_frames", masks_dir = dir / "full_masks";
+  TrackedInput t;
+  if (o.resume && fs::exists(dir / "track_report.json") && fs::exists(frames_dir) && fs::exists(masks_dir)) {
+    spdlog::info("prep: reusing the finished tracking pass in {}", o.out_dir);
+    t.fitted = ReadRecording((dir / "params.hcrec").string(), &t.info);
+    t.report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
+    return t;
+  }
+  fs::remove(dir / "track_report.json");
+  fs::remove_all(frames_dir);
+  fs::remove_all(masks_dir);
+  fs::create_directories(frames_dir);
+  fs::create_directories(masks_dir);
+  OfflineTrackOptions track;
+  track.input = o.input;
+  track.source = o.source;
+  track.max_frames = o.max_frames;
+  track.calibrate = o.calibrate;
+  if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
+  if (!o.identity_from.empty()) {
+    track.identity = ReadTrackingIdentity(o.identity_from, model);
+    track.identity_source = o.identity_from;
+  }
+  track.masks = true;
+  track.overlay = (dir / "preview.mp4").string();
+  spdlog::info("prep: tracking {}", o.input);
+  const OfflineTrack tracked = TrackVideo(model, track, [&](const OfflineFrame& f) {
+    if (!f.fitted) return;
+    WriteImage((frames_dir / FrameFileName(f.index)).string(), *f.bgr);
+    WriteImage((masks_dir / FrameFileName(f.index)).string(), f.mask);
+  });
+  t.fitted = tracked.frames;
+  t.info = MakeRecordingInfo(model, tracked.fps, tracked.subject, "headcast-train prep " + o.input);
+  t.report = tracked.report;
+  WriteRecording((dir / "params.hcrec").string(), t.info, t.fitted);
+  std::ofstream(dir / "track_report.json") << t.report.dump(2) << "\n";
+  return t;
+}
+
+}  // namespace
+
 nlohmann::json PrepareDataset(const PrepOptions& o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   fs::create_directories(o.out_dir);
   const fs::path dir = o.out_dir;
-  std::string tracker = o.tracker;
-  if (tracker.empty()) tracker = (fs::read_symlink("/proc/self/exe").parent_path() / "headcast-track").string();
-  if (!fs::exists(tracker)) throw std::runtime_error(tracker + ": headcast-track not found (give --tracker)");
-
-  // 1. The sender's own tracking pipeline, same settings (DESIGN: the tracker
-  //    used for training data and live is the same code).
-  const fs::path full_masks = dir / "full_masks";
-  std::vector<std::string> argv = {tracker,
-                                   "--input",
-                                   o.input,
-                                   "--head-model",
-                                   o.head_model,
-                                   "--out",
-                                   (dir / "params.hcrec").string(),
-                                   "--report",
-                                   (dir / "track_report.json").string(),
-                                   "--overlay",
-                                   (dir / "preview.mp4").string(),
-                                   "--masks",
-                                   full_masks.string()};
-  if (o.calibrate) argv.push_back("--calibrate");
-  if (!o.identity_from.empty()) argv.insert(argv.end(), {"--identity-from", o.identity_from});
-  if (!o.intrinsics.empty()) argv.insert(argv.end(), {"--intrinsics", o.intrinsics});
-  if (o.max_frames > 0) argv.insert(argv.end(), {"--max-frames", std::to_string(o.max_frames)});
-  argv.insert(argv.end(), o.tracker_args.begin(), o.tracker_args.end());
-  const bool tracked = o.resume && fs::exists(dir / "track_report.json") && fs::exists(full_masks);
-  if (tracked) {
-    spdlog::info("prep: reusing the finished tracking pass in {}", o.out_dir);
-  } else {
-    fs::remove(dir / "track_report.json");  // written last by the tracker: marks a finished pass
-    spdlog::info("prep: tracking {} with {}", o.input, tracker);
-    if (const int rc = RunProgram(argv); rc != 0)
-      throw std::runtime_error(o.input + ": headcast-track failed (exit " + std::to_string(rc) +
-                               "); its messages are above");
-  }
-  const nlohmann::json track_report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
-  RecordingInfo info;
-  const std::vector<FrameParams> fitted = ReadRecording((dir / "params.hcrec").string(), &info);
+  const fs::path full_frames = dir / "full_frames", full_masks = dir / "full_masks";
+  const TrackedInput tracked = TrackInput(o, model);
+  const std::vector<FrameParams>& fitted = tracked.fitted;
+  const RecordingInfo& info = tracked.info;
+  const nlohmann::json& track_report = tracked.report;
   if (fitted.empty()) throw std::runtime_error(o.input + ": no face was found and fitted in any frame");
   const int min_train = 8;
   if (static_cast<int>(fitted.size()) < o.test_frames + min_train)
@@ -286,27 +248,22 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     fs::create_directories(dir / std::to_string(r) / "images");
     fs::create_directories(dir / std::to_string(r) / "masks");
   }
-  InputFrames frames(o.input);
-  size_t next = 0;
-  int read = 0;
-  cv::Mat frame;
   ProgressLine progress(0, static_cast<int>(fitted.size()));
-  while (next < fitted.size() && frames.Next(&frame)) {
-    const int n = read++;
-    if (static_cast<int>(fitted[next].sequence) != n) continue;
+  for (size_t next = 0; next < fitted.size(); ++next) {
     if (next % 20 == 0 || next + 1 == fitted.size()) progress.Show(static_cast<int>(next), "cropping");
-    ++next;
-    const cv::Mat mask = ReadImage((full_masks / FrameName(n)).string(), cv::IMREAD_GRAYSCALE);
+    const FrameParams& params = fitted[next];
+    const int n = static_cast<int>(params.sequence);
+    const cv::Mat frame = ReadImage((full_frames / FrameFileName(n)).string());
+    const cv::Mat mask = ReadImage((full_masks / FrameFileName(n)).string(), cv::IMREAD_GRAYSCALE);
     if (mask.size() != frame.size())
       throw std::runtime_error(o.input + ": frame " + std::to_string(n) + " and its mask differ in size");
-    const FrameParams& params = fitted[next - 1];
     HeadModelOutput posed;
     model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
     RasterVertices in_camera;
     TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
-      WriteImage((rd / "images" / FrameName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
+      WriteImage((rd / "images" / FrameFileName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
       const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
@@ -319,13 +276,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
                                 static_cast<int>(std::lround(o.side_margin * r))),
                       m);
       if (!o.keep_neck) ClearBelowJawLine(crop_landmarks, &m);
-      WriteImage((rd / "masks" / FrameName(n)).string(), m);
+      WriteImage((rd / "masks" / FrameFileName(n)).string(), m);
     }
   }
   progress.Finish();
-  if (next != fitted.size())
-    throw std::runtime_error(o.input + ": read " + std::to_string(read) + " frames but the tracker fitted frame " +
-                             std::to_string(fitted[next].sequence) + " (frame numbering differs?)");
 
   const int n = static_cast<int>(fitted.size());
   // 4. Short videos: frames between consecutive training frames.
@@ -342,7 +296,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       for (int r : o.resolutions) {
         const fs::path rd = dir / std::to_string(r);
         auto read = [&](const char* kind, uint64_t frame, int flags) {
-          return ReadImage((rd / kind / FrameName(static_cast<int>(frame))).string(), flags);
+          return ReadImage((rd / kind / FrameFileName(static_cast<int>(frame))).string(), flags);
         };
         const cv::Mat ia = read("images", a.sequence, cv::IMREAD_COLOR),
                       ib = read("images", b.sequence, cv::IMREAD_COLOR);
@@ -352,10 +306,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         for (int k = 1; k <= o.interpolate; ++k) {
           const double t = static_cast<double>(k) / (o.interpolate + 1);
           const int id = interpolated + k - 1;
-          WriteImage((rd / "interp" / "images" / FrameName(id)).string(), InterpolateImage(ia, ib, flow, t));
+          WriteImage((rd / "interp" / "images" / FrameFileName(id)).string(), InterpolateImage(ia, ib, flow, t));
           cv::Mat m = InterpolateImage(ma, mb, flow, t);
           cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
-          WriteImage((rd / "interp" / "masks" / FrameName(id)).string(), m);
+          WriteImage((rd / "interp" / "masks" / FrameFileName(id)).string(), m);
         }
       }
       for (int k = 1; k <= o.interpolate; ++k) {
@@ -382,7 +336,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"format_version", kDatasetFormatVersion},
       {"source", o.input},
       {"head_model", {{"name", model.data().name}, {"fingerprint", model.fingerprint()}}},
-      {"frames_read", read},
+      {"frames_read", track_report.value("frames", 0)},
       {"frames_fitted", n},
       {"frame_numbers", frame_numbers},
       {"split", {{"train", n - o.test_frames}, {"test", o.test_frames}, {"rule", "test = the last N fitted frames"}}},
@@ -391,24 +345,25 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"frames", interpolated},
         {"how", "Farneback optical flow both ways, neighbours warped and blended; parameters interpolated"}}},
       {"crop",
-       {{"x0", x0}, {"y0", y0}, {"side", side}, {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}}}},
+       {{"x0", x0},
+        {"y0", y0},
+        {"side", side},
+        {"source_camera", {camera.fx, camera.fy, camera.cx, camera.cy}},
+        {"source_size", {camera.width, camera.height}}}},
       {"resolutions", o.resolutions},
       {"intrinsics", intrinsics},
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
       {"identity", track_report.value("identity", std::string("?"))},
-      {"masks", "the tracker's head mask (GrabCut), convex above the brows, within the fitted model's silhouette "
-                    "dilated by " +
-                    std::to_string(o.mask_margin) + " of the crop edge above the eye line, " +
-                    std::to_string(o.side_margin) + " below it" +
-                    (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
+      {"masks",
+       "the tracker's head mask (GrabCut), convex above the brows, within the fitted model's silhouette "
+       "dilated by " +
+           std::to_string(o.mask_margin) + " of the crop edge above the eye line, " + std::to_string(o.side_margin) +
+           " below it" + (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
         {"frames", track_report.value("frames", 0)},
         {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
         {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)}}}};
-  if (track_report.value("frames", -1) != read)
-    throw std::runtime_error(o.input + ": the tracker saw " + std::to_string(track_report.value("frames", -1)) +
-                             " frames, prep read " + std::to_string(read) + " (frame numbering differs)");
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }
@@ -464,16 +419,30 @@ PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& m
   return d;
 }
 
+std::optional<CameraContract> PreparedDataset::camera_contract() const {
+  const nlohmann::json& crop = manifest_.at("crop");
+  if (!crop.contains("source_size")) return std::nullopt;
+  const std::vector<double> k = crop.at("source_camera");
+  const std::vector<int> size = crop.at("source_size");
+  if (k.size() != 4 || size.size() != 2) throw std::runtime_error(dir_ + "/dataset.json: a malformed crop");
+  CameraContract c;
+  c.source = PinholeCamera{k[0], k[1], k[2], k[3], size[0], size[1]};
+  c.crop_x0 = crop.at("x0");
+  c.crop_y0 = crop.at("y0");
+  c.crop_side = crop.at("side");
+  return CameraContract::FromJson(c.ToJson());  // checked
+}
+
 const RealSample& PreparedDataset::At(int i) const {
-  if (i < 0 || i >= size()) throw std::out_of_range("PreparedDataset::At: no frame " + std::to_string(i));
+  HEADCAST_CHECK(i >= 0 && i < size()) << "PreparedDataset::At(" << i << ") of " << size() << " frames";
   auto it = cache_.find(i);
   if (it != cache_.end()) return it->second;
   RealSample s;
   s.params = frames_[static_cast<size_t>(i)];
   s.frame = static_cast<int>(s.params.sequence);
   const fs::path rd = fs::path(dir_) / std::to_string(resolution_) / (i >= first_interpolated_ ? "interp" : "");
-  s.image_bgr = ReadImage((rd / "images" / FrameName(s.frame)).string());
-  s.mask = ReadImage((rd / "masks" / FrameName(s.frame)).string(), cv::IMREAD_GRAYSCALE);
+  s.image_bgr = ReadImage((rd / "images" / FrameFileName(s.frame)).string());
+  s.mask = ReadImage((rd / "masks" / FrameFileName(s.frame)).string(), cv::IMREAD_GRAYSCALE);
   if (s.image_bgr.rows != resolution_ || s.image_bgr.cols != resolution_ || s.mask.size() != s.image_bgr.size())
     throw std::runtime_error(rd.string() + ": frame " + std::to_string(s.frame) + " is not " +
                              std::to_string(resolution_) + " pixels square");

@@ -8,7 +8,7 @@
 //   dataset.json        format, version, head model, source, crop box, split, subject, per-resolution intrinsics
 //   params.hcrec        the tracker's recording (full-frame camera)
 //   track_report.json   the tracker's report (written last: a finished pass); preview.mp4 its overlay
-//   full_masks/         the tracker's full-frame head masks
+//   full_frames/, full_masks/   the fitted frames and their head masks, full size (lossless PNG)
 //   R/images/NNNNN.png  crops at R x R (R in 128, 256, 512), NNNNN the source frame number
 //   R/masks/NNNNN.png   the head masks, same crops
 //   params_interp.hcrec, R/interp/{images,masks}/NNNNN.png   frames synthesised between
@@ -19,9 +19,11 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "common/capture/frame_source.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 
@@ -30,14 +32,14 @@ namespace headcast {
 constexpr int kDatasetFormatVersion = 1;
 
 struct PrepOptions {
-  std::string input;  // video, image folder (anything headcast-track reads)
+  std::string input;  // anything the offline tracker reads: video, image or RGB-D folder, zed:SOURCE
   std::string head_model = "builtin";
   std::string out_dir;
   std::vector<int> resolutions = {128, 256};
   int test_frames = 150;      // the last N fitted frames are the test split
   int max_frames = 0;         // 0: all
   bool calibrate = true;      // identity calibration over key frames (shape, focal)
-  std::string identity_from;  // or: beta from headcast-fit-mesh's PARAMS.json
+  std::string identity_from;  // or: beta from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json
   std::string intrinsics;     // fx,fy,cx,cy when known (else calibration / field of view)
   double crop_scale = 2.2;    // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
@@ -55,11 +57,10 @@ struct PrepOptions {
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;
-  std::string tracker;  // headcast-track to run; default: the one beside this program
   // Reuse a finished tracking pass in out_dir (its report is written last, so
   // its presence means the recording is complete); crops are always redone.
   bool resume = false;
-  std::vector<std::string> tracker_args;  // passed on to headcast-track as they are
+  SourceOptions source;  // how the input is read (stereo calibration, depth input, ...)
   void Check() const;
 };
 
@@ -110,6 +111,9 @@ class PreparedDataset {
   // The subject's constants with the intrinsics of the R x R crops.
   const SubjectParams& subject() const { return subject_; }
   const nlohmann::json& manifest() const { return manifest_; }
+  // The full frames' camera and the crop (datasets prepared before the
+  // source size was recorded have none).
+  std::optional<CameraContract> camera_contract() const;
   const std::string& dir() const { return dir_; }
   // Reads (and caches) the crop and mask of position i.
   const RealSample& At(int i) const;

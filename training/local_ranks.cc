@@ -52,11 +52,10 @@ LocalRanks::LocalRanks(int processes, const std::vector<std::string>& args) {
   for (int rank = 1; rank < processes; ++rank) {
     std::vector<std::string> a = {"/proc/self/exe"};
     a.insert(a.end(), args.begin(), args.end());
-    for (const std::string& s : {std::string("--processes"), std::string("1"), std::string("--threads"),
-                                 std::string("1"), std::string("--rank"), std::to_string(rank),
-                                 std::string("--world-size"), std::to_string(processes),
-                                 std::string("--master-addr"), std::string("127.0.0.1"),
-                                 std::string("--master-port"), std::to_string(port_)})
+    for (const std::string& s :
+         {std::string("--processes"), std::string("1"), std::string("--threads"), std::string("1"),
+          std::string("--rank"), std::to_string(rank), std::string("--world-size"), std::to_string(processes),
+          std::string("--master-addr"), std::string("127.0.0.1"), std::string("--master-port"), std::to_string(port_)})
       a.push_back(s);
     std::vector<char*> argv;
     for (std::string& s : a) argv.push_back(s.data());

@@ -32,13 +32,13 @@ void CheckRun(int resolution, const RunOutputs& o, OptionsCheck* c) {
 
 // The loop around TrainAvatar that people see: progress with ETA, the loss
 // CSV, held-out figures every eval_every steps, plots at the end.
-FitResult TrainWithReports(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& fit,
-                           const RunOutputs& out, const std::function<EvalResult(Avatar&)>& evaluate) {
+TrainResult TrainWithReports(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& fit,
+                             const RunOutputs& out, const std::function<EvalResult(Avatar&)>& evaluate) {
   std::optional<ProgressLine> progress;
   CsvLog loss_log, eval_log;
   double last_psnr = NAN;
   if (fit.distributed.rank != 0) return TrainAvatar(avatar, model, data, fit);  // rank 0 reports
-  const FitResult fit_result = TrainAvatar(avatar, model, data, fit, [&](const StepInfo& s) {
+  const TrainResult fit_result = TrainAvatar(avatar, model, data, fit, [&](const StepInfo& s) {
     if (!progress) {  // the first step of this run (not 0 after a resume)
       progress.emplace(s.step, fit.iterations);
       if (!out.log_csv.empty()) loss_log = CsvLog(out.log_csv, "step,loss,mse,synthetic", fit.resume, s.step);
@@ -81,7 +81,7 @@ nlohmann::json EvalJson(const EvalResult& e, const std::string& what) {
           {"on", what}};
 }
 
-nlohmann::json FitJson(const FitOptions& f, const FitResult& r, bool real) {
+nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
   nlohmann::json j = {
       {"iterations", f.iterations},
       {"batch", f.batch},
@@ -145,7 +145,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
   if (!o.real_dataset.empty()) real = PreparedDataset::Load(o.real_dataset, model, o.resolution);
   const TrainingData data{&synthetic, real ? &*real : nullptr};
   const int eval_frames = o.outputs.eval_frames;
-  const FitResult fitted = TrainWithReports(avatar, model, data, o.fit, o.outputs, [&](Avatar& a) {
+  const TrainResult fitted = TrainWithReports(avatar, model, data, o.fit, o.outputs, [&](Avatar& a) {
     return EvaluateOnSynthetic(a, model, synthetic, eval_frames);
   });
   if (o.fit.distributed.rank != 0) return {{"rank", o.fit.distributed.rank}, {"written_by", "rank 0"}};
@@ -207,6 +207,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     return general.WithRuntimeSwitches(c);
   }();
   avatar.mutable_subject() = subject;
+  if (const std::optional<CameraContract> contract = data.camera_contract()) avatar.set_camera_contract(*contract);
   // The subject's own renders, decaying to none (METHOD §6): beta and tau stay the subject's.
   SyntheticDataOptions synthetic_options;
   synthetic_options.image_size = o.resolution;
@@ -227,8 +228,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
       spread.push_back(periodic[static_cast<size_t>(k) * periodic.size() / o.outputs.eval_frames]);
     periodic = spread;
   }
-  const FitResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs,
-                                            [&](Avatar& a) { return EvaluateOnDataset(a, model, data, periodic); });
+  const TrainResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs,
+                                              [&](Avatar& a) { return EvaluateOnDataset(a, model, data, periodic); });
   if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;

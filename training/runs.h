@@ -65,14 +65,14 @@ struct EvalOptions {
   std::string avatar;
   std::string dataset;
   std::string out_dir;
-  int max_frames = 0;     // 0: the whole split
+  int max_frames = 0;  // 0: the whole split
   // "test" (the held-out frames) or "train" (the real training frames, spread
   // evenly when max_frames is smaller): the two side by side tell
   // underfitting (both low) from overfitting (train high, test low).
   std::string split = "test";
-  std::string drive;      // a recording whose expressions drive the expression-transfer video
-  int orbit_frames = 60;  // novel-view orbit video (0: none)
-  double orbit_deg = 30;  // yaw swing of the orbit
+  std::string drive;          // a recording whose expressions drive the expression-transfer video
+  int orbit_frames = 60;      // novel-view orbit video (0: none)
+  double orbit_deg = 30;      // yaw swing of the orbit
   bool write_frames = false;  // also OUT/frames/truth_NNNNN.png and avatar_NNNNN.png (codec comparisons)
   void Check() const;
 };

@@ -99,7 +99,8 @@ int main(int argc, char** argv) {
 
   auto* prep = app.add_subcommand("prep", "video or image folder -> a prepared dataset (crops, masks, parameters)");
   PrepOptions p;
-  prep->add_option("--input", p.input, "video file or image folder")->required();
+  prep->add_option("--input", p.input, "video file, image or RGB-D folder, or zed:SOURCE (as headcast-track)")
+      ->required();
   prep->add_option("--head-model", p.head_model, "builtin or a model .npz")->capture_default_str();
   prep->add_option("--out", p.out_dir, "dataset folder to write")->required();
   prep->add_option("--resolutions", p.resolutions, "crop sizes (128, 256, 512)")->delimiter(',')->capture_default_str();
@@ -108,7 +109,7 @@ int main(int argc, char** argv) {
   prep->add_option("--max-frames", p.max_frames, "use only the first N frames");
   prep->add_flag("!--no-calibrate", p.calibrate, "no identity calibration (shape stays neutral)");
   prep->add_option("--identity-from", p.identity_from,
-                   "shape from headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
+                   "shape from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
   prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
   prep->add_option("--crop-scale", p.crop_scale, "crop edge over the landmarks' extent")->capture_default_str();
   prep->add_option("--mask-margin", p.mask_margin,
@@ -122,7 +123,12 @@ int main(int argc, char** argv) {
                    "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();
   prep->add_flag("--resume", p.resume, "reuse a finished tracking pass in --out (after an interrupted prep)");
-  prep->add_option("--tracker", p.tracker, "headcast-track to run (default: beside this program)");
+  prep->add_option("--stereo-calibration", p.source.stereo_calibration,
+                   "for zed:SOURCE inputs: OpenCV YAML or the camera's factory SN<serial>.conf");
+  prep->add_option("--stereo-resolution", p.source.stereo_resolution, "section of a ZED .conf: 2K, FHD, HD, VGA")
+      ->capture_default_str();
+  prep->add_option("--depth-input", p.source.depth_input, "RGB-D: association file (TUM style) of 16-bit depth PNGs");
+  prep->add_option("--depth-units", p.source.depth_units_per_metre, "depth PNG units per metre")->capture_default_str();
 
   int processes = 1;
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");
@@ -172,7 +178,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"test", "train"}))
       ->capture_default_str();
   eval->add_option("--drive", e.drive, "a recording (.hcrec) whose expressions drive transfer.mp4");
-  eval->add_flag("--write-frames", e.write_frames, "also write the ground-truth and avatar frames (PNG) under OUT/frames");
+  eval->add_flag("--write-frames", e.write_frames,
+                 "also write the ground-truth and avatar frames (PNG) under OUT/frames");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
 
   auto* plot = app.add_subcommand("plot", "line plot of CSV columns (logs of several runs in one picture)");

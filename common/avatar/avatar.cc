@@ -15,6 +15,7 @@ struct Avatar::Impl {
   AvatarConfig config;
   SubjectParams subject;
   std::string fingerprint;
+  std::optional<CameraContract> camera_contract;
   nlohmann::json training_summary = nlohmann::json::object();
   AvatarModules modules;
 };
@@ -27,6 +28,8 @@ const AvatarConfig& Avatar::config() const { return impl_->config; }
 const SubjectParams& Avatar::subject() const { return impl_->subject; }
 SubjectParams& Avatar::mutable_subject() { return impl_->subject; }
 const std::string& Avatar::head_model_fingerprint() const { return impl_->fingerprint; }
+const std::optional<CameraContract>& Avatar::camera_contract() const { return impl_->camera_contract; }
+void Avatar::set_camera_contract(const CameraContract& contract) { impl_->camera_contract = contract; }
 nlohmann::json& Avatar::training_summary() { return impl_->training_summary; }
 const nlohmann::json& Avatar::training_summary() const { return impl_->training_summary; }
 AvatarModules& Avatar::modules() { return impl_->modules; }
@@ -90,17 +93,18 @@ Avatar Avatar::CreateRandom(const AvatarConfig& requested, const HeadModel& mode
 Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
   config.Check();
   const AvatarConfig& c = impl_->config;
-  if (config.feature_channels != c.feature_channels ||
-      config.num_shape != c.num_shape || config.num_expression != c.num_expression ||
-      config.num_texture != c.num_texture || config.pe_frequencies != c.pe_frequencies ||
-      config.pe_scale != c.pe_scale || config.mlp_width != c.mlp_width || config.mlp_layers != c.mlp_layers ||
-      config.skip_layer != c.skip_layer || config.renderer_channels != c.renderer_channels)
+  if (config.feature_channels != c.feature_channels || config.num_shape != c.num_shape ||
+      config.num_expression != c.num_expression || config.num_texture != c.num_texture ||
+      config.pe_frequencies != c.pe_frequencies || config.pe_scale != c.pe_scale || config.mlp_width != c.mlp_width ||
+      config.mlp_layers != c.mlp_layers || config.skip_layer != c.skip_layer ||
+      config.renderer_channels != c.renderer_channels)
     throw std::invalid_argument(
         "WithRuntimeSwitches: the network architecture differs; only run-time switches may change");
   Avatar a;
   a.impl_ = std::make_unique<Impl>(config);
   a.impl_->subject = impl_->subject;
   a.impl_->fingerprint = impl_->fingerprint;
+  a.impl_->camera_contract = impl_->camera_contract;
   a.impl_->training_summary = impl_->training_summary;
   torch::NoGradGuard no_grad;
   auto copy = [](const torch::nn::Module& from, torch::nn::Module& to) {
@@ -119,6 +123,7 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
   const auto& s = m.subject;
   nlohmann::json manifest = {{"format", "headcast-avatar"},
                              {"format_version", kAvatarFormatVersion},
+                             {"kind", "cnerf"},
                              {"config", m.config.ToJson()},
                              {"output_resolution", m.config.output_size},
                              {"head_model", {{"fingerprint", m.fingerprint}}},
@@ -134,6 +139,7 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
                                  {"cy", s.intrinsics.cy},
                                  {"width", s.intrinsics.width},
                                  {"height", s.intrinsics.height}}}}}};
+  if (m.camera_contract) manifest["camera"] = m.camera_contract->ToJson();
   torch::serialize::OutputArchive root, cnerf, renderer;
   m.modules.cnerf->save(cnerf);
   m.modules.renderer->save(renderer);
@@ -173,6 +179,8 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
     throw std::runtime_error(path + ": avatar format version " + std::to_string(version) +
                              ", this build reads version " + std::to_string(kAvatarFormatVersion) +
                              (version > kAvatarFormatVersion ? " (update headcast)" : " (re-export the avatar)"));
+  if (const std::string kind = manifest.value("kind", std::string("cnerf")); kind != "cnerf")
+    throw std::runtime_error(path + ": a '" + kind + "' avatar, not a CNeRF one (open it with OpenAvatarBackend)");
   const std::string fingerprint = manifest.value("/head_model/fingerprint"_json_pointer, std::string());
   if (fingerprint != model.fingerprint())
     throw std::runtime_error(path + ": made for head model " + fingerprint + ", but the loaded head model '" +
@@ -198,6 +206,7 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
     s.intrinsics.height = k.at("height");
     CheckSubjectMatches(config, s, model);
     a.impl_->fingerprint = fingerprint;
+    if (manifest.contains("camera")) a.impl_->camera_contract = CameraContract::FromJson(manifest.at("camera"));
     a.impl_->training_summary = manifest.value("training_summary", nlohmann::json::object());
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": bad manifest: " + e.what());

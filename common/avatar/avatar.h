@@ -7,6 +7,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 
 #include "common/avatar/avatar_config.h"
@@ -55,6 +56,10 @@ class Avatar {
   const SubjectParams& subject() const;
   SubjectParams& mutable_subject();
   const std::string& head_model_fingerprint() const;
+  // The camera and crop the avatar was trained with (nothing for avatars not
+  // trained on a prepared video: general models, older files).
+  const std::optional<CameraContract>& camera_contract() const;
+  void set_camera_contract(const CameraContract& contract);
   nlohmann::json& training_summary();
   const nlohmann::json& training_summary() const;
   AvatarModules& modules();

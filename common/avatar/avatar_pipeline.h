@@ -1,6 +1,9 @@
-// The differentiable avatar pipeline in libtorch, shared by the receiver's
-// AvatarRenderer (inference) and the trainer.
+// The differentiable avatar pipeline in libtorch: the one frame-preparation
+// and render path shared by the trainer, evaluation and the receiver's
+// AvatarRenderer, so that the quality a report measures is what a call shows.
 #pragma once
+
+#include <random>
 
 #include "common/avatar/avatar_model.h"
 #include "common/avatar/avatar_renderer.h"
@@ -24,5 +27,30 @@ torch::Tensor BgrToImageTensor(const cv::Mat& image_bgr);
 // Runs CNeRF on the batch's samples, composites the feature map and upsamples it.
 AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
                        const AvatarConditioning& conditioning, AvatarTimings* timings = nullptr);
+
+// One frame's inputs to the networks; the posed-mesh buffers are reused when
+// the same object serves frame after frame.
+struct AvatarFrameInputs {
+  RayBatch rays;
+  RigidTransform cam_from_head;
+  AvatarConditioning conditioning;
+  HeadModelOutput posed;
+  RasterVertices v_cam;
+};
+
+// The head model posed by `frame` with `identity` (the subject's shape), seen
+// through the subject's intrinsics at feature resolution: rays and depths
+// (jittered within their strata when `rng` is given: training), placement
+// and conditioning.
+void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                        const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
+                        AvatarFrameInputs* out, AvatarTimings* timings = nullptr);
+
+// What the receiver shows for `frame`: PrepareAvatarFrame, RunAvatar, then
+// 8-bit BGR in *image_bgr (reused).
+void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,
+                       const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
+                       RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr,
+                       AvatarTimings* timings = nullptr);
 
 }  // namespace headcast

@@ -84,10 +84,49 @@ AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const Rigid
   return out;
 }
 
-void AvatarRendererOptions::Check() const {
-  OptionsCheck c("AvatarRendererOptions");
+void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                        const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
+                        AvatarFrameInputs* out, AvatarTimings* timings) {
+  Stopwatch watch;
+  out->cam_from_head = frame.CamFromHead();
+  model.Forward(identity, frame.expression.cast<double>(), frame.HeadPose(), &out->posed);
+  TransformToCamera(out->posed.vertices, out->cam_from_head, &out->v_cam);
+  if (timings) timings->head_model_ms = watch.ElapsedMs();
+  watch.Restart();
+  const int f = config.feature_size();
+  sampler->Sample(out->v_cam, model.data().faces, subject.intrinsics.Resized(f, f), out->cam_from_head, rng,
+                  &out->rays);
+  out->conditioning = MakeConditioning(config, subject, frame);
+  if (timings) timings->sample_ms = watch.ElapsedMs();
+}
+
+void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,
+                       const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
+                       RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr, AvatarTimings* timings) {
+  PrepareAvatarFrame(config, model, identity, subject, frame, sampler, nullptr, buffers, timings);
+  const AvatarOutput out = RunAvatar(modules, buffers->rays, buffers->cam_from_head, buffers->conditioning, timings);
+  Stopwatch watch;
+  ImageTensorToBgr(out.image, image_bgr);
+  if (timings) timings->convert_ms = watch.ElapsedMs();
+}
+
+void AvatarBackendOptions::Check() const {
+  OptionsCheck c("avatar backend");
   c.InRange("threads", threads, 1, 256);
   c.ThrowIfErrors();
+}
+
+std::vector<std::string> AvatarBackendKinds() { return {AvatarRenderer::kKind}; }
+
+std::unique_ptr<AvatarBackend> OpenAvatarBackend(const std::string& path, std::shared_ptr<const HeadModel> model,
+                                                 const AvatarBackendOptions& options) {
+  if (!model) throw std::invalid_argument("OpenAvatarBackend: no head model");
+  const std::string kind = Avatar::ReadManifest(path).value("kind", std::string(AvatarRenderer::kKind));
+  if (kind == AvatarRenderer::kKind)
+    return std::make_unique<AvatarRenderer>(model, Avatar::Load(path, *model), options);
+  std::string known;
+  for (const std::string& k : AvatarBackendKinds()) known += (known.empty() ? "" : ", ") + k;
+  throw std::runtime_error(path + ": avatar backend '" + kind + "' is not in this build (it has: " + known + ")");
 }
 
 struct AvatarRenderer::Impl {
@@ -97,10 +136,7 @@ struct AvatarRenderer::Impl {
   Avatar avatar;
   RaySampler sampler;
   HeadIdentity identity;
-  HeadModelOutput posed;
-  RasterVertices v_cam;
-  RayBatch rays;
-  PinholeCamera feature_camera;
+  AvatarFrameInputs buffers;
 };
 
 AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar avatar,
@@ -120,8 +156,6 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   impl_->avatar.modules().eval();
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
   impl_->identity = impl_->model->MakeIdentity(beta);
-  const int f = impl_->avatar.config().feature_size();
-  impl_->feature_camera = impl_->avatar.subject().intrinsics.Resized(f, f);
 }
 
 AvatarRenderer::~AvatarRenderer() = default;
@@ -134,23 +168,15 @@ bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTim
   AvatarTimings local;
   AvatarTimings& t = timings ? *timings : local;
   t = AvatarTimings();
-  Stopwatch total, watch;
+  Stopwatch total;
   torch::InferenceMode inference;
-  const RigidTransform cam_from_head = params.CamFromHead();
-  Eigen::VectorXd psi = params.expression.cast<double>();
-  m.model->Forward(m.identity, psi, params.HeadPose(), &m.posed);
-  TransformToCamera(m.posed.vertices, cam_from_head, &m.v_cam);
-  t.head_model_ms = watch.ElapsedMs();
-  watch.Restart();
-  m.sampler.Sample(m.v_cam, m.model->data().faces, m.feature_camera, cam_from_head, nullptr, &m.rays);
-  t.sample_ms = watch.ElapsedMs();
-  const AvatarConditioning cond = MakeConditioning(m.avatar.config(), m.avatar.subject(), params);
-  const AvatarOutput out = RunAvatar(m.avatar.modules(), m.rays, cam_from_head, cond, &t);
-  watch.Restart();
-  ImageTensorToBgr(out.image, image);
-  t.convert_ms = watch.ElapsedMs();
+  RenderAvatarFrame(m.avatar.modules(), m.avatar.config(), *m.model, m.identity, m.avatar.subject(), params, &m.sampler,
+                    &m.buffers, image, &t);
   t.total_ms = total.ElapsedMs();
   return true;
 }
+
+int AvatarRenderer::output_size() const { return impl_->avatar.config().output_size; }
+const SubjectParams& AvatarRenderer::subject() const { return impl_->avatar.subject(); }
 
 }  // namespace headcast

@@ -1,4 +1,4 @@
-// AvatarRenderer: FrameParams in, the avatar's picture out, on the CPU.
+// AvatarRenderer, the CNeRF avatar backend: FrameParams in, the avatar's picture out, on the CPU.
 // Per frame: head model (Eigen) -> ray sampling -> CNeRF -> volume rendering ->
 // 2D neural renderer -> BGR image. Buffers are reused across frames.
 #pragma once
@@ -8,34 +8,17 @@
 #include <string>
 
 #include "common/avatar/avatar.h"
+#include "common/avatar/avatar_backend.h"
 #include "common/headmodel/params.h"
 
 namespace headcast {
 
-// Milliseconds per stage of one frame.
-struct AvatarTimings {
-  double head_model_ms = 0;  // head-model forward pass and transform to the camera
-  double sample_ms = 0;      // rasterising at feature resolution and choosing rays/depths
-  double mlp_ms = 0;         // CNeRF over every sample
-  double composite_ms = 0;   // volume rendering into the feature map
-  double upsample_ms = 0;    // the 2D neural renderer
-  double convert_ms = 0;     // tensor to BGR image
-  double total_ms = 0;
-  int rays = 0;
-  int samples = 0;
-};
+// The CNeRF backend's options are the backends' shared ones.
+using AvatarRendererOptions = AvatarBackendOptions;
 
-struct AvatarRendererOptions {
-  // libtorch intra-op (OpenMP) threads. 1 by default: measured on the 2-core
-  // machine, OpenBLAS already threads the MLP's matrix products, and a second
-  // OpenMP thread competing with it (and with the display) made frames slower
-  // (`headcast-bench render` reports both).
-  int threads = 1;
-  void Check() const;
-};
-
-class AvatarRenderer {
+class AvatarRenderer : public AvatarBackend {
  public:
+  static constexpr const char* kKind = "cnerf";
   // `model` must be the head model the avatar was made for (fingerprint checked).
   AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar avatar, const AvatarRendererOptions& options = {});
   ~AvatarRenderer();
@@ -43,7 +26,10 @@ class AvatarRenderer {
   // Renders into `image_bgr` (CV_8UC3, output_size x output_size). Returns false
   // with `why` for invalid parameters (NaN, out of range) and leaves the image alone.
   bool Render(const FrameParams& params, cv::Mat* image_bgr, AvatarTimings* timings = nullptr,
-              std::string* why = nullptr);
+              std::string* why = nullptr) override;
+  int output_size() const override;
+  std::string kind() const override { return kKind; }
+  const SubjectParams& subject() const override;
 
   const Avatar& avatar() const;
   const HeadModel& head_model() const;

@@ -2,7 +2,9 @@
 #include "common/core/camera.h"
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
+#include <stdexcept>
 
 #include "common/core/options.h"
 
@@ -68,6 +70,25 @@ std::string PinholeCamera::ToString() const {
   std::ostringstream s;
   s << "fx=" << fx << " fy=" << fy << " cx=" << cx << " cy=" << cy << " " << width << "x" << height;
   return s.str();
+}
+
+PinholeCamera ParseIntrinsics(const std::string& text, const std::string& flag) {
+  PinholeCamera k;
+  char end = 0;
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf,%lf%c", &k.fx, &k.fy, &k.cx, &k.cy, &end) != 4)
+    throw std::invalid_argument(flag + " wants fx,fy,cx,cy in pixels, e.g. 640,640,320,240 (got '" + text + "')");
+  if (!(k.fx > 0 && k.fy > 0 && std::isfinite(k.cx) && std::isfinite(k.cy)))
+    throw std::invalid_argument(flag + ": focal lengths must be positive and the principal point finite");
+  return k;
+}
+
+void ParseSize(const std::string& text, const std::string& flag, int* width, int* height) {
+  char end = 0;
+  int w = 0, h = 0;
+  if (std::sscanf(text.c_str(), "%dx%d%c", &w, &h, &end) != 2 || w < 1 || h < 1 || w > 16384 || h > 16384)
+    throw std::invalid_argument(flag + " wants WIDTHxHEIGHT in pixels, e.g. 1280x720 (got '" + text + "')");
+  *width = w;
+  *height = h;
 }
 
 }  // namespace headcast

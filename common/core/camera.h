@@ -33,4 +33,11 @@ struct PinholeCamera {
   std::string ToString() const;
 };
 
+// "fx,fy,cx,cy" in pixels (a flag's value; `flag` names it in the error).
+// Width and height stay at their defaults: the frames say how big they are.
+PinholeCamera ParseIntrinsics(const std::string& text, const std::string& flag);
+
+// "WIDTHxHEIGHT" in pixels; throws std::invalid_argument naming `flag`.
+void ParseSize(const std::string& text, const std::string& flag, int* width, int* height);
+
 }  // namespace headcast

@@ -2,11 +2,12 @@
 #include "common/core/image_io.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
-#include <sstream>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <stdexcept>
 
 namespace headcast {
@@ -110,13 +111,20 @@ std::vector<RgbdPair> ReadRgbdAssociations(const std::string& path) {
     double depth_time;
     std::string colour, depth;
     if (!(fields >> p.time >> colour >> depth_time >> depth))
-      throw std::runtime_error(path + ": line " + std::to_string(number) + ": expected 'time colour.png time depth.png'");
+      throw std::runtime_error(path + ": line " + std::to_string(number) +
+                               ": expected 'time colour.png time depth.png'");
     p.colour = (base / colour).string();
     p.depth = (base / depth).string();
     pairs.push_back(p);
   }
   if (pairs.empty()) throw std::runtime_error(path + ": no colour/depth pairs listed");
   return pairs;
+}
+
+std::string FrameFileName(int frame) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "%05d.png", frame);
+  return name;
 }
 
 }  // namespace headcast

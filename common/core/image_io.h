@@ -20,6 +20,9 @@ cv::Mat ToUint8(const cv::Mat& float_image);
 // `folder`, sorted by name: the order of every image-folder input.
 std::vector<std::string> ListImageFiles(const std::string& folder);
 
+// "NNNNN.png": how per-frame images (masks, crops) are named by frame number.
+std::string FrameFileName(int frame);
+
 // A TUM-style RGB-D association file: lines "t_rgb rgb/x.png t_depth depth/x.png"
 // ('#' comments), paths relative to the file's folder. Throws naming the file
 // and line when it cannot be read or a line is malformed, or when it lists nothing.

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "common/core/check.h"
 #include "common/core/zip_archive.h"
 
 namespace headcast {
@@ -28,7 +29,8 @@ constexpr DTypeInfo kDTypes[] = {
 const DTypeInfo& Info(DType dtype) {
   for (const auto& i : kDTypes)
     if (i.dtype == dtype) return i;
-  throw std::logic_error("unknown dtype");
+  HEADCAST_CHECK(false) << "dtype " << static_cast<int>(dtype) << " missing from kDTypes";
+  return kDTypes[0];
 }
 
 [[noreturn]] void Fail(const std::string& what, const std::string& why) { throw std::runtime_error(what + ": " + why); }

@@ -127,7 +127,9 @@ class HeadModel {
   // A joint's rest position for the template and how it moves per shape and
   // expression unit (the joint regressor applied to the template and the bases).
   Eigen::Vector3f RestJoint(int joint) const { return j_template_.row(joint).transpose(); }
-  Eigen::Matrix<float, 3, Eigen::Dynamic> JointShapeDirs(int joint) const { return j_shapedirs_.middleRows(3 * joint, 3); }
+  Eigen::Matrix<float, 3, Eigen::Dynamic> JointShapeDirs(int joint) const {
+    return j_shapedirs_.middleRows(3 * joint, 3);
+  }
   Eigen::Matrix<float, 3, Eigen::Dynamic> JointExpressionDirs(int joint) const {
     return j_expressiondirs_.middleRows(3 * joint, 3);
   }

@@ -110,11 +110,11 @@ enum class PlyType { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, 
 
 PlyType ParsePlyType(const std::string& t, const std::string& path) {
   static const std::map<std::string, PlyType> types = {
-      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUInt8},
-      {"uint8", PlyType::kUInt8},   {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUInt16}, {"uint16", PlyType::kUInt16},   {"int", PlyType::kInt32},
-      {"int32", PlyType::kInt32},   {"uint", PlyType::kUInt32},     {"uint32", PlyType::kUInt32},
-      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
+      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},       {"uchar", PlyType::kUInt8},
+      {"uint8", PlyType::kUInt8},    {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUInt16},  {"uint16", PlyType::kUInt16},   {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},    {"uint", PlyType::kUInt32},     {"uint32", PlyType::kUInt32},
+      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
       {"float64", PlyType::kFloat64}};
   auto it = types.find(t);
   if (it == types.end()) Fail(path, "unknown PLY property type '" + t + "'");
@@ -124,13 +124,17 @@ PlyType ParsePlyType(const std::string& t, const std::string& path) {
 int PlySize(PlyType t) {
   switch (t) {
     case PlyType::kInt8:
-    case PlyType::kUInt8: return 1;
+    case PlyType::kUInt8:
+      return 1;
     case PlyType::kInt16:
-    case PlyType::kUInt16: return 2;
+    case PlyType::kUInt16:
+      return 2;
     case PlyType::kInt32:
     case PlyType::kUInt32:
-    case PlyType::kFloat32: return 4;
-    case PlyType::kFloat64: return 8;
+    case PlyType::kFloat32:
+      return 4;
+    case PlyType::kFloat64:
+      return 8;
   }
   return 0;
 }
@@ -160,14 +164,22 @@ class PlyValueReader {
     if (!in_.read(reinterpret_cast<char*>(raw), n)) Fail(path_, "PLY data is truncated");
     if ((format_ == 2) != kBigEndianHost) std::reverse(raw, raw + n);
     switch (t) {
-      case PlyType::kInt8: return static_cast<int8_t>(raw[0]);
-      case PlyType::kUInt8: return raw[0];
-      case PlyType::kInt16: return Cast<int16_t>(raw);
-      case PlyType::kUInt16: return Cast<uint16_t>(raw);
-      case PlyType::kInt32: return Cast<int32_t>(raw);
-      case PlyType::kUInt32: return Cast<uint32_t>(raw);
-      case PlyType::kFloat32: return Cast<float>(raw);
-      case PlyType::kFloat64: return Cast<double>(raw);
+      case PlyType::kInt8:
+        return static_cast<int8_t>(raw[0]);
+      case PlyType::kUInt8:
+        return raw[0];
+      case PlyType::kInt16:
+        return Cast<int16_t>(raw);
+      case PlyType::kUInt16:
+        return Cast<uint16_t>(raw);
+      case PlyType::kInt32:
+        return Cast<int32_t>(raw);
+      case PlyType::kUInt32:
+        return Cast<uint32_t>(raw);
+      case PlyType::kFloat32:
+        return Cast<float>(raw);
+      case PlyType::kFloat64:
+        return Cast<double>(raw);
     }
     return 0;
   }
@@ -199,10 +211,14 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
     if (key == "format") {
       std::string f;
       ls >> f;
-      if (f == "ascii") format = 0;
-      else if (f == "binary_little_endian") format = 1;
-      else if (f == "binary_big_endian") format = 2;
-      else Fail(path, "unknown PLY format '" + f + "'");
+      if (f == "ascii")
+        format = 0;
+      else if (f == "binary_little_endian")
+        format = 1;
+      else if (f == "binary_big_endian")
+        format = 2;
+      else
+        Fail(path, "unknown PLY format '" + f + "'");
     } else if (key == "element") {
       PlyElement e;
       if (!(ls >> e.name >> e.count) || e.count < 0) Fail(path, "bad PLY element line '" + line + "'");
@@ -265,7 +281,8 @@ TriangleMesh ReadPly(const std::string& path, std::istream& in) {
       if (face) polygons.push_back(std::move(idx));
     }
   }
-  for (size_t f = 0; f < polygons.size(); ++f) b.AddPolygon(polygons[f], num_vertices, path, "face " + std::to_string(f));
+  for (size_t f = 0; f < polygons.size(); ++f)
+    b.AddPolygon(polygons[f], num_vertices, path, "face " + std::to_string(f));
   return b.Build(path);
 }
 

@@ -26,8 +26,8 @@ TriangleMesh ReadMesh(const std::string& path);
 void WriteMesh(const std::string& path, const TriangleMesh& mesh);
 
 struct MeshDiagnostics {
-  int non_manifold_edges = 0;    // edges shared by more than two faces
-  int degenerate_faces = 0;      // repeated vertex index or zero area
+  int non_manifold_edges = 0;  // edges shared by more than two faces
+  int degenerate_faces = 0;    // repeated vertex index or zero area
   int unreferenced_vertices = 0;
   int non_finite_vertices = 0;
   double bounding_diagonal = 0;  // of the referenced vertices, in the mesh's units

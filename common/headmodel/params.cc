@@ -2,7 +2,6 @@
 #include "common/headmodel/params.h"
 
 #include <Eigen/Geometry>
-
 #include <cmath>
 
 #include "common/core/rotation.h"
@@ -90,6 +89,47 @@ FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double
   out.capture_time_s = (1 - t) * a.capture_time_s + t * b.capture_time_s;
   out.confidence = static_cast<float>((1 - t) * a.confidence + t * b.confidence);
   return out;
+}
+
+nlohmann::json CameraContract::ToJson() const {
+  return {{"source",
+           {{"fx", source.fx},
+            {"fy", source.fy},
+            {"cx", source.cx},
+            {"cy", source.cy},
+            {"width", source.width},
+            {"height", source.height}}},
+          {"crop", {{"x0", crop_x0}, {"y0", crop_y0}, {"side", crop_side}}}};
+}
+
+CameraContract CameraContract::FromJson(const nlohmann::json& j) {
+  CameraContract c;
+  try {
+    const auto& s = j.at("source");
+    c.source.fx = s.at("fx");
+    c.source.fy = s.at("fy");
+    c.source.cx = s.at("cx");
+    c.source.cy = s.at("cy");
+    c.source.width = s.at("width");
+    c.source.height = s.at("height");
+    c.crop_x0 = j.at("crop").at("x0");
+    c.crop_y0 = j.at("crop").at("y0");
+    c.crop_side = j.at("crop").at("side");
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(std::string("camera contract: ") + e.what());
+  }
+  c.source.Check();
+  if (!(c.crop_side > 0 && std::isfinite(c.crop_x0) && std::isfinite(c.crop_y0)))
+    throw std::invalid_argument("camera contract: the crop needs a positive side and a finite corner");
+  return c;
+}
+
+std::optional<PinholeCamera> ContractCameraFor(const CameraContract& contract, int width, int height) {
+  const PinholeCamera& s = contract.source;
+  const double aspect = static_cast<double>(width) / height, source_aspect = static_cast<double>(s.width) / s.height;
+  if (std::abs(aspect / source_aspect - 1) > 0.01) return std::nullopt;
+  if (width == s.width && height == s.height) return s;
+  return s.Resized(width, height);
 }
 
 }  // namespace headcast

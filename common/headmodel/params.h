@@ -4,6 +4,8 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 
 #include "common/core/camera.h"
@@ -54,5 +56,23 @@ struct SubjectParams {
   std::array<float, 27> light{};  // lambda: 2nd-order SH, 9 per RGB channel
   PinholeCamera intrinsics;       // of the output image
 };
+
+// The camera contract of an avatar: the full frames' camera its training
+// video was tracked with, and the square (source pixels) its training images
+// were cut from. The avatar renders with the crop's intrinsics
+// (SubjectParams::intrinsics); a tracker that drives it fits with `source`
+// (scaled to its frame size), so that its poses mean what they meant in training.
+struct CameraContract {
+  PinholeCamera source;
+  double crop_x0 = 0, crop_y0 = 0, crop_side = 0;  // pixels of the source frames
+  nlohmann::json ToJson() const;
+  // Throws std::invalid_argument naming what is missing or out of range.
+  static CameraContract FromJson(const nlohmann::json& j);
+};
+
+// `source` for frames of `width` x `height`: scaled when only the resolution
+// differs; nothing when the aspect ratio differs by more than 1 % (another
+// camera or mode: the contract cannot be kept).
+std::optional<PinholeCamera> ContractCameraFor(const CameraContract& contract, int width, int height);
 
 }  // namespace headcast

@@ -22,10 +22,10 @@ namespace {
 
 // One pixel's observation and the per-channel pieces of its prediction.
 struct PixelTerms {
-  Eigen::Vector3d observed;                            // RGB, 0..1
-  Eigen::Matrix<double, 9, 1> sh;                      // SH basis at the normal
-  Eigen::Vector3d mean_albedo;                         // RGB
-  Eigen::Matrix<double, 3, Eigen::Dynamic> basis;      // RGB x T
+  Eigen::Vector3d observed;                        // RGB, 0..1
+  Eigen::Matrix<double, 9, 1> sh;                  // SH basis at the normal
+  Eigen::Vector3d mean_albedo;                     // RGB
+  Eigen::Matrix<double, 3, Eigen::Dynamic> basis;  // RGB x T
 };
 
 }  // namespace

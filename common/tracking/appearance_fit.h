@@ -17,17 +17,17 @@
 namespace headcast {
 
 struct AppearanceSample {
-  cv::Mat bgr;          // the frame, 8-bit BGR
-  cv::Mat mask;         // optional CV_8U head mask: only pixels inside count (empty: the model's silhouette)
-  FrameParams params;   // fitted expression, jaw, cam_from_head
+  cv::Mat bgr;         // the frame, 8-bit BGR
+  cv::Mat mask;        // optional CV_8U head mask: only pixels inside count (empty: the model's silhouette)
+  FrameParams params;  // fitted expression, jaw, cam_from_head
   PinholeCamera camera;
 };
 
 struct AppearanceFitOptions {
-  int alternations = 300;             // light, texture, light, ... at most (stops when the error settles)
-  double texture_prior = 1e-3;        // weight of |tau|^2 against mean squared pixel error (0..1 intensities)
-  int max_pixels_per_frame = 20000;   // pixels used per frame at most (evenly subsampled)
-  int border_px = 2;                  // silhouette pixels left out (they mix head and background)
+  int alternations = 300;            // light, texture, light, ... at most (stops when the error settles)
+  double texture_prior = 1e-3;       // weight of |tau|^2 against mean squared pixel error (0..1 intensities)
+  int max_pixels_per_frame = 20000;  // pixels used per frame at most (evenly subsampled)
+  int border_px = 2;                 // silhouette pixels left out (they mix head and background)
   void Check() const;
 };
 

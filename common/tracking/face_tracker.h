@@ -14,8 +14,8 @@ namespace headcast {
 
 struct FaceTrackerOptions {
   std::string predictor_path = "/usr/share/dlib/shape_predictor_68_face_landmarks.dat";
-  int detect_width = 320;          // the detector sees the frame scaled to this width (at most 2x up), pixels
-  int redetect_interval = 30;      // while tracking the detector runs every this many frames (1: every frame)
+  int detect_width = 320;      // the detector sees the frame scaled to this width (at most 2x up), pixels
+  int redetect_interval = 30;  // while tracking the detector runs every this many frames (1: every frame)
   // While tracking, the box handed to the shape predictor is drawn around the
   // previous landmarks with the margins the detector's own box had at the last
   // detection. The predictor was trained on detector boxes: a box of another

@@ -1,11 +1,10 @@
 // Landmark fitting with Ceres.
 #include "common/tracking/head_fitter.h"
 
-#include <algorithm>
-
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <algorithm>
 #include <opencv2/calib3d.hpp>
 
 #include "common/core/options.h"
@@ -18,7 +17,8 @@ void HeadFitterOptions::Check() const {
   OptionsCheck c("HeadFitterOptions");
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
-  c.InRange("expression_limit", expression_limit, 0.1, 5.0).NonNegative("expression_range_weight", expression_range_weight);
+  c.InRange("expression_limit", expression_limit, 0.1, 5.0)
+      .NonNegative("expression_range_weight", expression_range_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.ThrowIfErrors();
@@ -126,9 +126,9 @@ void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression
   problem->AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr, expression);
   const HeadModelData& d = model_.data();
   if (d.HasExpressionRange() && options_.expression_range_weight > 0)
-    problem->AddResidualBlock(new RangeCost(num_expression_, d.expression_min, d.expression_max,
-                                            std::sqrt(options_.expression_range_weight)),
-                              nullptr, expression);
+    problem->AddResidualBlock(
+        new RangeCost(num_expression_, d.expression_min, d.expression_max, std::sqrt(options_.expression_range_weight)),
+        nullptr, expression);
 }
 
 Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& cam) const {
@@ -146,7 +146,7 @@ Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& c
   return out;
 }
 
-FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame) const {
+LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame) const {
   if (frame->expression.size() != model_.num_expression())
     frame->expression = Eigen::VectorXf::Zero(model_.num_expression());
   const LandmarkBasis b = MakeBasis(frame->ViewPose());
@@ -199,7 +199,7 @@ FitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam,
   solver.num_threads = 1;
   ceres::Solver::Summary summary;
   ceres::Solve(solver, &problem, &summary);
-  FitResult r;
+  LandmarkFitResult r;
   r.iterations = static_cast<int>(summary.iterations.size());
   r.ok = summary.IsSolutionUsable() && translation[2] > 0;
   if (!r.ok) return r;
@@ -255,15 +255,15 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
     const LandmarkBasis b = MakeBasis(params[f].ViewPose(), /*shape_free=*/true);
     for (int l = 0; l < kNumLandmarks; ++l) {
       const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<CalibrationResidual, 8>(new CalibrationResidual(
-          b.base.row(l).transpose(), b.dirs[l], b.shape_dirs[l],
-          model_.JointIsArticulated(kJawJoint) ? b.jaw_weight[l] : 0.0, b.jaw_joint, jaw_shape_dirs,
-          key_frames[f][l], initial, weight));
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<CalibrationResidual, 8>(
+          new CalibrationResidual(b.base.row(l).transpose(), b.dirs[l], b.shape_dirs[l],
+                                  model_.JointIsArticulated(kJawJoint) ? b.jaw_weight[l] : 0.0, b.jaw_joint,
+                                  jaw_shape_dirs, key_frames[f][l], initial, weight));
       for (int size : {3, 3, std::max(E, 1), 3, S, 1}) cost->AddParameterBlock(size);
       cost->SetNumResiduals(2);
-      problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
-                               {pose[f].data(), pose[f].data() + 3, expression[f].data(), pose[f].data() + 6,
-                                shape.data(), &log_focal});
+      problem.AddResidualBlock(
+          cost, new ceres::HuberLoss(options_.huber_px),
+          {pose[f].data(), pose[f].data() + 3, expression[f].data(), pose[f].data() + 6, shape.data(), &log_focal});
     }
     AddExpressionPriors(&problem, expression[f].data());
     problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, pose[f].data() + 6);

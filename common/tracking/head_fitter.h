@@ -32,16 +32,16 @@ struct HeadFitterOptions {
   // squared pixels. Without it ICT fits chase landmarks with eye-look and jaw
   // blendshapes at -4..+4, which no avatar can be conditioned on.
   double expression_range_weight = 100;
-  double jaw_prior = 10;           // weight of |jaw|^2 (radians^2)
-  double contour_weight = 0.5;     // landmarks 0..16 sit on a contour the model only approximates
-  int max_iterations = 25;         // Levenberg-Marquardt iterations per frame
-  double huber_px = 3;             // robust loss scale on landmark residuals, pixels
-  double shape_prior = 1e-2;       // calibration: weight of sum(beta^2) against squared pixels per landmark
-  double max_focal_change = 2;     // calibration: the focal length stays within this factor of the initial one
+  double jaw_prior = 10;        // weight of |jaw|^2 (radians^2)
+  double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
+  int max_iterations = 25;      // Levenberg-Marquardt iterations per frame
+  double huber_px = 3;          // robust loss scale on landmark residuals, pixels
+  double shape_prior = 1e-2;    // calibration: weight of sum(beta^2) against squared pixels per landmark
+  double max_focal_change = 2;  // calibration: the focal length stays within this factor of the initial one
   void Check() const;
 };
 
-struct FitResult {
+struct LandmarkFitResult {
   bool ok = false;
   double rms_px = 0;  // landmark reprojection error after the fit, pixels
   int iterations = 0;
@@ -55,7 +55,7 @@ class HeadFitter {
   // Fits `frame` (expression, jaw, cam_from_head) to `landmarks`, starting from
   // its current values. A frame whose cam_translation.z <= 0 is initialised
   // from the landmarks (PnP on a neutral face) first.
-  FitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame) const;
+  LandmarkFitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame) const;
   // Identity calibration over key frames of one person and one fixed camera
   // (METHOD §2): shape and focal length shared by all frames, pose,
   // expression and jaw per frame, starting from per-frame fits with the

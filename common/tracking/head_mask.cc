@@ -60,10 +60,10 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   cv::resize(bgr(roi), image, cv::Size(), scale, scale, cv::INTER_AREA);
   auto to_work = [&](cv::Point2f p) { return cv::Point2f((p.x - roi.x) * scale, (p.y - roi.y) * scale); };
   cv::Mat seeds(image.size(), CV_8U, cv::Scalar(cv::GC_BGD));
-  cv::ellipse(seeds,
-              cv::RotatedRect(to_work(head.center), cv::Size2f(head.size.width * scale, head.size.height * scale),
-                              head.angle),
-              cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
+  cv::ellipse(
+      seeds,
+      cv::RotatedRect(to_work(head.center), cv::Size2f(head.size.width * scale, head.size.height * scale), head.angle),
+      cv::Scalar(cv::GC_PR_FGD), cv::FILLED);
   std::vector<cv::Point> neck_work;
   for (const auto& p : neck) neck_work.push_back(to_work(p));
   cv::fillConvexPoly(seeds, neck_work, cv::Scalar(cv::GC_PR_FGD));

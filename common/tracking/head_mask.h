@@ -10,11 +10,11 @@
 namespace headcast {
 
 struct HeadMaskOptions {
-  int iterations = 3;           // GrabCut iterations
-  int working_size = 200;       // the head region is segmented at about this many pixels across (speed)
-  double hair_height = 0.75;    // probable hair above the brows, in face heights (brow to chin)
-  double head_width = 1.35;     // probable head width, in jaw widths
-  double neck_height = 0.45;    // probable neck below the chin, in face heights
+  int iterations = 3;                         // GrabCut iterations
+  int working_size = 200;                     // the head region is segmented at about this many pixels across (speed)
+  double hair_height = 0.75;                  // probable hair above the brows, in face heights (brow to chin)
+  double head_width = 1.35;                   // probable head width, in jaw widths
+  double neck_height = 0.45;                  // probable neck below the chin, in face heights
   double turn_shift = 1.0, turn_widen = 1.5;  // how far the region follows the back of a turned head
   void Check() const;
 };

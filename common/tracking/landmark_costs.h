@@ -61,7 +61,6 @@ struct LandmarkResidual {
   double weight;
 };
 
-
 // The same landmark during identity calibration: shape (and the jaw joint's
 // dependence on it) and a log focal-length scale are unknowns too. Blocks:
 // rotation, translation, expression, jaw, shape, log focal scale.

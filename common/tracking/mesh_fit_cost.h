@@ -5,8 +5,8 @@
 
 #include <Eigen/Core>
 #include <array>
-#include <cmath>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -26,8 +26,8 @@ struct MeshBasis {
   Eigen::VectorXd mean;              // 3N
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> dirs;  // 3N x k
   Eigen::Vector3d jaw_mean;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_dirs;  // 3 x k
-  Eigen::VectorXd jaw_weight;                         // N
+  Eigen::Matrix<double, 3, Eigen::Dynamic> jaw_dirs;                       // 3 x k
+  Eigen::VectorXd jaw_weight;                                              // N
   Eigen::Matrix<double, Eigen::Dynamic, 9, Eigen::RowMajor> jaw_posedirs;  // 3N x 9, or empty
 
   // Unique per basis (addresses are reused), for CachedJaw.
@@ -92,7 +92,8 @@ struct MeshBasis {
     Eigen::Vector3d p = mean.segment<3>(3 * i) + Bi * Eigen::Map<const Eigen::VectorXd>(c, k);
     if (jaw_posedirs.rows() > 0) {
       const auto Pi = jaw_posedirs.middleRows(3 * i, 3);
-      p += Pi * Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix<double, 3, 3, Eigen::RowMajor>(jaw.RmI).data());
+      p += Pi *
+           Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix<double, 3, 3, Eigen::RowMajor>(jaw.RmI).data());
     }
     const double w = jaw_weight[i];
     const Eigen::Vector3d u = p - jaw.joint;

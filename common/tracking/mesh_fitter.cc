@@ -10,8 +10,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <memory>
 #include <fstream>
+#include <memory>
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -97,7 +97,9 @@ Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector
 struct CloudAdaptor {
   const RowMatrixX3f& points;
   size_t kdtree_get_point_count() const { return static_cast<size_t>(points.rows()); }
-  float kdtree_get_pt(size_t i, size_t d) const { return points(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
+  float kdtree_get_pt(size_t i, size_t d) const {
+    return points(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
+  }
   template <class Box>
   bool kdtree_get_bbox(Box&) const {
     return false;
@@ -259,9 +261,9 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   prior_weights.head(basis.ns).setConstant(std::sqrt(o.shape_prior * count));
   prior_weights.segment(basis.ns, basis.ne).setConstant(std::sqrt(o.expression_prior * count));
   if (basis.ns + basis.ne > 0)
-    problem.AddResidualBlock(new ceres::NormalPrior(prior_weights.asDiagonal().toDenseMatrix(),
-                                                    Eigen::VectorXd::Zero(basis.k)),
-                             nullptr, blocks[kCoefficients]);
+    problem.AddResidualBlock(
+        new ceres::NormalPrior(prior_weights.asDiagonal().toDenseMatrix(), Eigen::VectorXd::Zero(basis.k)), nullptr,
+        blocks[kCoefficients]);
   problem.AddResidualBlock(
       new ceres::NormalPrior(std::sqrt(o.jaw_prior * count) * Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()),
       nullptr, blocks[kJaw]);
@@ -360,10 +362,14 @@ Eigen::VectorXf DefaultImportance(const HeadModel& model) {
     float near_nose = INFINITY;
     for (int k = 27; k <= 35; ++k) near_nose = std::min(near_nose, (v - L.row(k).transpose()).norm());
     const bool face = v.z() > front_z && inside(v.x(), v.y());
-    if (face && near_nose < 0.25f * iod) nu[i] = 2;
-    else if (face) nu[i] = 1;
-    else if (v.z() > centre_z) nu[i] = 0.3f;
-    else nu[i] = 0.1f;
+    if (face && near_nose < 0.25f * iod)
+      nu[i] = 2;
+    else if (face)
+      nu[i] = 1;
+    else if (v.z() > centre_z)
+      nu[i] = 0.3f;
+    else
+      nu[i] = 0.1f;
   }
   return nu;
 }
@@ -526,8 +532,7 @@ MeshFitResult FitHeadModelToMesh(const HeadModel& model, const TriangleMesh& tar
     for (int round = 0; round < o.closest_point_rounds; ++round) {
       // Wider gates while the alignment is rough.
       const double gate = o.max_correspondence_m * (round < 2 ? 3.0 : 1.0);
-      pairs =
-          ClosestPoints(model, PoseAll(basis, st), target.vertices, target_normals, omega, nu, gate);
+      pairs = ClosestPoints(model, PoseAll(basis, st), target.vertices, target_normals, omega, nu, gate);
       r.iterations += SolveOnce(basis, pairs, settings, round == 0 ? FreeBlocks::RigidOnly() : all_free, &st);
       ++r.rounds;
       MeasureRms(PoseAll(basis, st), pairs, &r);
@@ -561,24 +566,23 @@ void WriteMeshFitJson(const std::string& path, const HeadModel& model, const Mes
   auto vec = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
   nlohmann::json rotation = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) rotation.push_back({fit.rotation(r, 0), fit.rotation(r, 1), fit.rotation(r, 2)});
-  nlohmann::json j = {
-      {"format", "headcast mesh fit 1"},
-      {"head_model", model.data().name},
-      {"head_model_fingerprint", model.fingerprint()},
-      {"shape", vec(fit.params.shape)},
-      {"expression", vec(fit.params.expression)},
-      {"pose", vec(fit.params.pose)},
-      {"mesh_from_model",
-       {{"scale", fit.scale},
-        {"rotation", rotation},
-        {"translation", {fit.translation.x(), fit.translation.y(), fit.translation.z()}},
-        {"what", "mesh = scale * rotation * model(shape, expression, pose) + translation, metres"}}},
-      {"same_topology", fit.same_topology},
-      {"correspondences", fit.correspondences},
-      {"rms_mm", 1e3 * fit.rms_m},
-      {"rms_face_mm", 1e3 * fit.rms_face_m},
-      {"rounds", fit.rounds},
-      {"iterations", fit.iterations}};
+  nlohmann::json j = {{"format", "headcast mesh fit 1"},
+                      {"head_model", model.data().name},
+                      {"head_model_fingerprint", model.fingerprint()},
+                      {"shape", vec(fit.params.shape)},
+                      {"expression", vec(fit.params.expression)},
+                      {"pose", vec(fit.params.pose)},
+                      {"mesh_from_model",
+                       {{"scale", fit.scale},
+                        {"rotation", rotation},
+                        {"translation", {fit.translation.x(), fit.translation.y(), fit.translation.z()}},
+                        {"what", "mesh = scale * rotation * model(shape, expression, pose) + translation, metres"}}},
+                      {"same_topology", fit.same_topology},
+                      {"correspondences", fit.correspondences},
+                      {"rms_mm", 1e3 * fit.rms_m},
+                      {"rms_face_mm", 1e3 * fit.rms_face_m},
+                      {"rounds", fit.rounds},
+                      {"iterations", fit.iterations}};
   j.update(nlohmann::json::parse(extra_json_object));
   std::ofstream out(path);
   out << j.dump(2) << "\n";
@@ -669,7 +673,8 @@ BlackBoxFitResult FitBlackBoxToMesh(const MeshGenerator& generator, const Eigen:
                                     const RowMatrixX3f& target, const Eigen::VectorXf& weights,
                                     const BlackBoxFitOptions& o) {
   o.Check();
-  if (target.rows() == 0 || !target.allFinite()) throw std::invalid_argument("black-box fit: empty or non-finite target");
+  if (target.rows() == 0 || !target.allFinite())
+    throw std::invalid_argument("black-box fit: empty or non-finite target");
   if (weights.size() != target.rows())
     throw std::invalid_argument("black-box fit: " + std::to_string(weights.size()) + " weights for " +
                                 std::to_string(target.rows()) + " vertices");

@@ -29,8 +29,8 @@ enum class MeshLoss { kNorm, kSquared, kCauchy, kHuber };
 
 struct MeshFitOptions {
   bool fit_shape = true, fit_expression = true;
-  bool fit_jaw = true;     // the jaw joint rotation (models with an articulated jaw)
-  bool fit_scale = false;  // a similarity instead of a rigid transform
+  bool fit_jaw = true;                    // the jaw joint rotation (models with an articulated jaw)
+  bool fit_scale = false;                 // a similarity instead of a rigid transform
   int num_shape = 0, num_expression = 0;  // components fitted (0: all the model has)
   MeshCorrespondence correspondence = MeshCorrespondence::kAuto;
   MeshWeighting weighting = MeshWeighting::kImportanceAndCount;
@@ -39,13 +39,13 @@ struct MeshFitOptions {
   // Tikhonov weights on the coefficients, in m^2 per unit^2 per point: small, they only
   // keep components the mesh does not constrain at zero.
   double shape_prior = 1e-9, expression_prior = 1e-9, jaw_prior = 1e-9;
-  int max_iterations = 50;          // Levenberg-Marquardt iterations per solve
-  int closest_point_rounds = 30;    // correspondence updates at most (other topology); stops on convergence
+  int max_iterations = 50;             // Levenberg-Marquardt iterations per solve
+  int closest_point_rounds = 30;       // correspondence updates at most (other topology); stops on convergence
   double max_correspondence_m = 0.01;  // pairs farther apart are ignored (hair, shoulders, scan noise)
   // Other topology: target landmark positions (model landmark index 0..67 ->
   // point on the mesh) for the rigid pre-alignment; at least 4, not collinear.
   std::vector<std::pair<int, Eigen::Vector3d>> target_landmarks;
-  bool prealigned = false;  // the mesh is already in the model's frame: no landmarks needed
+  bool prealigned = false;     // the mesh is already in the model's frame: no landmarks needed
   Eigen::VectorXf importance;  // nu override, one value per model vertex (empty: DefaultImportance)
   bool allow_non_manifold = false;
   void Check() const;

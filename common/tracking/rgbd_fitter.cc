@@ -53,8 +53,8 @@ struct RgbdFitter::Impl {
 
 RgbdFitter::RgbdFitter(const HeadModel& model, const RgbdFitOptions& options) : model_(model), options_(options) {
   options.Check();
-  const int ne = options.num_expression > 0 ? std::min(options.num_expression, model.num_expression())
-                                            : model.num_expression();
+  const int ne =
+      options.num_expression > 0 ? std::min(options.num_expression, model.num_expression()) : model.num_expression();
   impl_ = std::make_unique<Impl>(model, ne);
 }
 

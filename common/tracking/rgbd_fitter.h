@@ -36,19 +36,20 @@ struct RgbdFitOptions {
   int warm_rounds = 2;  // block 2 rounds when warm-started from the previous frame
   // About this many depth points on the face: the pixel stride follows the
   // face's size in the image, so a closer face or a 2K camera costs no more.
-  // Tracking (identity frozen) takes 1200: 2-3x faster than 3000 for ~1 %
-  // more face error with 1 mm depth noise (headcast-bench rgbd, side by
-  // side). The identity is fitted once, over a few frames: it takes more.
+  // Tracking (identity frozen) takes fewer: much faster for slightly more face
+  // error. The identity is fitted once, over a few frames: it takes more
+  // (bench/DEFAULTS.md).
   int cloud_points = 1200;
-  int shape_cloud_points = 3000;  // when fit_shape
-  double cloud_margin_m = 0.015;   // around the landmarks' image span
-  double head_depth_m = 0.15;      // points this far behind the nearest landmark at most
+  int shape_cloud_points = 3000;       // when fit_shape
+  double cloud_margin_m = 0.015;       // around the landmarks' image span
+  double head_depth_m = 0.15;          // points this far behind the nearest landmark at most
   double contour_tolerance_m = 0.005;  // contour landmark depth against the posed model after block 1
   double contour_weight = 0.25;        // of a contour landmark against an inner one
   bool reject_background_contour = true;
-  double shape_prior = 1e-9, expression_prior = 1e-9;  // m^2 per unit^2 per point: only keeps unobserved components at zero
-  int max_iterations = 30;  // per solve
-  int warm_max_iterations = 8;  // per solve when warm-started
+  double shape_prior = 1e-9,
+         expression_prior = 1e-9;  // m^2 per unit^2 per point: only keeps unobserved components at zero
+  int max_iterations = 30;         // per solve
+  int warm_max_iterations = 8;     // per solve when warm-started
   void Check() const;
 };
 
@@ -58,8 +59,8 @@ struct RgbdFitResult {
   HeadModelParams params;  // shape, expression, jaw (root zero: the placement is the rotation/translation below)
   Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // cam_from_head
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();
-  double accuracy_m = 0;        // sqrt(mean squared point-to-mesh distance) after the last block
-  double landmark_rmse_m = 0;   // 3D landmarks used, after the fit
+  double accuracy_m = 0;       // sqrt(mean squared point-to-mesh distance) after the last block
+  double landmark_rmse_m = 0;  // 3D landmarks used, after the fit
   int cloud_points = 0, paired_points = 0, landmarks_3d = 0, contour_rejected = 0;
 };
 

@@ -2,14 +2,14 @@
 
 namespace headcast {
 
-FitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
-                         FrameParams* params) {
+LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
+                                 FrameParams* params) {
   if (face.status == FaceStatus::kNoFace) {
     params->cam_translation.setZero();
     return {};
   }
   if (face.status == FaceStatus::kDetected && !(params->cam_translation.z() > 0)) params->expression.resize(0);
-  const FitResult fit = fitter.Fit(face.landmarks, camera, params);
+  const LandmarkFitResult fit = fitter.Fit(face.landmarks, camera, params);
   if (!fit.ok) params->cam_translation.setZero();
   return fit;
 }

@@ -14,7 +14,7 @@ namespace headcast {
 // neutral expression, not from the old pose. No face, or a failed fit, leaves
 // *params marked cold (cam_translation zero) so the next face starts afresh;
 // the result is then not ok.
-FitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
-                         FrameParams* params);
+LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
+                                 FrameParams* params);
 
 }  // namespace headcast

@@ -11,12 +11,12 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "common/capture/frame_source.h"
+#include "common/capture/recorded_sources.h"
+#include "common/capture/stereo_depth.h"
+#include "common/capture/v4l2_source.h"
 #include "common/core/image_io.h"
 #include "common/core/timer.h"
-#include "sender/capture/frame_source.h"
-#include "sender/capture/recorded_sources.h"
-#include "sender/capture/stereo_depth.h"
-#include "sender/capture/v4l2_source.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -26,12 +26,9 @@ namespace fs = std::filesystem;
 
 // A typical USB webcam: YUYV is slow at large sizes, MJPEG is not.
 std::vector<V4l2Mode> Webcam() {
-  return {{V4L2_PIX_FMT_YUYV, 640, 480, {30, 15}},
-          {V4L2_PIX_FMT_YUYV, 1280, 720, {10, 5}},
-          {V4L2_PIX_FMT_MJPEG, 640, 480, {30}},
-          {V4L2_PIX_FMT_MJPEG, 1280, 720, {30, 15}},
-          {V4L2_PIX_FMT_MJPEG, 1920, 1080, {30}},
-          {v4l2_fourcc('H', '2', '6', '4'), 1920, 1080, {30}}};
+  return {{V4L2_PIX_FMT_YUYV, 640, 480, {30, 15}}, {V4L2_PIX_FMT_YUYV, 1280, 720, {10, 5}},
+          {V4L2_PIX_FMT_MJPEG, 640, 480, {30}},    {V4L2_PIX_FMT_MJPEG, 1280, 720, {30, 15}},
+          {V4L2_PIX_FMT_MJPEG, 1920, 1080, {30}},  {v4l2_fourcc('H', '2', '6', '4'), 1920, 1080, {30}}};
 }
 
 TEST(V4l2Negotiation, PicksTheClosestModeAFrameRateCanKeepUpWith) {
@@ -131,8 +128,8 @@ TEST(RecordedSources, ImageFoldersSkipCorruptFilesPaceAndLoop) {
   std::vector<ReadStatus> got;
   Stopwatch watch;
   for (ReadStatus s; (s = src->Read(&f, &problem)) != ReadStatus::kEnd;) got.push_back(s);
-  EXPECT_EQ(got, (std::vector<ReadStatus>{ReadStatus::kFrame, ReadStatus::kFrame, ReadStatus::kSkipped,
-                                          ReadStatus::kFrame}));
+  EXPECT_EQ(
+      got, (std::vector<ReadStatus>{ReadStatus::kFrame, ReadStatus::kFrame, ReadStatus::kSkipped, ReadStatus::kFrame}));
   EXPECT_NE(problem.find("f1b.png"), std::string::npos) << problem;
   EXPECT_GE(watch.ElapsedSeconds(), 3 / 50.0 - 1e-3);  // four frames at 50 fps: the last is due after 60 ms
   o.realtime = false;
@@ -140,7 +137,7 @@ TEST(RecordedSources, ImageFoldersSkipCorruptFilesPaceAndLoop) {
   auto looping = OpenFrameSource(dir, o);
   int frames = 0;
   for (int i = 0; i < 12; ++i) frames += looping->Read(&f, &problem) == ReadStatus::kFrame;
-  EXPECT_EQ(frames, 9);  // three passes of four files, one of them corrupt
+  EXPECT_EQ(frames, 9);                           // three passes of four files, one of them corrupt
   EXPECT_DOUBLE_EQ(f.capture_time_s, 11 / 50.0);  // media time when not paced
   const std::string empty = testing::TempDir("empty");
   EXPECT_NE(OpenError(empty).find("no images"), std::string::npos);
@@ -193,10 +190,13 @@ TEST(RgbdFolder, ReadsMillimetreDepthAndSkipsBadPairs) {
     const std::string name = std::to_string(i) + ".png";
     WriteImage(dir + "/rgb/" + name, Pattern(i));
     cv::Mat depth(48, 64, CV_16UC1, cv::Scalar(600 + 100 * i));  // millimetres
-    depth(cv::Rect(0, 0, 8, 8)) = 0;                              // unknown
-    if (i == 1) cv::imwrite(dir + "/depth/" + name, cv::Mat(48, 64, CV_8UC1, cv::Scalar(7)));  // 8-bit: refused
-    else if (i == 2) cv::imwrite(dir + "/depth/" + name, cv::Mat(24, 32, CV_16UC1, cv::Scalar(600)));  // wrong size
-    else cv::imwrite(dir + "/depth/" + name, depth);
+    depth(cv::Rect(0, 0, 8, 8)) = 0;                             // unknown
+    if (i == 1)
+      cv::imwrite(dir + "/depth/" + name, cv::Mat(48, 64, CV_8UC1, cv::Scalar(7)));  // 8-bit: refused
+    else if (i == 2)
+      cv::imwrite(dir + "/depth/" + name, cv::Mat(24, 32, CV_16UC1, cv::Scalar(600)));  // wrong size
+    else
+      cv::imwrite(dir + "/depth/" + name, depth);
     assoc << 0.1 * i << " rgb/" << name << " " << 0.1 * i + 0.01 << " depth/" << name << "\n";
   }
   assoc << 0.4 << " rgb/0.png " << 0.41 << " depth/missing.png\n";
@@ -240,8 +240,8 @@ TEST(StereoCalibration, ReadsZedConfAndYamlAndRefusesBadFiles) {
   EXPECT_DOUBLE_EQ(zed.K1.at<double>(0, 0), 700);
   {
     cv::FileStorage fs(dir + "/c.yml", cv::FileStorage::WRITE);
-    fs << "image_width" << 1280 << "image_height" << 720 << "K1" << zed.K1 << "D1" << zed.D1 << "K2" << zed.K2
-       << "D2" << zed.D2 << "R" << zed.R << "T" << zed.T;
+    fs << "image_width" << 1280 << "image_height" << 720 << "K1" << zed.K1 << "D1" << zed.D1 << "K2" << zed.K2 << "D2"
+       << zed.D2 << "R" << zed.R << "T" << zed.T;
   }
   const StereoCalibration yaml = ReadStereoCalibration(dir + "/c.yml");
   EXPECT_EQ(cv::norm(yaml.T - zed.T), 0);
@@ -277,7 +277,8 @@ TEST(StereoDepth, SideBySideFramesGiveMetricDepth) {
   // Left sees columns [100, 1380), the right camera (to the right) the same points 105 px further left.
   cv::Mat both(720, 2560, CV_8UC3);
   texture(cv::Rect(100, 0, 1280, 720)).copyTo(both(cv::Rect(0, 0, 1280, 720)));
-  texture(cv::Rect(100 + static_cast<int>(disparity), 0, 1280 - 95, 720)).copyTo(both(cv::Rect(1280, 0, 1280 - 95, 720)));
+  texture(cv::Rect(100 + static_cast<int>(disparity), 0, 1280 - 95, 720))
+      .copyTo(both(cv::Rect(1280, 0, 1280 - 95, 720)));
   fs::create_directories(dir + "/frames");
   WriteImage(dir + "/frames/0.png", both);
   WriteImage(dir + "/frames/1.png", Pattern(1));  // the wrong size: a per-frame status
@@ -341,9 +342,10 @@ TEST(StereoDepth, AloeDisparityErrorAgainstGroundTruth) {
         }
       }
     const double coverage = 100.0 * matched / known, bad2 = 100.0 * bad / matched, mae = abs_sum / matched;
-    std::printf("aloe %dx%d, %s: coverage %.1f %%, mean |error| %.2f px (%.2f px where raw SGBM has a value), "
-                "bad > 2 px %.1f %%, %.0f ms\n",
-                left.cols, left.rows, wls ? "SGBM + WLS" : "SGBM", coverage, mae, abs_sum_common / common, bad2, ms);
+    std::printf(
+        "aloe %dx%d, %s: coverage %.1f %%, mean |error| %.2f px (%.2f px where raw SGBM has a value), "
+        "bad > 2 px %.1f %%, %.0f ms\n",
+        left.cols, left.rows, wls ? "SGBM + WLS" : "SGBM", coverage, mae, abs_sum_common / common, bad2, ms);
     EXPECT_GT(coverage, wls ? 80 : 70);
     EXPECT_LT(mae, wls ? 4.0 : 1.5);
     EXPECT_LT(bad2, wls ? 15 : 5);

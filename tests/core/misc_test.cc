@@ -6,6 +6,8 @@
 #include <thread>
 
 #include "common/core/bounded_queue.h"
+#include "common/core/camera.h"
+#include "common/core/check.h"
 #include "common/core/image_io.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
@@ -114,6 +116,33 @@ TEST(VideoIo, WritesAndReadsAnMp4) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("junk.mp4"), std::string::npos);
   }
+}
+
+TEST(CheckDeathTest, ABrokenInvariantAbortsSayingWhereAndWhy) {
+  const int frames = 3;
+  HEADCAST_CHECK(frames == 3) << "never printed";
+  EXPECT_DEATH(HEADCAST_CHECK(frames == 4) << "frames " << frames, "check failed: frames == 4 frames 3");
+}
+
+TEST(Flags, IntrinsicsAndSizesAreParsedOrRefusedNamingTheFlag) {
+  const PinholeCamera k = ParseIntrinsics("640,641,320.5,240", "--intrinsics");
+  EXPECT_EQ(k.fx, 640);
+  EXPECT_EQ(k.fy, 641);
+  EXPECT_EQ(k.cx, 320.5);
+  for (const char* bad : {"640,640,320", "a,b,c,d", "640,640,320,240,1", "-1,640,320,240", "nan,640,320,240"}) {
+    try {
+      ParseIntrinsics(bad, "--intrinsics");
+      ADD_FAILURE() << bad;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("--intrinsics"), std::string::npos) << e.what();
+    }
+  }
+  int w = 0, h = 0;
+  ParseSize("1280x720", "--camera-size", &w, &h);
+  EXPECT_EQ(w, 1280);
+  EXPECT_EQ(h, 720);
+  for (const char* bad : {"1280", "1280x", "0x720", "1280x720p", "99999x1"})
+    EXPECT_THROW(ParseSize(bad, "--camera-size", &w, &h), std::invalid_argument) << bad;
 }
 
 }  // namespace

@@ -25,7 +25,7 @@ TEST(Rotation, MatchesEigenAndInverts) {
 
 TEST(Rotation, DerivativeMatchesFiniteDifferences) {
   for (const Eigen::Vector3d& w : {Eigen::Vector3d(0.3, -0.7, 1.1), Eigen::Vector3d(1e-9, 0, 0),
-                                  Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(2.5, 0.1, -0.4)}) {
+                                   Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(2.5, 0.1, -0.4)}) {
     std::array<Eigen::Matrix3d, 3> d;
     AxisAngleToMatrix(w, &d);
     const double h = 1e-6;

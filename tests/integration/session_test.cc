@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-
 #include <limits>
 #include <thread>
 
@@ -14,6 +13,7 @@
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
 #include "proto/headcast.grpc.pb.h"
+#include "proto/protocol.h"
 #include "receiver/session_server.h"
 #include "sender/session_client.h"
 

@@ -6,6 +6,7 @@
 
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
+#include "proto/protocol.h"
 #include "receiver/session_server.h"
 #include "sender/session_client.h"
 #include "tests/testing/test_data.h"

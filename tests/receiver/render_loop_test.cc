@@ -1,13 +1,14 @@
 // The render loop: paces, skips rather than lags, refuses bad parameters, stops on quit.
-#include "tests/testing/tiny_avatar.h"
 #include "receiver/render_loop.h"
 
 #include <gtest/gtest.h>
 
 #include <thread>
 
+#include "common/avatar/avatar_renderer.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
+#include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
 namespace {
@@ -18,13 +19,33 @@ AvatarConfig Tiny() { return testing::TinyAvatarConfig(); }
 class FakeDisplay : public Display {
  public:
   bool Show(const cv::Mat& image, const DisplayOverlay&) override {
-    EXPECT_EQ(image.size(), cv::Size(128, 128));
+    EXPECT_EQ(image.size(), cv::Size(size, size));
     ++shown;
+    first_pixel.push_back(image.at<cv::Vec3b>(0, 0)[0]);
     if (delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
     return quit_after <= 0 || shown < quit_after;
   }
   std::string name() const override { return "fake"; }
-  int shown = 0, quit_after = 0, delay_ms = 0;
+  int shown = 0, quit_after = 0, delay_ms = 0, size = 128;
+  std::vector<int> first_pixel;  // the blue value at (0, 0) of every frame shown
+};
+
+// The avatar-backend seam with a fake: paints each frame's sequence number.
+class FakeBackend : public AvatarBackend {
+ public:
+  bool Render(const FrameParams& p, cv::Mat* image, AvatarTimings* timings, std::string* why) override {
+    if (!p.IsValid(why)) return false;
+    image->create(64, 64, CV_8UC3);
+    image->setTo(cv::Scalar::all(static_cast<double>(p.sequence % 256)));
+    if (timings) timings->total_ms = 1;
+    return true;
+  }
+  int output_size() const override { return 64; }
+  std::string kind() const override { return "fake"; }
+  const SubjectParams& subject() const override { return subject_; }
+
+ private:
+  SubjectParams subject_;
 };
 
 class RenderLoopTest : public ::testing::Test {
@@ -89,6 +110,23 @@ TEST_F(RenderLoopTest, RefusesBadFramesAndStopsOnQuit) {
   EXPECT_EQ(s.refused, 2);
   EXPECT_EQ(display.shown, 10);
   EXPECT_EQ(s.rendered, 10);
+}
+
+TEST_F(RenderLoopTest, AnyBackendRendersThroughTheLoop) {
+  for (size_t i = 0; i < frames_.size(); ++i) frames_[i].sequence = i;
+  frames_[4].expression[0] = std::nanf("");
+  SequenceSource source(frames_, /*paced=*/false);
+  FakeDisplay display;
+  display.size = 64;
+  FakeBackend backend;
+  RenderLoopOptions o;
+  o.paced = false;
+  const RenderLoopStats s = RunRenderLoop(backend, source, display, o);
+  EXPECT_EQ(s.rendered, 29);
+  EXPECT_EQ(s.refused, 1);
+  ASSERT_EQ(display.first_pixel.size(), 29u);
+  EXPECT_EQ(display.first_pixel[3], 3);
+  EXPECT_EQ(display.first_pixel[4], 5) << "frame 4 was refused; the next one is shown";
 }
 
 }  // namespace

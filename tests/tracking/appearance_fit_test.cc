@@ -23,7 +23,7 @@ TEST(AppearanceFit, RecoversTextureAndLightFromRenders) {
   render.light = DefaultLighting();
   for (int c = 0; c < 3; ++c) {
     render.light[9 * c + 0] *= static_cast<float>(0.85 - 0.1 * c);  // warmer than white
-    render.light[9 * c + 3] = 0.35f;                                 // from the image's right
+    render.light[9 * c + 3] = 0.35f;                                // from the image's right
   }
   const PinholeCamera cam = PinholeCamera::FromFovY(320, 240, 40);
   std::vector<AppearanceSample> samples;

@@ -3,6 +3,8 @@
 // vertex noise (built-in head; ICT-FaceKit when ../shared/data is present),
 // the weights against uniform weights on the face, other topologies, the
 // black-box mode, and bad meshes refused with a reason.
+#include "common/tracking/mesh_fitter.h"
+
 #include <ceres/gradient_checker.h>
 #include <gtest/gtest.h>
 
@@ -14,7 +16,6 @@
 #include "common/headmodel/ict_converter.h"
 #include "common/headmodel/mesh_io.h"
 #include "common/tracking/mesh_fit_cost.h"
-#include "common/tracking/mesh_fitter.h"
 #include "common/tracking/synthetic_scan.h"
 #include "tests/testing/test_data.h"
 
@@ -207,8 +208,8 @@ TEST(MeshFitCost, ClosestPointsAreTheClosestOfAllFaces) {
     const int f = static_cast<int>(u(rng) * faces.rows()) % static_cast<int>(faces.rows());
     double a = u(rng), b = u(rng);
     if (a + b > 1) a = 1 - a, b = 1 - b;
-    const Eigen::RowVector3f on = (1 - a - b) * posed.row(faces(f, 0)) + a * posed.row(faces(f, 1)) +
-                                  b * posed.row(faces(f, 2));
+    const Eigen::RowVector3f on =
+        (1 - a - b) * posed.row(faces(f, 0)) + a * posed.row(faces(f, 1)) + b * posed.row(faces(f, 2));
     // On the surface, within 2 cm of it, or up to 20 cm away.
     const double offset = i % 3 == 0 ? 0.0 : i % 3 == 1 ? 0.02 * u(rng) : 0.2 * u(rng);
     points.row(i) = on + static_cast<float>(offset) * Eigen::RowVector3f(g(rng), g(rng), g(rng)).normalized();
@@ -240,7 +241,8 @@ TEST(MeshFitCost, ClosestPointsAreTheClosestOfAllFaces) {
       EXPECT_NEAR((found - p.target).norm(), brute[i], 1e-7) << "point " << i << ", gate " << gate;
     }
   }
-  EXPECT_GT(std::count_if(brute.begin(), brute.end(), [](double d) { return d > 0.01; }), n / 5);  // the gate drops some
+  EXPECT_GT(std::count_if(brute.begin(), brute.end(), [](double d) { return d > 0.01; }),
+            n / 5);  // the gate drops some
 }
 
 TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
@@ -253,11 +255,11 @@ TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
     const double shape_err = (fit.params.shape - k.params.shape).cwiseAbs().maxCoeff();
     const double expr_err = (fit.params.expression - k.params.expression).cwiseAbs().maxCoeff();
     const double rot_deg = MatrixToAxisAngle(fit.rotation.transpose() * k.rotation).norm() * 180 / M_PI;
-    std::printf("seed %u: face RMS vs truth %.3f mm, residual %.3f mm, |d shape| %.4f, |d expr| %.4f, rot %.3f deg, "
-                "trans %.3f mm, jaw %.4f rad\n",
-                seed, face_mm, 1e3 * fit.rms_m, shape_err, expr_err, rot_deg,
-                1e3 * (fit.translation - k.translation).norm(),
-                (fit.params.pose.segment<3>(6) - k.params.pose.segment<3>(6)).norm());
+    std::printf(
+        "seed %u: face RMS vs truth %.3f mm, residual %.3f mm, |d shape| %.4f, |d expr| %.4f, rot %.3f deg, "
+        "trans %.3f mm, jaw %.4f rad\n",
+        seed, face_mm, 1e3 * fit.rms_m, shape_err, expr_err, rot_deg, 1e3 * (fit.translation - k.translation).norm(),
+        (fit.params.pose.segment<3>(6) - k.params.pose.segment<3>(6)).norm());
     // Coefficients are compared through the mesh they make: the built-in head's
     // expression fields 9 and 10 are exact opposites (one signed mouth field
     // twice), so single coefficients are not identifiable, the surface is.

@@ -58,7 +58,8 @@ RgbdScene MakeScene(unsigned seed, double yaw_deg) {
     s.landmarks[l] = s.camera.Project(s.cam_from_head.Apply(lmk.row(l).cast<double>().transpose()));
   s.vertices_cam.resize(out.vertices.rows(), 3);
   for (Eigen::Index i = 0; i < out.vertices.rows(); ++i)
-    s.vertices_cam.row(i) = s.cam_from_head.Apply(out.vertices.row(i).cast<double>().transpose()).cast<float>().transpose();
+    s.vertices_cam.row(i) =
+        s.cam_from_head.Apply(out.vertices.row(i).cast<double>().transpose()).cast<float>().transpose();
   return s;
 }
 
@@ -92,10 +93,11 @@ TEST(RgbdFitter, NoiseFreeDepthIsReconstructedToATenthOfAMillimetre) {
     const RgbdFitResult fit = fitter.Fit(s.landmarks, s.depth, s.camera);
     ASSERT_TRUE(fit.ok) << fit.problem;
     const double face_mm = FaceErrorMm(s, fit);
-    std::printf("yaw %.0f: accuracy %.3f mm (%d of %d points paired), visible face vs truth %.3f mm, landmarks %.2f mm, "
-                "contour rejected %d\n",
-                yaw, 1e3 * fit.accuracy_m, fit.paired_points, fit.cloud_points, face_mm, 1e3 * fit.landmark_rmse_m,
-                fit.contour_rejected);
+    std::printf(
+        "yaw %.0f: accuracy %.3f mm (%d of %d points paired), visible face vs truth %.3f mm, landmarks %.2f mm, "
+        "contour rejected %d\n",
+        yaw, 1e3 * fit.accuracy_m, fit.paired_points, fit.cloud_points, face_mm, 1e3 * fit.landmark_rmse_m,
+        fit.contour_rejected);
     EXPECT_LT(fit.accuracy_m, 0.2e-3);
     EXPECT_LT(face_mm, 0.5);
   }
@@ -112,8 +114,8 @@ TEST(RgbdFitter, AccuracyAtDepthNoise) {
     const RgbdFitResult fit = fitter.Fit(s.landmarks, noisy, s.camera);
     ASSERT_TRUE(fit.ok) << fit.problem;
     const double face_mm = FaceErrorMm(s, fit);
-    std::printf("depth noise %.1f mm: accuracy %.3f mm, visible face vs truth %.3f mm\n", noise_mm, 1e3 * fit.accuracy_m,
-                face_mm);
+    std::printf("depth noise %.1f mm: accuracy %.3f mm, visible face vs truth %.3f mm\n", noise_mm,
+                1e3 * fit.accuracy_m, face_mm);
     // The accuracy measures the residual, which is the noise itself; the surface stays much closer to the truth.
     EXPECT_LT(fit.accuracy_m, 1.3 * noise_mm * 1e-3 + 0.1e-3);
     EXPECT_LT(face_mm, 0.6 * noise_mm + 0.8);
@@ -136,9 +138,10 @@ TEST(RgbdFitter, BackgroundDepthAtTheContourIsHandled) {
     const RgbdFitResult fit = fitter.Fit(s.landmarks, leaked, s.camera);
     ASSERT_TRUE(fit.ok) << fit.problem;
     errors[reject] = FaceErrorMm(s, fit);
-    std::printf("background leak, contour check %s: %d contour landmarks rejected, accuracy %.3f mm, visible face vs truth "
-                "%.3f mm\n",
-                reject ? "on " : "off", fit.contour_rejected, 1e3 * fit.accuracy_m, errors[reject]);
+    std::printf(
+        "background leak, contour check %s: %d contour landmarks rejected, accuracy %.3f mm, visible face vs truth "
+        "%.3f mm\n",
+        reject ? "on " : "off", fit.contour_rejected, 1e3 * fit.accuracy_m, errors[reject]);
     if (reject) {
       EXPECT_GT(fit.contour_rejected, 3);
     }

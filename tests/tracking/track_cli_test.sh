@@ -5,7 +5,7 @@ bin=$1; data=$2
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 trap 'rm -rf "$tmp"' EXIT
 "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --parts face,head,mouth,eyes --identity 10 \
-  --out "$tmp/ict.npz" > /dev/null 2>&1 || { echo "SKIP: no ../shared/data (set HEADCAST_DATA)"; checks_summary "track cli"; exit 0; }
+  --out "$tmp/ict.npz" > /dev/null 2>&1 || { echo "SKIP: no ../shared/data (set HEADCAST_DATA)"; exit 77; }
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
   --out "$tmp/d14.hcrec" --report "$tmp/r.json" --overlay "$tmp/o.mp4" > /dev/null 2>&1
 grep -q '"fitted_frames": 60' "$tmp/r.json" && ok "60 of 60 real frames fitted" || bad "fit: $(cat "$tmp/r.json")"

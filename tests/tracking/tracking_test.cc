@@ -134,9 +134,9 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
     for (int l = 0; l < kNumLandmarks; ++l) observed[l] = clean[l] + Eigen::Vector2d(noise(rng), noise(rng));
     FrameParams fit;  // cold start: PnP, then the full fit
     fit.expression = Eigen::VectorXf::Zero(model.num_expression());
-    const FitResult r = fitter.Fit(observed, cam, &fit);
+    const LandmarkFitResult r = fitter.Fit(observed, cam, &fit);
     EXPECT_TRUE(r.ok);
-    FitResult again = fitter.Fit(observed, cam, &fit);  // a warm-started frame
+    LandmarkFitResult again = fitter.Fit(observed, cam, &fit);  // a warm-started frame
     EXPECT_TRUE(again.ok);
     const double angle = AngleDeg(fit.cam_rotation, truth.cam_rotation);
     worst.angle_deg = std::max(worst.angle_deg, angle);
@@ -170,9 +170,8 @@ RecoveryErrors RecoverSyntheticHeads(const HeadModel& model, int trials, bool bl
       "expression range\n  RMS over the trials: angle %.2f deg, depth %.2f mm; Cramer-Rao bound (RMS sigma): angle "
       "%.2f deg, depth %.2f mm\n  95th percentile: angle %.2f deg, translation %.2f mm (worst %.2f mm)\n",
       model.data().name.c_str(), trials, worst.angle_deg, 1e3 * worst.lateral_m, 1e3 * worst.depth_m,
-      worst.reprojection_px, worst.outside_range, worst.angle_rms_deg, 1e3 * worst.depth_rms_m,
-      worst.angle_bound_deg, 1e3 * worst.depth_bound_m, worst.angle_p95_deg, 1e3 * worst.translation_p95_m,
-      1e3 * worst.translation_m);
+      worst.reprojection_px, worst.outside_range, worst.angle_rms_deg, 1e3 * worst.depth_rms_m, worst.angle_bound_deg,
+      1e3 * worst.depth_bound_m, worst.angle_p95_deg, 1e3 * worst.translation_p95_m, 1e3 * worst.translation_m);
   return worst;
 }
 
@@ -212,19 +211,23 @@ TEST(HeadFitter, RecoversIctFaceKitHeads) {
 
 // The figures (pose within 1 degree, translation within 5 mm,
 // reprojection within 1.5 px) at the real clips' framing, over 100 heads each.
+void CheckRecoveryAtTheClipsFraming(const RecoveryErrors& e) {
+  EXPECT_LT(e.angle_p95_deg, 1.0);
+  EXPECT_LT(e.translation_m, 0.005);
+  EXPECT_LT(e.reprojection_px, 1.5);
+  EXPECT_LT(e.angle_rms_deg, e.angle_bound_deg);  // the fit's prior adds what the landmarks lack
+  EXPECT_LT(e.depth_rms_m, 1.25 * e.depth_bound_m);
+}
+
 TEST(HeadFitter, RecoversHeadsFramedAsInTheRealClips) {
-  const auto check = [](const RecoveryErrors& e) {
-    EXPECT_LT(e.angle_p95_deg, 1.0);
-    EXPECT_LT(e.translation_m, 0.005);
-    EXPECT_LT(e.reprojection_px, 1.5);
-    EXPECT_LT(e.angle_rms_deg, e.angle_bound_deg);  // the fit's prior adds what the landmarks lack
-    EXPECT_LT(e.depth_rms_m, 1.25 * e.depth_bound_m);
-  };
-  check(RecoverSyntheticHeads(Model(), 100, false, TalkingHeadScene()));
-  if (testing::DataDir().empty()) return;  // the ICT half needs ../shared/data
+  CheckRecoveryAtTheClipsFraming(RecoverSyntheticHeads(Model(), 100, false, TalkingHeadScene()));
+}
+
+TEST(HeadFitter, RecoversIctFaceKitHeadsFramedAsInTheRealClips) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
   IctConvertOptions io;
   io.folder = testing::DataDir() + "/head-models/ict-facekit";
-  check(RecoverSyntheticHeads(ConvertIctFaceKit(io), 100, true, TalkingHeadScene()));
+  CheckRecoveryAtTheClipsFraming(RecoverSyntheticHeads(ConvertIctFaceKit(io), 100, true, TalkingHeadScene()));
 }
 
 // The sender's and headcast-track's per-frame rule: warm while tracked, cold after a loss.
@@ -319,9 +322,10 @@ TEST(HeadFitter, CalibratesShapeAndFocalLengthOverKeyFrames) {
   for (int k = 0; k < kNumLandmarks; ++k) err += ((a.row(k) - ca) - (b.row(k) - cb)).norm();
   err /= kNumLandmarks;
   const double focal_error = std::abs(c.camera.fx / truth_cam.fx - 1);
-  std::printf("calibration over %d frames: focal %.1f px (truth %.1f, start %.1f, error %.1f %%), landmark shape "
-              "error %.2f mm, rms %.2f px\n",
-              c.frames, c.camera.fx, truth_cam.fx, guess.fx, 100 * focal_error, 1e3 * err, c.rms_px);
+  std::printf(
+      "calibration over %d frames: focal %.1f px (truth %.1f, start %.1f, error %.1f %%), landmark shape "
+      "error %.2f mm, rms %.2f px\n",
+      c.frames, c.camera.fx, truth_cam.fx, guess.fx, 100 * focal_error, 1e3 * err, c.rms_px);
   EXPECT_EQ(c.frames, 9);
   EXPECT_LT(focal_error, 0.06);
   EXPECT_LT(err, 2.5e-3);

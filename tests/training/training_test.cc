@@ -1,24 +1,23 @@
 // Synthetic data on the fly and fitting on tiny configurations.
 #include <gtest/gtest.h>
-
-#include <fstream>
-#include <thread>
+#include <torch/script.h>
 #include <unistd.h>
 
-#include "tests/testing/tiny_avatar.h"
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgproc.hpp>
+#include <thread>
+
 #include "common/avatar/avatar_pipeline.h"
+#include "common/core/image_io.h"
 #include "common/headmodel/builtin_head.h"
+#include "proto/recording.h"
 #include "tests/testing/test_data.h"
+#include "tests/testing/tiny_avatar.h"
 #include "training/avatar_fit.h"
 #include "training/dataset.h"
 #include "training/image_losses.h"
 #include "training/interpolation.h"
-#include <opencv2/imgproc.hpp>
-#include "proto/recording.h"
-#include "common/core/image_io.h"
-
-#include <filesystem>
-#include <torch/script.h>
 
 namespace headcast {
 namespace {
@@ -59,9 +58,10 @@ TEST(FitOnSynthetic, ReducesTheLossAndImprovesHeldOutPsnr) {
   f.iterations = 40;
   f.batch = 2;
   f.learning_rate = 5e-3;
-  const FitResult r = FitOnSynthetic(avatar, Model(), data, f);
+  const TrainResult r = FitOnSynthetic(avatar, Model(), data, f);
   ASSERT_EQ(r.steps.size(), 40u);
-  const float first = (r.steps[0].loss + r.steps[1].loss + r.steps[2].loss) / 3, last = (r.steps[37].loss + r.steps[38].loss + r.steps[39].loss) / 3;
+  const float first = (r.steps[0].loss + r.steps[1].loss + r.steps[2].loss) / 3,
+              last = (r.steps[37].loss + r.steps[38].loss + r.steps[39].loss) / 3;
   EXPECT_LT(last, 0.7f * first);
   const EvalResult after = EvaluateOnSynthetic(avatar, Model(), data, 4);
   EXPECT_GT(after.psnr_mean, before.psnr_mean + 1.0);
@@ -106,7 +106,7 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   f.checkpoint_every = 3;
   f.checkpoint_dir = testing::TempDir("ckpt_straight");
   Avatar straight = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
-  const FitResult all = FitOnSynthetic(straight, Model(), data, f);
+  const TrainResult all = FitOnSynthetic(straight, Model(), data, f);
   ASSERT_EQ(all.steps.size(), 6u);
 
   f.checkpoint_dir = testing::TempDir("ckpt_resumed");
@@ -114,10 +114,11 @@ TEST(FitOnSynthetic, ResumeContinuesTheLossCurve) {
   EXPECT_THROW(FitOnSynthetic(first, Model(), data, f, CrashAfter(3)), Crash);
   f.resume = true;
   Avatar second = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 99);  // other weights
-  const FitResult rest = FitOnSynthetic(second, Model(), data, f);
+  const TrainResult rest = FitOnSynthetic(second, Model(), data, f);
   EXPECT_EQ(rest.first_step, 3);
   ASSERT_EQ(rest.steps.size(), 3u);
-  for (int i = 0; i < 3; ++i) EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
   EXPECT_LT(MaxDifference(straight.modules().parameters(), second.modules().parameters()), 1e-5);
   // A corrupt checkpoint is refused by name.
   std::string latest;
@@ -145,7 +146,7 @@ TEST(FitOnSynthetic, WeightAverageIsTheMovingAverageOfThePlainRunsWeights) {
   f.weight_average = 0.6;
   const FitOptions averaging = f;
   f.weight_average = 0;
-  const FitResult plain_run = FitOnSynthetic(plain, Model(), data, f, [&](const StepInfo& s) {
+  const TrainResult plain_run = FitOnSynthetic(plain, Model(), data, f, [&](const StepInfo& s) {
     const double d = averaging.WeightAverageDecayAt(s.step);
     const auto live = plain.modules().parameters();
     for (size_t i = 0; i < live.size(); ++i) expected[i] = d * expected[i] + (1 - d) * live[i].detach();
@@ -164,7 +165,7 @@ TEST(FitOnSynthetic, WeightAverageIsTheMovingAverageOfThePlainRunsWeights) {
   f.checkpoint_dir = testing::TempDir("ckpt_average");
   Avatar averaged = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
   std::vector<double> seen;
-  const FitResult run = FitOnSynthetic(averaged, Model(), data, f, [&](const StepInfo& s) {
+  const TrainResult run = FitOnSynthetic(averaged, Model(), data, f, [&](const StepInfo& s) {
     seen.push_back(MaxDifference(averaged.modules().parameters(), expected_after[s.step]));
   });
   ASSERT_EQ(run.steps.size(), 6u);
@@ -347,7 +348,8 @@ TEST(Dataset, MasksAreClearedBelowTheJawLineOnly) {
     FrameParams frame;
     frame.expression = Eigen::VectorXf::Zero(Model().num_expression());
     RigidTransform cam_from_head = FrontalCamFromHead(0.62);
-    cam_from_head.rotation = Eigen::AngleAxisd(roll_deg * M_PI / 180, Eigen::Vector3d::UnitZ()) * cam_from_head.rotation;
+    cam_from_head.rotation =
+        Eigen::AngleAxisd(roll_deg * M_PI / 180, Eigen::Vector3d::UnitZ()) * cam_from_head.rotation;
     frame.SetCamFromHead(cam_from_head);
     HeadModelOutput posed;
     Model().Forward(Model().MakeIdentity(Eigen::VectorXd::Zero(Model().num_shape())),
@@ -405,7 +407,7 @@ TEST(Dataset, HairNotchesAboveTheBrowsAreFilled) {
   std::array<Eigen::Vector2d, kNumLandmarks> lm;
   lm.fill(Eigen::Vector2d(128, 128));
   for (int l = 17; l <= 26; ++l) lm[l] = Eigen::Vector2d(100 + 6 * (l - 17), 110);  // brows at y = 110
-  lm[8] = Eigen::Vector2d(128, 190);                                                  // chin
+  lm[8] = Eigen::Vector2d(128, 190);                                                // chin
   cv::Mat mask(256, 256, CV_8U, cv::Scalar(0));
   cv::circle(mask, cv::Point(128, 128), 70, cv::Scalar(255), cv::FILLED);
   const std::vector<cv::Point> top_notch = {{100, 50}, {140, 50}, {120, 80}};
@@ -461,7 +463,7 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   f.freeze_cnerf_layers = 1;
   f.checkpoint_dir = testing::TempDir("ckpt_real");
   f.checkpoint_every = 20;
-  const FitResult r = TrainAvatar(avatar, Model(), TrainingData{nullptr, &real}, f);
+  const TrainResult r = TrainAvatar(avatar, Model(), TrainingData{nullptr, &real}, f);
   ASSERT_EQ(r.steps.size(), 40u);
   EXPECT_EQ(r.steps[0].synthetic, 0);
   const EvalResult after = EvaluateOnDataset(avatar, Model(), real, real.test());
@@ -490,7 +492,7 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   g.checkpoint_every = 3;
   g.checkpoint_dir = testing::TempDir("ckpt_real_straight");
   Avatar straight = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
-  const FitResult all = TrainAvatar(straight, Model(), TrainingData{&synthetic, &real}, g);
+  const TrainResult all = TrainAvatar(straight, Model(), TrainingData{&synthetic, &real}, g);
   int synthetic_samples = 0;
   for (const auto& s : all.steps) synthetic_samples += s.synthetic;
   EXPECT_GT(synthetic_samples, 0);
@@ -500,7 +502,7 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   EXPECT_THROW(TrainAvatar(first, Model(), TrainingData{&synthetic, &real}, g, CrashAfter(3)), Crash);
   g.resume = true;
   Avatar second = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 9);
-  const FitResult rest = TrainAvatar(second, Model(), TrainingData{&synthetic, &real}, g);
+  const TrainResult rest = TrainAvatar(second, Model(), TrainingData{&synthetic, &real}, g);
   ASSERT_EQ(rest.steps.size(), 3u);
   for (int i = 0; i < 3; ++i)
     EXPECT_NEAR(rest.steps[i].loss, all.steps[3 + i].loss, 1e-4 * all.steps[3 + i].loss) << "step " << 3 + i;
@@ -522,10 +524,10 @@ TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
   f.batch = 4;
   f.learning_rate = 5e-3;
   Avatar single = Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4);
-  const FitResult one = FitOnSynthetic(single, Model(), data, f);
+  const TrainResult one = FitOnSynthetic(single, Model(), data, f);
   std::vector<Avatar> ranks;
   for (int r = 0; r < 2; ++r) ranks.push_back(Avatar::CreateRandom(Tiny(), Model(), DefaultSubject(Model(), 128), 4));
-  std::vector<FitResult> results(2);
+  std::vector<TrainResult> results(2);
   std::vector<std::string> errors(2);
   const int port = 20000 + static_cast<int>(getpid() % 20000);
   std::vector<std::thread> threads;

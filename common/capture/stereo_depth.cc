@@ -1,5 +1,5 @@
 // Stereo depth with OpenCV.
-#include "sender/capture/stereo_depth.h"
+#include "common/capture/stereo_depth.h"
 
 #include <cmath>
 #include <fstream>
@@ -68,9 +68,8 @@ StereoCalibration ReadZedConf(const std::string& path, const std::string& resolu
   };
   camera("LEFT_CAM_" + resolution, &c.K1, &c.D1);
   camera("RIGHT_CAM_" + resolution, &c.K2, &c.D2);
-  const cv::Mat rvec =
-      (cv::Mat_<double>(3, 1) << get("STEREO", "RX_" + resolution), get("STEREO", "CV_" + resolution),
-       get("STEREO", "RZ_" + resolution));
+  const cv::Mat rvec = (cv::Mat_<double>(3, 1) << get("STEREO", "RX_" + resolution), get("STEREO", "CV_" + resolution),
+                        get("STEREO", "RZ_" + resolution));
   cv::Rodrigues(rvec, c.R);
   // The right camera sits Baseline mm along +x of the left one: X_right = R X_left + T with T = -(B, TY, TZ).
   c.T = (cv::Mat_<double>(3, 1) << -get("STEREO", "Baseline"), -get("STEREO", "TY"), -get("STEREO", "TZ")) / 1000.0;
@@ -165,11 +164,11 @@ StereoDepth::StereoDepth(const StereoCalibration& calibration, double scale, boo
   baseline_ = std::abs(P2.at<double>(0, 3) / P2.at<double>(0, 0));
   match_.wls_filter = wls_filter;
   // Enough disparity range for anything nearer than min_depth_m.
-  match_.max_disparity = std::clamp(static_cast<int>(std::ceil(camera_.fx * baseline_ / min_depth_m * scale_)), 16, 512);
+  match_.max_disparity =
+      std::clamp(static_cast<int>(std::ceil(camera_.fx * baseline_ / min_depth_m * scale_)), 16, 512);
 }
 
-void StereoDepth::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* left_rectified,
-                          cv::Mat* depth_m) const {
+void StereoDepth::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* left_rectified, cv::Mat* depth_m) const {
   if (left.size() != calib_.size || right.size() != calib_.size)
     throw std::invalid_argument("stereo: images are " + std::to_string(left.cols) + "x" + std::to_string(left.rows) +
                                 ", the calibration is for " + std::to_string(calib_.size.width) + "x" +

@@ -1,5 +1,5 @@
 // Video files, image folders and RGB-D association files as frame sources.
-#include "sender/capture/recorded_sources.h"
+#include "common/capture/recorded_sources.h"
 
 #include <algorithm>
 #include <filesystem>

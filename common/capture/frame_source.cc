@@ -1,12 +1,12 @@
 // Opening a frame source from its spec.
-#include "sender/capture/frame_source.h"
+#include "common/capture/frame_source.h"
 
 #include <filesystem>
 
+#include "common/capture/recorded_sources.h"
+#include "common/capture/stereo_depth.h"
+#include "common/capture/v4l2_source.h"
 #include "common/core/options.h"
-#include "sender/capture/recorded_sources.h"
-#include "sender/capture/stereo_depth.h"
-#include "sender/capture/v4l2_source.h"
 
 namespace headcast {
 

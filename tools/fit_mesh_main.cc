@@ -32,8 +32,10 @@ std::vector<std::pair<int, Eigen::Vector3d>> ReadLandmarks(const std::string& pa
     const auto j = nlohmann::json::parse(s);
     for (auto it = j.begin(); it != j.end(); ++it) {
       const auto& p = it.value();
-      if (!p.is_array() || p.size() != 3) throw std::runtime_error(path + ": landmark " + it.key() + " is not [x, y, z]");
-      out.emplace_back(std::stoi(it.key()), Eigen::Vector3d(p[0].get<double>(), p[1].get<double>(), p[2].get<double>()));
+      if (!p.is_array() || p.size() != 3)
+        throw std::runtime_error(path + ": landmark " + it.key() + " is not [x, y, z]");
+      out.emplace_back(std::stoi(it.key()),
+                       Eigen::Vector3d(p[0].get<double>(), p[1].get<double>(), p[2].get<double>()));
     }
   } else {
     std::istringstream ls(s);
@@ -63,9 +65,8 @@ Eigen::VectorXf ReadImportance(const std::string& path) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-fit-mesh: fit the head model to a polygonal head mesh (weighted residual, METHOD §8)"};
-  std::string mesh_path, head_model_spec = "builtin", out, fit = "shape,expression,pose", unit = "m",
-                         topology = "auto", weights = "importance-count", loss = "norm", importance, landmarks,
-                         fitted_mesh, log_level;
+  std::string mesh_path, head_model_spec = "builtin", out, fit = "shape,expression,pose", unit = "m", topology = "auto",
+                         weights = "importance-count", loss = "norm", importance, landmarks, fitted_mesh, log_level;
   bool black_box = false;
   MeshFitOptions o;
   app.add_option("--mesh", mesh_path, "the head mesh (.obj or .ply)")->required();
@@ -122,7 +123,8 @@ int main(int argc, char** argv) {
     const std::map<std::string, MeshLoss> losses = {
         {"norm", MeshLoss::kNorm}, {"squared", MeshLoss::kSquared}, {"cauchy", MeshLoss::kCauchy}};
     if (!topologies.count(topology)) throw std::invalid_argument("--topology must be auto, same or other");
-    if (!weightings.count(weights)) throw std::invalid_argument("--weights must be importance-count, importance or uniform");
+    if (!weightings.count(weights))
+      throw std::invalid_argument("--weights must be importance-count, importance or uniform");
     if (!losses.count(loss)) throw std::invalid_argument("--loss must be norm, squared or cauchy");
     o.correspondence = topologies.at(topology);
     o.weighting = weightings.at(weights);

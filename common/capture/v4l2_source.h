@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "sender/capture/frame_source.h"
+#include "common/capture/frame_source.h"
 
 namespace headcast {
 

@@ -8,7 +8,7 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-#include "sender/capture/frame_source.h"
+#include "common/capture/frame_source.h"
 
 namespace headcast {
 

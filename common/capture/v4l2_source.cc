@@ -1,5 +1,5 @@
 // V4L2 capture.
-#include "sender/capture/v4l2_source.h"
+#include "common/capture/v4l2_source.h"
 
 #include <fcntl.h>
 #include <linux/videodev2.h>
@@ -29,11 +29,12 @@ namespace {
 bool Decodable(uint32_t fourcc) { return fourcc == V4L2_PIX_FMT_YUYV || fourcc == V4L2_PIX_FMT_MJPEG; }
 }  // namespace
 
-bool NegotiateV4l2Mode(const std::vector<V4l2Mode>& modes, const V4l2Request& r, V4l2Choice* choice,
-                       std::string* why) {
+bool NegotiateV4l2Mode(const std::vector<V4l2Mode>& modes, const V4l2Request& r, V4l2Choice* choice, std::string* why) {
   uint32_t wanted = 0;
-  if (r.pixel_format == "yuyv") wanted = V4L2_PIX_FMT_YUYV;
-  else if (r.pixel_format == "mjpeg") wanted = V4L2_PIX_FMT_MJPEG;
+  if (r.pixel_format == "yuyv")
+    wanted = V4L2_PIX_FMT_YUYV;
+  else if (r.pixel_format == "mjpeg")
+    wanted = V4L2_PIX_FMT_MJPEG;
   else if (r.pixel_format != "auto") {
     if (why) *why = "unknown pixel format '" + r.pixel_format + "' (auto, yuyv, mjpeg)";
     return false;
@@ -65,8 +66,8 @@ bool NegotiateV4l2Mode(const std::vector<V4l2Mode>& modes, const V4l2Request& r,
   }
   if (!std::isfinite(best)) {
     std::string offered;
-    for (const V4l2Mode& m : modes) offered += " " + FourccName(m.fourcc) + " " + std::to_string(m.width) + "x" +
-                                               std::to_string(m.height);
+    for (const V4l2Mode& m : modes)
+      offered += " " + FourccName(m.fourcc) + " " + std::to_string(m.width) + "x" + std::to_string(m.height);
     if (why)
       *why = std::string("no usable mode") + (wanted ? " in " + FourccName(wanted) : "") +
              " (headcast decodes YUYV and MJPEG); the device offers:" + (offered.empty() ? " nothing" : offered);
@@ -91,8 +92,7 @@ V4l2Source::V4l2Source(std::string device, const SourceOptions& options) : devic
   if (fd_ < 0) {
     const int e = errno;
     if (e == ENOENT) throw std::runtime_error(device_ + ": no such device (is the camera plugged in? ls /dev/video*)");
-    if (e == EACCES)
-      throw std::runtime_error(device_ + ": permission denied (add the user to the 'video' group)");
+    if (e == EACCES) throw std::runtime_error(device_ + ": permission denied (add the user to the 'video' group)");
     if (e == EBUSY) throw std::runtime_error(device_ + ": busy (another program is using the camera)");
     throw std::runtime_error(device_ + ": cannot open: " + std::strerror(e));
   }
@@ -145,8 +145,8 @@ V4l2Source::V4l2Source(std::string device, const SourceOptions& options) : devic
     parm.parm.capture.timeperframe.numerator = 1000;
     parm.parm.capture.timeperframe.denominator = static_cast<uint32_t>(std::lround(choice_.fps * 1000));
     if (Ioctl(VIDIOC_S_PARM, &parm) == 0 && parm.parm.capture.timeperframe.numerator > 0)
-      choice_.fps = static_cast<double>(parm.parm.capture.timeperframe.denominator) /
-                    parm.parm.capture.timeperframe.numerator;
+      choice_.fps =
+          static_cast<double>(parm.parm.capture.timeperframe.denominator) / parm.parm.capture.timeperframe.numerator;
   }
 
   v4l2_requestbuffers req{};
@@ -203,8 +203,8 @@ std::vector<V4l2Mode> V4l2Source::EnumerateModes() const {
       ival.height = static_cast<uint32_t>(h);
       for (ival.index = 0; Ioctl(VIDIOC_ENUM_FRAMEINTERVALS, &ival) == 0; ++ival.index) {
         if (ival.type != V4L2_FRMIVAL_TYPE_DISCRETE) break;
-        if (ival.discrete.numerator > 0) m.fps.push_back(static_cast<double>(ival.discrete.denominator) /
-                                                         ival.discrete.numerator);
+        if (ival.discrete.numerator > 0)
+          m.fps.push_back(static_cast<double>(ival.discrete.denominator) / ival.discrete.numerator);
       }
       modes.push_back(m);
     }
@@ -241,8 +241,7 @@ ReadStatus V4l2Source::Read(CapturedFrame* frame, std::string* problem) {
   }
   // Kernel timestamps are CLOCK_MONOTONIC, the steady clock here.
   const bool monotonic = (buf.flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
-  frame->capture_time_s =
-      monotonic ? buf.timestamp.tv_sec + 1e-6 * buf.timestamp.tv_usec : SteadyNowSeconds();
+  frame->capture_time_s = monotonic ? buf.timestamp.tv_sec + 1e-6 * buf.timestamp.tv_usec : SteadyNowSeconds();
   frame->index = index_++;
   frame->depth_m.release();
   frame->camera.reset();

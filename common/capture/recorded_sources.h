@@ -4,9 +4,9 @@
 
 #include <vector>
 
+#include "common/capture/frame_source.h"
 #include "common/core/image_io.h"
 #include "common/core/timer.h"
-#include "sender/capture/frame_source.h"
 
 namespace headcast {
 

@@ -40,18 +40,18 @@ class FrameSource {
 };
 
 struct SourceOptions {
-  bool realtime = false;  // recorded sources: pace to their frame rate (stamps from the steady clock)
-  bool loop = false;      // recorded sources: start again at the end
-  double fps = 30;        // image folders: their rate; cameras: the rate asked for
-  int width = 640, height = 480;  // cameras: the size asked for (per eye for stereo)
-  std::string pixel_format = "auto";  // cameras: auto, yuyv or mjpeg
-  std::string stereo_calibration;     // "zed:" sources: OpenCV YAML or a ZED factory .conf
+  bool realtime = false;                 // recorded sources: pace to their frame rate (stamps from the steady clock)
+  bool loop = false;                     // recorded sources: start again at the end
+  double fps = 30;                       // image folders: their rate; cameras: the rate asked for
+  int width = 640, height = 480;         // cameras: the size asked for (per eye for stereo)
+  std::string pixel_format = "auto";     // cameras: auto, yuyv or mjpeg
+  std::string stereo_calibration;        // "zed:" sources: OpenCV YAML or a ZED factory .conf
   std::string stereo_resolution = "HD";  // which section of a ZED .conf: 2K, FHD, HD, VGA
-  double depth_scale = 0.5;  // stereo: disparity computed at this fraction of the size (speed)
-  // stereo: edge-aware WLS filtering of the disparity. Denser but less exact
-  // (aloe: 86 % coverage at 3.2 px mean error against 77 % at 1.1 px), so off by default.
+  double depth_scale = 0.5;              // stereo: disparity computed at this fraction of the size (speed)
+  // stereo: edge-aware WLS filtering of the disparity. Denser but less exact,
+  // so off by default (bench/DEFAULTS.md).
   bool wls_filter = false;
-  std::string depth_input;   // RGB-D: an association file (TUM style) for the colour/depth pairs
+  std::string depth_input;              // RGB-D: an association file (TUM style) for the colour/depth pairs
   double depth_units_per_metre = 1000;  // RGB-D: 16-bit depth PNG units (1000 = millimetres; TUM uses 5000)
   void Check() const;
 };

@@ -91,7 +91,8 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
     if (eq == std::string::npos) throw std::invalid_argument("--shape wants index=value, got '" + e + "'");
     const int idx = std::stoi(e.substr(0, eq));
     if (idx < 0 || idx >= model.num_shape())
-      throw std::invalid_argument("--shape: the model has shape components 0.." + std::to_string(model.num_shape() - 1));
+      throw std::invalid_argument("--shape: the model has shape components 0.." +
+                                  std::to_string(model.num_shape() - 1));
     p.shape[idx] = std::stod(e.substr(eq + 1));
   }
   return p;

@@ -1,0 +1,65 @@
+// The avatar-backend seam: whatever turns one frame's parameters into the
+// person's picture. The avatar file's manifest names its backend ("kind");
+// OpenAvatarBackend builds it. The CNeRF + 2D neural renderer
+// (AvatarRenderer, kind "cnerf") is the first backend. A new backend
+// implements this interface, writes its kind into the files it saves, and
+// adds a branch to OpenAvatarBackend; the render loop, the receiver and
+// headcast-avatar need nothing else.
+#pragma once
+
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "common/headmodel/head_model.h"
+#include "common/headmodel/params.h"
+
+namespace headcast {
+
+// Milliseconds per stage of one frame (backends fill what applies to them).
+struct AvatarTimings {
+  double head_model_ms = 0;  // head-model forward pass and transform to the camera
+  double sample_ms = 0;      // rasterising at feature resolution and choosing rays/depths
+  double mlp_ms = 0;         // the network over every sample
+  double composite_ms = 0;   // volume rendering into the feature map
+  double upsample_ms = 0;    // the 2D neural renderer
+  double convert_ms = 0;     // tensor to BGR image
+  double total_ms = 0;
+  int rays = 0;
+  int samples = 0;
+};
+
+class AvatarBackend {
+ public:
+  virtual ~AvatarBackend() = default;
+  // Renders into `image_bgr` (CV_8UC3, output_size() square). Returns false
+  // with `why` for invalid parameters (NaN, out of range) and leaves the image alone.
+  virtual bool Render(const FrameParams& params, cv::Mat* image_bgr, AvatarTimings* timings = nullptr,
+                      std::string* why = nullptr) = 0;
+  virtual int output_size() const = 0;
+  virtual std::string kind() const = 0;
+  // The person's constants (shape, texture, light) and the camera the avatar renders with.
+  virtual const SubjectParams& subject() const = 0;
+};
+
+struct AvatarBackendOptions {
+  // libtorch intra-op (OpenMP) threads. 1 by default: on two cores OpenBLAS
+  // already threads the matrix products, and a second OpenMP thread competing
+  // with it (and with the display) made frames slower (`headcast-bench render`
+  // reports both).
+  int threads = 1;
+  void Check() const;
+};
+
+// The backends this build knows, by kind.
+std::vector<std::string> AvatarBackendKinds();
+
+// Opens the avatar file at `path` with the backend its manifest names (files
+// without a kind are "cnerf", the first backend). Throws naming the file for an
+// unknown kind and for everything the backend refuses (format version, CRCs,
+// another head model's fingerprint, mismatched weights).
+std::unique_ptr<AvatarBackend> OpenAvatarBackend(const std::string& path, std::shared_ptr<const HeadModel> model,
+                                                 const AvatarBackendOptions& options = {});
+
+}  // namespace headcast

@@ -1,0 +1,172 @@
+// The per-frame tracker shared by the live sender, the offline pass and the benchmark.
+#include "common/tracking/frame_tracker.h"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "common/core/options.h"
+#include "common/core/timer.h"
+#include "common/core/zip_archive.h"
+#include "common/tracking/mesh_fitter.h"
+#include "common/tracking/tracked_fit.h"
+
+namespace headcast {
+namespace {
+
+RgbdFitOptions RgbdOptions(bool fit_shape) {
+  RgbdFitOptions o;
+  o.fit_shape = fit_shape;
+  return o;
+}
+
+}  // namespace
+
+namespace {
+
+bool IsAvatarFile(const std::string& path) {
+  return path.size() > 9 && path.compare(path.size() - 9, 9, ".hcavatar") == 0;
+}
+
+// The manifest only: trackers do not load networks.
+nlohmann::json ReadAvatarManifest(const std::string& path) {
+  try {
+    const ZipEntries entries = ReadZip(path);
+    const auto it = entries.find("manifest.json");
+    if (it == entries.end()) throw std::runtime_error("no manifest.json");
+    return nlohmann::json::parse(it->second);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": not a readable avatar (" + e.what() + ")");
+  }
+}
+
+}  // namespace
+
+std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path) {
+  if (!IsAvatarFile(path)) return std::nullopt;
+  const nlohmann::json manifest = ReadAvatarManifest(path);
+  if (!manifest.contains("camera")) return std::nullopt;
+  try {
+    return CameraContract::FromJson(manifest.at("camera"));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
+}
+
+Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model) {
+  if (!IsAvatarFile(path)) return ReadIdentityFromMeshFit(path, model);
+  const nlohmann::json manifest = ReadAvatarManifest(path);
+  const std::string fingerprint = manifest.value("head_model", nlohmann::json::object()).value("fingerprint", "");
+  if (fingerprint != model.fingerprint())
+    throw std::runtime_error(path + ": an avatar for head model " + fingerprint + ", not " + model.data().name + " (" +
+                             model.fingerprint() + ")");
+  const std::vector<double> shape = manifest.at("subject").at("shape").get<std::vector<double>>();
+  Eigen::VectorXd beta = Eigen::VectorXd::Zero(model.num_shape());
+  for (size_t k = 0; k < shape.size() && static_cast<int>(k) < model.num_shape(); ++k) {
+    if (!std::isfinite(shape[k])) throw std::runtime_error(path + ": non-finite shape");
+    beta[static_cast<Eigen::Index>(k)] = shape[k];
+  }
+  return beta;
+}
+
+void FrameTrackerOptions::Check() const {
+  face.Check();
+  fit.Check();
+  OptionsCheck c("FrameTrackerOptions");
+  c.InRange("rgbd_identity_frames", rgbd_identity_frames, 1, 10000);
+  c.ThrowIfErrors();
+}
+
+void ApplyRgbdFit(const RgbdFitResult& r, FrameParams* f) {
+  f->expression = r.params.expression.cast<float>();
+  f->jaw = r.params.pose.segment<3>(3 * kJawJoint).cast<float>();
+  f->SetCamFromHead({r.rotation, r.translation});
+}
+
+FrameTracker::FrameTracker(const HeadModel& model, const FrameTrackerOptions& options)
+    : model_(model),
+      options_((options.Check(), options)),
+      faces_(options.face),
+      fitter_(model, options.fit),
+      rgbd_calibrating_(model, RgbdOptions(true)),
+      rgbd_(model, RgbdOptions(false)),
+      identity_(Eigen::VectorXd::Zero(model.num_shape())) {
+  last_.cam_translation.setZero();  // cold start
+}
+
+FrameTracker::~FrameTracker() = default;
+
+void FrameTracker::SetIdentity(const Eigen::VectorXd& shape, bool frozen) {
+  identity_ = shape;
+  fitter_.SetIdentity(shape);
+  rgbd_.SetIdentity(shape);
+  identity_frozen_ = frozen;
+}
+
+void FrameTracker::Reset() {
+  faces_.Reset();
+  last_ = FrameParams{};
+  last_.cam_translation.setZero();
+  last_rgbd_ = RgbdFitResult{};
+}
+
+bool FrameTracker::FreezeRgbdIdentity() {
+  if (calibration_shapes_.empty()) return false;
+  Eigen::VectorXd shape(model_.num_shape());
+  for (int k = 0; k < model_.num_shape(); ++k) {
+    std::vector<double> v;
+    for (const auto& s : calibration_shapes_) v.push_back(s[k]);
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    shape[k] = v[v.size() / 2];
+  }
+  SetIdentity(shape, true);
+  calibration_shapes_.clear();
+  return true;
+}
+
+RgbdFitResult FrameTracker::RefitRgbd(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
+                                      const RgbdFitResult* previous) const {
+  return rgbd_.Fit(landmarks, depth_m, camera, previous && previous->ok ? previous : nullptr);
+}
+
+TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
+                                 FrameParams* params) {
+  TrackedFrame r;
+  Stopwatch watch;
+  r.face = faces_.Track(bgr, time_s);
+  r.landmarks_ms = watch.ElapsedMs();
+  watch.Restart();
+  if (r.face.status != FaceStatus::kNoFace && !depth_m.empty()) {
+    // RGB-D (METHOD §3): the shape is fitted on the first frames, then frozen at their median.
+    r.with_depth = true;
+    const RgbdFitResult fit = identity_frozen_
+                                  ? rgbd_.Fit(r.face.landmarks, depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
+                                  : rgbd_calibrating_.Fit(r.face.landmarks, depth_m, camera);
+    if (fit.ok) {
+      ApplyRgbdFit(fit, &last_);
+      r.fitted = true;
+      r.rgbd_accuracy_m = fit.accuracy_m;
+      r.contour_rejected = fit.contour_rejected;
+      if (!identity_frozen_) {
+        r.identity_frame = true;
+        calibration_shapes_.push_back(fit.params.shape);
+        if (static_cast<int>(calibration_shapes_.size()) >= options_.rgbd_identity_frames) {
+          FreezeRgbdIdentity();
+          r.identity_frozen_now = true;
+        }
+      }
+    } else {
+      r.problem = "RGB-D fit: " + fit.problem;
+      last_.cam_translation.setZero();
+    }
+    last_rgbd_ = fit;
+  } else {
+    r.fitted = FitTrackedFace(fitter_, r.face, camera, &last_).ok;
+    if (!r.fitted && r.face.status != FaceStatus::kNoFace) r.problem = "landmark fit did not converge";
+  }
+  r.fit_ms = watch.ElapsedMs();
+  if (r.fitted) *params = last_;
+  return r;
+}
+
+}  // namespace headcast

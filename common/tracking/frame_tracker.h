@@ -1,0 +1,104 @@
+// The one per-frame tracker: face tracker, then the head-model fit (the RGB
+// landmark fit, or the RGB-D fit of METHOD §3 when the frame carries depth),
+// warm-started from the previous frame. The live sender, the offline pass
+// (headcast-track, and so the trainer's prep) and the benchmark all track
+// through this class, so the parameters an avatar is trained on and driven by
+// come from the same rule.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "common/core/camera.h"
+#include "common/headmodel/params.h"
+#include "common/tracking/face_tracker.h"
+#include "common/tracking/head_fitter.h"
+#include "common/tracking/rgbd_fitter.h"
+
+namespace headcast {
+
+struct FrameTrackerOptions {
+  FaceTrackerOptions face;
+  HeadFitterOptions fit;
+  // RGB-D without a given identity: the identity is the per-component median
+  // of this many first fitted frames' shapes, then frozen.
+  int rgbd_identity_frames = 15;
+  void Check() const;
+};
+
+struct TrackedFrame {
+  FaceObservation face;
+  bool fitted = false;
+  bool with_depth = false;  // fitted (or tried) by the RGB-D fit
+  // RGB-D identity calibration: this frame was fitted with a free shape. The
+  // offline pass fits such frames again once the identity is frozen.
+  bool identity_frame = false;
+  bool identity_frozen_now = false;  // this frame completed the RGB-D identity
+  double landmarks_ms = 0;           // detection/tracking + landmarks
+  double fit_ms = 0;                 // head-model fit
+  double rgbd_accuracy_m = 0;        // RGB-D: point-to-mesh RMS after the fit
+  int contour_rejected = 0;          // RGB-D: contour landmarks taken for background
+  std::string problem;               // why not fitted, when a fit failed
+};
+
+class FrameTracker {
+ public:
+  FrameTracker(const HeadModel& model, const FrameTrackerOptions& options = {});
+  ~FrameTracker();
+
+  // The person's shape (beta). `frozen`: RGB-D frames do not calibrate it.
+  void SetIdentity(const Eigen::VectorXd& shape, bool frozen = true);
+  const Eigen::VectorXd& identity() const { return identity_; }
+  bool identity_frozen() const { return identity_frozen_; }
+
+  // Tracks one frame; `depth_m` empty for colour-only frames. On success
+  // *params holds the frame's expression, jaw and cam_from_head (the caller
+  // stamps sequence, time and confidence). No face or a failed fit marks the
+  // tracker cold: the next face starts from PnP with a neutral expression.
+  TrackedFrame Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
+                     FrameParams* params);
+
+  // RGB-D: fits `landmarks` and `depth_m` again with the frozen identity,
+  // warm from `previous` when given (frames held during identity calibration).
+  RgbdFitResult RefitRgbd(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
+                          const RgbdFitResult* previous) const;
+
+  // RGB-D: freezes the identity at the median of the shapes collected so far
+  // (an input shorter than rgbd_identity_frames); false when there are none.
+  bool FreezeRgbdIdentity();
+
+  // Forgets the previous frame (cold start) and the face track.
+  void Reset();
+
+  const HeadFitter& fitter() const { return fitter_; }
+  const HeadModel& model() const { return model_; }
+
+ private:
+  const HeadModel& model_;
+  FrameTrackerOptions options_;
+  FaceTracker faces_;
+  HeadFitter fitter_;
+  RgbdFitter rgbd_calibrating_, rgbd_;
+  Eigen::VectorXd identity_;
+  bool identity_frozen_ = false;
+  std::vector<Eigen::VectorXd> calibration_shapes_;
+  RgbdFitResult last_rgbd_;
+  FrameParams last_;
+};
+
+// The person's shape for tracking: from an avatar (.hcavatar: the identity it
+// was trained with, so the fit agrees with the avatar) or a PARAMS.json
+// (headcast-fit-mesh). Throws naming the file when it is unreadable or made
+// for another head model.
+Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model);
+
+// The camera contract an avatar file (.hcavatar) records, if any; nothing for
+// other files. Throws naming the file when it is unreadable or the contract malformed.
+std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path);
+
+// An RGB-D fit as the frame parameters the sender streams.
+void ApplyRgbdFit(const RgbdFitResult& fit, FrameParams* params);
+
+}  // namespace headcast

@@ -1,0 +1,319 @@
+// The offline tracking pass.
+#include "common/tracking/offline_tracker.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <opencv2/imgproc.hpp>
+
+#include "common/core/image_io.h"
+#include "common/core/options.h"
+#include "common/core/rotation.h"
+#include "common/core/timer.h"
+#include "common/tracking/appearance_fit.h"
+
+namespace headcast {
+namespace {
+
+bool IsCamera(const std::string& input) {
+  return input.rfind("/dev/", 0) == 0 || input.find(":/dev/") != std::string::npos;
+}
+
+// The full frame's camera: calibrated, given, the source's, or from the field of view.
+PinholeCamera FirstFrameCamera(const OfflineTrackOptions& o, const std::optional<PinholeCamera>& calibrated,
+                               const CapturedFrame& c) {
+  PinholeCamera camera = calibrated     ? *calibrated
+                         : o.intrinsics ? *o.intrinsics
+                         : c.camera     ? *c.camera
+                                        : PinholeCamera::FromFovY(c.bgr.cols, c.bgr.rows, o.fov_deg);
+  if (o.intrinsics && !calibrated) {
+    camera.width = c.bgr.cols;
+    camera.height = c.bgr.rows;
+  }
+  return camera;
+}
+
+// Identity calibration (RGB, recorded input): a first pass collects
+// landmarks; key frames spread evenly over the sorted yaws (the extremes
+// included, at most a quarter of the frames) give shape and focal length.
+struct IdentityCalibration {
+  Eigen::VectorXd shape;
+  PinholeCamera camera;
+  nlohmann::json report;
+};
+
+IdentityCalibration CalibrateOverKeyFrames(const HeadModel& model, const OfflineTrackOptions& o,
+                                           const FrameSourceFactory& open) {
+  auto source = open();
+  FrameTracker first(model, o.tracker);
+  if (o.identity.size() > 0) first.SetIdentity(o.identity);
+  std::vector<std::pair<double, Landmarks2d>> seen;  // (yaw, landmarks)
+  std::optional<PinholeCamera> initial;
+  for (int n = 0; o.max_frames <= 0 || n < o.max_frames; ++n) {
+    CapturedFrame c;
+    std::string why;
+    const ReadStatus st = source->Read(&c, &why);
+    if (st == ReadStatus::kEnd) break;
+    if (st == ReadStatus::kSkipped) continue;
+    if (!initial) initial = FirstFrameCamera(o, std::nullopt, c);
+    FrameParams p;
+    const TrackedFrame t = first.Track(c.bgr, cv::Mat(), c.capture_time_s, *initial, &p);
+    if (t.fitted)
+      seen.emplace_back(ViewRotation(AxisAngleToMatrix(p.cam_rotation.cast<double>())).y(), t.face.landmarks);
+  }
+  if (seen.size() < 3) throw std::runtime_error(o.input + ": too few frames with a face to calibrate the identity");
+  std::sort(seen.begin(), seen.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  const int keys = std::max(3, std::min(o.calibration_frames, static_cast<int>(seen.size()) / 4));
+  std::vector<Landmarks2d> key_frames;
+  for (int k = 0; k < keys; ++k)
+    key_frames.push_back(seen[static_cast<size_t>(std::lround(k * (seen.size() - 1.0) / (keys - 1)))].second);
+  HeadFitter fitter(model, o.tracker.fit);
+  if (o.identity.size() > 0) fitter.SetIdentity(o.identity);
+  const HeadFitter::Calibration cal = fitter.CalibrateIdentity(key_frames, *initial);
+  if (!cal.ok) throw std::runtime_error(o.input + ": identity calibration failed");
+  spdlog::info("identity calibrated over {} key frames: focal {:.1f} px, rms {:.2f} px", cal.frames, cal.camera.fx,
+               cal.rms_px);
+  return {cal.shape, cal.camera,
+          nlohmann::json{{"key_frames", cal.frames},
+                         {"yaw_range_deg", {seen.front().first * 180 / M_PI, seen.back().first * 180 / M_PI}},
+                         {"focal_px", cal.camera.fx},
+                         {"focal_px_from_fov", initial->fx},
+                         {"rms_px", cal.rms_px}}};
+}
+
+// Landmark error and jitter of the fitted frames. Jitter: the second
+// difference of landmark positions over consecutive fitted frames (mean over
+// the 68, over the eye distance): what shakes.
+class FitQuality {
+ public:
+  void Add(int frame, const Landmarks2d& fitted, const Landmarks2d& detected) {
+    error_iod_.Add(LandmarkErrorIod(fitted, detected));
+    if (last_frame_ != frame - 1) {  // a gap: start the history again
+      fitted_.clear();
+      detected_.clear();
+    }
+    last_frame_ = frame;
+    fitted_.push_back(fitted);
+    detected_.push_back(detected);
+    if (fitted_.size() > 3) {
+      fitted_.erase(fitted_.begin());
+      detected_.erase(detected_.begin());
+    }
+    if (fitted_.size() == 3) {
+      jitter_fitted_.Add(SecondDifference(fitted_));
+      jitter_detected_.Add(SecondDifference(detected_));
+    }
+  }
+  void Report(nlohmann::json* r) const {
+    (*r)["landmark_error_iod_mean"] = error_iod_.empty() ? -1.0 : error_iod_.Mean();
+    (*r)["jitter_iod_median"] = jitter_fitted_.empty() ? -1.0 : jitter_fitted_.Median();
+    (*r)["jitter_iod_median_raw_landmarks"] = jitter_detected_.empty() ? -1.0 : jitter_detected_.Median();
+  }
+
+ private:
+  static double SecondDifference(const std::vector<Landmarks2d>& h) {
+    double sum = 0;
+    for (int l = 0; l < kNumLandmarks; ++l) sum += (h[2][l] - 2 * h[1][l] + h[0][l]).norm();
+    return sum / kNumLandmarks / std::max(1e-9, (h[1][36] - h[1][45]).norm());
+  }
+  SampleStats error_iod_, jitter_fitted_, jitter_detected_;
+  std::vector<Landmarks2d> fitted_, detected_;
+  int last_frame_ = -2;
+};
+
+void DrawOverlay(const cv::Mat& frame, const TrackedFrame& t, const Landmarks2d* model_landmarks, cv::Mat* shown) {
+  *shown = frame.clone();
+  if (model_landmarks) {
+    for (int l = 0; l < kNumLandmarks; ++l) {
+      cv::circle(*shown, cv::Point2d(t.face.raw[l].x(), t.face.raw[l].y()), 2, cv::Scalar(0, 200, 255), cv::FILLED,
+                 cv::LINE_AA);
+      cv::circle(*shown, cv::Point2d((*model_landmarks)[l].x(), (*model_landmarks)[l].y()), 2, cv::Scalar(80, 255, 80),
+                 1, cv::LINE_AA);
+    }
+  }
+  cv::putText(*shown, std::string(FaceStatusName(t.face.status)) + (t.fitted ? " fitted" : ""), {8, 20},
+              cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+}
+
+// RGB-D frames fitted while the identity was still free: written once it is
+// frozen, fitted again with it.
+struct HeldFrame {
+  Landmarks2d landmarks;
+  cv::Mat depth;
+  FrameParams params;  // sequence and time
+};
+
+void RefitHeld(const FrameTracker& tracker, const PinholeCamera& camera, std::vector<HeldFrame>* held,
+               std::vector<FrameParams>* out) {
+  spdlog::info("identity frozen from {} RGB-D frames", held->size());
+  RgbdFitResult previous;
+  for (const HeldFrame& h : *held) {
+    const RgbdFitResult r = tracker.RefitRgbd(h.landmarks, h.depth, camera, &previous);
+    if (!r.ok) continue;
+    FrameParams f = h.params;
+    ApplyRgbdFit(r, &f);
+    out->push_back(f);
+    previous = r;
+  }
+  held->clear();
+}
+
+}  // namespace
+
+void OfflineTrackOptions::Check() const {
+  source.Check();
+  mask.Check();
+  tracker.Check();
+  OptionsCheck c("OfflineTrackOptions");
+  c.NotEmpty("input", input).NonNegative("max_frames", max_frames).InRange("fov_deg", fov_deg, 1, 179);
+  c.InRange("calibration_frames", calibration_frames, 3, 10000);
+  c.That(!(calibrate && IsCamera(input)), "calibrate needs a recorded input (a live camera cannot be read twice)");
+  c.That(!(calibrate && identity.size() > 0), "calibrate and a given identity exclude each other");
+  if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
+  c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");
+  c.ThrowIfErrors();
+}
+
+OfflineTrack TrackVideo(const HeadModel& model, const OfflineTrackOptions& options,
+                        const OfflineFrameObserver& observer) {
+  return TrackFrames(
+      model, options, [&] { return OpenFrameSource(options.input, options.source); }, observer);
+}
+
+OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, const FrameSourceFactory& open,
+                         const OfflineFrameObserver& observer) {
+  o.Check();
+  if (o.identity.size() > 0 && o.identity.size() != model.num_shape())
+    throw std::invalid_argument("the given identity has " + std::to_string(o.identity.size()) +
+                                " shape values; the head model has " + std::to_string(model.num_shape()));
+  FrameTracker tracker(model, o.tracker);
+  tracker.SetIdentity(o.identity.size() > 0 ? o.identity : Eigen::VectorXd::Zero(model.num_shape()),
+                      o.identity.size() > 0);
+  std::optional<IdentityCalibration> calibration;
+  if (o.calibrate) {
+    calibration = CalibrateOverKeyFrames(model, o, open);
+    tracker.SetIdentity(calibration->shape, false);  // RGB only: RGB-D frames still calibrate their own
+  }
+  std::unique_ptr<FrameSource> source = open();
+  spdlog::info("source: {}", source->Describe());
+  OfflineTrack out;
+  out.fps = source->fps();
+  std::unique_ptr<VideoWriter> overlay;
+  if (!o.overlay.empty()) overlay = std::make_unique<VideoWriter>(o.overlay, out.fps);
+  PinholeCamera camera;
+  std::vector<AppearanceSample> appearance_samples;
+  std::vector<HeldFrame> held;
+  FitQuality quality;
+  SampleStats ms, accuracy_mm;
+  int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0;
+  std::map<std::string, int> statuses;
+  for (;;) {
+    if (o.max_frames > 0 && frames >= o.max_frames) break;
+    CapturedFrame captured;
+    std::string problem;
+    const ReadStatus status = source->Read(&captured, &problem);
+    if (status == ReadStatus::kEnd) {
+      if (!problem.empty()) spdlog::warn("{}", problem);
+      break;
+    }
+    if (status == ReadStatus::kSkipped) {
+      ++unreadable;  // a corrupt frame is a per-frame status; the run goes on
+      spdlog::warn("{}", problem);
+      continue;
+    }
+    const cv::Mat& frame = captured.bgr;
+    const int index = frames++;
+    with_depth += !captured.depth_m.empty();
+    if (index == 0)
+      camera = FirstFrameCamera(o, calibration ? std::optional(calibration->camera) : std::nullopt, captured);
+    if (index > 0 && index % 100 == 0) spdlog::info("tracking: {} frames, {} fitted", index, fitted);
+    FrameParams params;
+    const TrackedFrame t = tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params);
+    ms.Add(t.landmarks_ms + t.fit_ms);
+    if (!t.fitted && !t.problem.empty()) spdlog::debug("frame {}: {}", index, t.problem);
+    ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];
+    OfflineFrame seen{index, &frame, t.fitted, cv::Mat()};
+    Landmarks2d model_landmarks{};
+    if (t.fitted) {
+      ++fitted;
+      params.sequence = static_cast<uint64_t>(index);
+      params.capture_time_s = captured.capture_time_s;
+      params.confidence = 1.f;
+      if (t.with_depth) {
+        accuracy_mm.Add(1e3 * t.rgbd_accuracy_m);
+        contour_rejected += t.contour_rejected;
+      }
+      if (t.identity_frame)
+        held.push_back({t.face.landmarks, captured.depth_m.clone(), params});
+      else
+        out.frames.push_back(params);
+      if (t.identity_frozen_now) RefitHeld(tracker, camera, &held, &out.frames);
+      // Every 15th fitted frame, up to 8, for the texture and light fit.
+      const bool sample = o.fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8;
+      if (sample || o.masks) {
+        seen.mask = HeadMask(frame, t.face.raw, o.mask);
+        if (sample) appearance_samples.push_back({frame.clone(), seen.mask, params, camera});
+      }
+      model_landmarks = tracker.fitter().Project(params, camera);
+      quality.Add(index, model_landmarks, t.face.raw);
+    }
+    if (observer) observer(seen);
+    if (overlay) {
+      cv::Mat shown;
+      DrawOverlay(frame, t, t.fitted ? &model_landmarks : nullptr, &shown);
+      overlay->Write(shown);
+    }
+  }
+  if (tracker.FreezeRgbdIdentity()) RefitHeld(tracker, camera, &held, &out.frames);
+  if (frames == 0) throw std::runtime_error(o.input + ": no readable frames (corrupt or empty?)");
+  std::sort(out.frames.begin(), out.frames.end(),
+            [](const FrameParams& a, const FrameParams& b) { return a.sequence < b.sequence; });
+  out.frames_read = frames;
+  SubjectParams& subject = out.subject;
+  subject.shape = tracker.identity().cast<float>();
+  subject.texture = Eigen::VectorXf::Zero(model.num_texture());
+  subject.intrinsics = camera;
+  AppearanceFit appearance;
+  if (!appearance_samples.empty()) {
+    appearance = FitAppearance(model, tracker.identity(), appearance_samples);
+    if (!appearance.ok) spdlog::warn("texture/light fit: {}", appearance.problem);
+  }
+  if (appearance.ok) {
+    subject.texture.head(appearance.texture.size()) = appearance.texture.cast<float>();
+    subject.light = appearance.light;
+  }
+  nlohmann::json& report = out.report;
+  report = {{"input", o.input},
+            {"head_model", model.data().name},
+            {"frames", frames},
+            {"fitted_frames", fitted},
+            {"unreadable_frames", unreadable},
+            {"statuses", statuses},
+            {"ms_per_frame_median", ms.Median()},
+            {"ms_per_frame_p95", ms.Percentile(95)},
+            {"frames_with_depth", with_depth},
+            {"identity", !o.identity_source.empty() ? o.identity_source
+                         : o.identity.size() > 0    ? "given"
+                         : o.calibrate              ? "calibrated over key frames (shape, focal)"
+                         : with_depth > 0           ? "RGB-D: median shape of the first fitted frames"
+                                                    : "neutral (beta = 0)"},
+            {"camera", camera.ToString()}};
+  quality.Report(&report);
+  if (!accuracy_mm.empty()) {
+    report["rgbd_accuracy_mm_median"] = accuracy_mm.Median();
+    report["rgbd_accuracy_mm_p95"] = accuracy_mm.Percentile(95);
+    report["rgbd_contour_landmarks_rejected"] = contour_rejected;
+    report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
+  }
+  if (calibration) report["calibration"] = calibration->report;
+  if (appearance.ok)
+    report["appearance"] = {{"frames", appearance_samples.size()},
+                            {"pixels", appearance.pixels},
+                            {"rms", appearance.rms},
+                            {"what", "texture tau and SH light lambda by the masked photometric fit; rms in 0..1"}};
+  return out;
+}
+
+}  // namespace headcast

@@ -1,0 +1,97 @@
+// The sender's gRPC adapter.
+#include "sender/grpc_uplink.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include "common/core/zip_archive.h"
+#include "proto/headcast.grpc.pb.h"
+
+namespace headcast {
+namespace {
+
+std::shared_ptr<grpc::Channel> MakeChannel(const SenderOptions& options) {
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(options.keepalive_s * 1000));
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 5000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+  // No bandwidth-delay-product probing: its pings cost more than our frames on narrow links.
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  // Reconnect quickly after a receiver restart.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_initial_s * 1000));
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(options.reconnect_max_s * 1000));
+  if (!options.tls_server_name.empty()) args.SetSslTargetNameOverride(options.tls_server_name);
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
+  if (options.plaintext) {
+    credentials = grpc::InsecureChannelCredentials();
+  } else {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = ReadFileBytes(options.tls_ca);
+    if (!options.tls_client_cert.empty()) {
+      ssl.pem_cert_chain = ReadFileBytes(options.tls_client_cert);
+      ssl.pem_private_key = ReadFileBytes(options.tls_client_key);
+    }
+    credentials = grpc::SslCredentials(ssl);
+  }
+  return grpc::CreateCustomChannel(options.target, credentials, args);
+}
+
+class GrpcUplinkChannel final : public UplinkChannel {
+ public:
+  GrpcUplinkChannel(v1::Headcast::Stub& stub, const std::string& token) {
+    if (!token.empty()) context_.AddMetadata("authorization", "Bearer " + token);
+    stream_ = stub.Session(&context_);
+  }
+  ~GrpcUplinkChannel() override {
+    if (!finished_) {
+      context_.TryCancel();
+      Finish();
+    }
+  }
+  bool Write(const v1::Uplink& m) override { return stream_->Write(m); }
+  bool Read(v1::Downlink* m) override { return stream_->Read(m); }
+  void CloseWrites() override { stream_->WritesDone(); }
+  void Cancel() override { context_.TryCancel(); }
+  std::string Finish() override {
+    finished_ = true;
+    const grpc::Status status = stream_->Finish();
+    return status.ok() ? std::string() : status.error_message();
+  }
+
+ private:
+  grpc::ClientContext context_;
+  std::unique_ptr<grpc::ClientReaderWriter<v1::Uplink, v1::Downlink>> stream_;
+  bool finished_ = false;
+};
+
+class GrpcUplinkConnector final : public UplinkConnector {
+ public:
+  explicit GrpcUplinkConnector(SenderOptions options) : options_(std::move(options)) {}
+  std::unique_ptr<UplinkChannel> Open(std::string* error) override {
+    if (!stub_) {
+      try {  // one HTTP/2 channel for every attempt: gRPC reconnects it underneath
+        channel_ = MakeChannel(options_);
+        stub_ = v1::Headcast::NewStub(channel_);
+      } catch (const std::exception& e) {
+        *error = e.what();
+        return nullptr;
+      }
+    }
+    return std::make_unique<GrpcUplinkChannel>(*stub_, options_.token);
+  }
+  std::string Describe() const override { return options_.target; }
+
+ private:
+  SenderOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Headcast::Stub> stub_;
+};
+
+}  // namespace
+
+std::unique_ptr<UplinkConnector> MakeGrpcUplinkConnector(const SenderOptions& options) {
+  return std::make_unique<GrpcUplinkConnector>(options);
+}
+
+}  // namespace headcast

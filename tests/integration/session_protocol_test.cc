@@ -1,0 +1,273 @@
+// The protocol without sockets: the real SenderClient and ReceiverSessions
+// joined by in-memory channels — streaming, rejection, the session limit,
+// reconnection after a broken link, narrow-link pacing, and a failing frame
+// observer that ends only its own session.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <mutex>
+#include <thread>
+
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/synthetic_motion.h"
+#include "receiver/receiver_sessions.h"
+#include "sender/session_client.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+const CodecLayout& Layout() {
+  static const CodecLayout l = CodecLayout::FromModel(Model());
+  return l;
+}
+
+ReceiverSessionOptions ReceiverOptions(int max_sessions = 4) {
+  ReceiverSessionOptions o;
+  o.tokens = {"secret-token"};
+  o.stats_interval_s = 0.1;
+  o.max_sessions = max_sessions;
+  return o;
+}
+
+std::map<std::string, AvatarEntry> Avatars() { return {{"demo", {Model().fingerprint(), Model().num_expression()}}}; }
+
+SenderOptions Options() {
+  SenderOptions o;
+  o.target = "127.0.0.1:0";  // not dialled: the in-memory connector ignores it
+  o.plaintext = true;
+  o.avatar_id = "demo";
+  o.queue_frames = 1000;
+  o.reconnect_initial_s = 0.05;
+  o.reconnect_max_s = 0.1;
+  return o;
+}
+
+bool WaitFor(const std::function<bool()>& condition, double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (condition()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return condition();
+}
+
+// Each Open makes a channel pair and serves the receiver's end on its own
+// thread, as a transport adapter would. Break() cuts the current link.
+class InMemoryConnector : public UplinkConnector {
+ public:
+  InMemoryConnector(ReceiverSessions& receiver, std::string token) : receiver_(receiver), token_(std::move(token)) {}
+  ~InMemoryConnector() override {
+    for (auto& t : threads_) t.join();
+  }
+  std::unique_ptr<UplinkChannel> Open(std::string*) override {
+    InMemoryChannelPair pair = MakeInMemoryChannelPair(token_);
+    std::shared_ptr<DownlinkChannel> end(std::move(pair.receiver));
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      current_ = end;
+      ++opened_;
+    }
+    threads_.emplace_back([this, end] {
+      const SessionEnd e = receiver_.Serve(*end);
+      end->CloseWrites();  // the end of the call, as gRPC's status would end it
+      std::lock_guard<std::mutex> lock(mutex_);
+      ends_.push_back(e);
+    });
+    return std::move(pair.sender);
+  }
+  std::string Describe() const override { return "in-memory"; }
+  void Break() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (current_) current_->Cancel();
+  }
+  std::vector<SessionEnd> ends() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return ends_;
+  }
+  int opened() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return opened_;
+  }
+
+ private:
+  ReceiverSessions& receiver_;
+  std::string token_;
+  std::mutex mutex_;
+  std::shared_ptr<DownlinkChannel> current_;
+  std::vector<SessionEnd> ends_;
+  std::vector<std::thread> threads_;
+  int opened_ = 0;
+};
+
+struct Client {
+  Client(ReceiverSessions& receiver, const std::string& token, const SenderOptions& o = Options()) {
+    auto c = std::make_unique<InMemoryConnector>(receiver, token);
+    connector = c.get();
+    client = std::make_unique<SenderClient>(o, Layout(), std::move(c));
+  }
+  InMemoryConnector* connector;  // owned by the client
+  std::unique_ptr<SenderClient> client;
+};
+
+struct Collector {
+  std::mutex mutex;
+  std::vector<FrameParams> frames;
+  size_t size() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return frames.size();
+  }
+};
+
+TEST(SessionProtocol, FramesArriveInOrderAndStatsComeBack) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Collector got;
+  receiver.SetFrameObserver([&](const std::string&, const FrameParams& f) {
+    std::lock_guard<std::mutex> lock(got.mutex);
+    got.frames.push_back(f);
+  });
+  Client c(receiver, "secret-token");
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5)) << c.client->counters().last_error;
+  ASSERT_EQ(receiver.Sessions().size(), 1u);
+  for (int i = 0; i < 60; ++i) {
+    FrameParams f = SyntheticTalkingHead(Model(), i);
+    f.sequence = static_cast<uint64_t>(i);
+    c.client->Submit(f);
+  }
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 60; }, 5)) << got.size();
+  for (int i = 0; i < 60; ++i) {
+    EXPECT_EQ(got.frames[i].sequence, static_cast<uint64_t>(i));
+    const FrameParams truth = SyntheticTalkingHead(Model(), i);
+    EXPECT_LT((got.frames[i].expression - truth.expression).cwiseAbs().maxCoeff(), 0.05);
+  }
+  EXPECT_TRUE(WaitFor([&] { return c.client->counters().receiver_frames == 60; }, 5)) << "Stats report the frames";
+  c.client->Stop("test over");
+  EXPECT_TRUE(WaitFor([&] { return receiver.Sessions().empty(); }, 5));
+  EXPECT_EQ(receiver.counters().frames_received, 60u);
+}
+
+TEST(SessionProtocol, WrongTokenUnknownAvatarAndOldVersionsAreRejected) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Client wrong(receiver, "guess");
+  wrong.client->Start();
+  EXPECT_FALSE(wrong.client->WaitStreaming(0.5));
+  EXPECT_TRUE(WaitFor([&] { return !wrong.client->counters().last_rejection.empty(); }, 5));
+  EXPECT_NE(wrong.client->counters().last_rejection.find("UNAUTHENTICATED"), std::string::npos)
+      << wrong.client->counters().last_rejection;
+  wrong.client->Stop();
+  ASSERT_FALSE(wrong.connector->ends().empty());
+  EXPECT_EQ(wrong.connector->ends()[0].code, SessionEndCode::kUnauthenticated);
+
+  SenderOptions o = Options();
+  o.avatar_id = "nobody";
+  Client unknown(receiver, "secret-token", o);
+  unknown.client->Start();
+  EXPECT_TRUE(WaitFor([&] { return !unknown.client->counters().last_rejection.empty(); }, 5));
+  EXPECT_NE(unknown.client->counters().last_rejection.find("UNKNOWN_AVATAR"), std::string::npos);
+  unknown.client->Stop();
+
+  // A hand-made Hello of another protocol version.
+  InMemoryChannelPair pair = MakeInMemoryChannelPair("secret-token");
+  std::thread serve([&] { EXPECT_EQ(receiver.Serve(*pair.receiver).code, SessionEndCode::kFailedPrecondition); });
+  v1::Uplink hello;
+  hello.mutable_hello()->set_protocol_version(99);
+  ASSERT_TRUE(pair.sender->Write(hello));
+  v1::Downlink reply;
+  ASSERT_TRUE(pair.sender->Read(&reply));
+  ASSERT_TRUE(reply.has_reject());
+  EXPECT_NE(reply.reject().message().find("version 99"), std::string::npos);
+  serve.join();
+  EXPECT_GE(receiver.counters().sessions_rejected, 3u);  // refused senders retry with back-off
+  EXPECT_EQ(receiver.counters().sessions_started, 0u);
+}
+
+TEST(SessionProtocol, TheSessionOverTheLimitIsRefusedAndTheReceiverGoesOn) {
+  ReceiverSessions receiver(ReceiverOptions(/*max_sessions=*/1), Avatars());
+  Client first(receiver, "secret-token");
+  first.client->Start();
+  ASSERT_TRUE(first.client->WaitStreaming(5));
+  Client second(receiver, "secret-token");
+  second.client->Start();
+  ASSERT_TRUE(WaitFor([&] { return !second.client->counters().last_rejection.empty(); }, 5))
+      << "the busy path must answer, not hang";
+  EXPECT_NE(second.client->counters().last_rejection.find("BUSY"), std::string::npos);
+  // The receiver is not stuck: it lists sessions and the first one still streams.
+  EXPECT_EQ(receiver.Sessions().size(), 1u);
+  first.client->Submit(SyntheticTalkingHead(Model(), 0));
+  EXPECT_TRUE(WaitFor([&] { return first.client->counters().sent == 1; }, 5));
+  second.client->Stop();
+  first.client->Stop();
+  EXPECT_TRUE(WaitFor([&] { return receiver.Sessions().empty(); }, 5));
+  EXPECT_EQ(receiver.counters().frames_received, 1u);
+}
+
+TEST(SessionProtocol, ABrokenLinkIsReconnected) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Client c(receiver, "secret-token");
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  c.connector->Break();
+  ASSERT_TRUE(WaitFor([&] { return c.client->counters().connects >= 2; }, 5))
+      << "connects " << c.client->counters().connects << ", " << c.client->counters().last_error;
+  EXPECT_GE(c.connector->opened(), 2);
+  c.client->Submit(SyntheticTalkingHead(Model(), 1));
+  EXPECT_TRUE(WaitFor([&] { return c.client->counters().sent == 1; }, 5));
+  c.client->Stop();
+}
+
+TEST(SessionProtocol, ANarrowLinkBatchesFramesWithinTheBudget) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  SenderOptions o = Options();
+  o.max_kbps = 4;  // 500 B/s: about two messages a second with their wire overhead
+  o.stats_interval_s = 5;
+  Client c(receiver, "secret-token", o);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  const auto start = std::chrono::steady_clock::now();
+  for (int i = 0; i < 90; ++i) {  // 3 s at 30 fps
+    c.client->Submit(SyntheticTalkingHead(Model(), i));
+    std::this_thread::sleep_until(start + std::chrono::milliseconds(33 * (i + 1)));
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const SenderCounters n = c.client->counters();
+  c.client->Stop();
+  ASSERT_GT(n.messages, 0u);
+  const double frames_per_message = static_cast<double>(n.sent) / n.messages;
+  const double wire_kbps = 8e-3 * (n.payload_bytes + n.messages * o.wire_overhead_bytes) / seconds;
+  EXPECT_GT(frames_per_message, 4) << n.sent << " frames in " << n.messages << " messages";
+  EXPECT_LT(wire_kbps, 1.3 * o.max_kbps) << "paced to the budget";
+  EXPECT_EQ(n.submitted, 90u);
+  EXPECT_GT(n.sent, 45u) << "the budget carries 30 fps in batches";
+}
+
+TEST(SessionProtocol, AFailingObserverEndsOnlyItsSession) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  std::atomic<bool> fail{true};
+  receiver.SetFrameObserver([&](const std::string&, const FrameParams&) {
+    if (fail) throw std::runtime_error("disk full");
+  });
+  Client c(receiver, "secret-token");
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  c.client->Submit(SyntheticTalkingHead(Model(), 0));
+  ASSERT_TRUE(WaitFor([&] { return !c.connector->ends().empty(); }, 5));
+  EXPECT_EQ(c.connector->ends()[0].code, SessionEndCode::kInternal);
+  EXPECT_NE(c.connector->ends()[0].message.find("disk full"), std::string::npos);
+  fail = false;  // the sender reconnects and streams again
+  ASSERT_TRUE(WaitFor([&] { return c.client->counters().connects >= 2; }, 5));
+  c.client->Submit(SyntheticTalkingHead(Model(), 1));
+  EXPECT_TRUE(WaitFor([&] { return c.client->counters().sent == 2; }, 5));
+  c.client->Flush(2);
+  c.client->Stop();
+  EXPECT_TRUE(WaitFor([&] { return receiver.Sessions().empty(); }, 5));
+  EXPECT_GE(receiver.counters().frames_received, 1u);
+}
+
+}  // namespace
+}  // namespace headcast

@@ -1,0 +1,80 @@
+// The camera contract from the avatar to the live tracker: which camera the
+// sender tracks with, and the contract read from an avatar's manifest.
+#include "sender/live_tracker.h"
+
+#include <gtest/gtest.h>
+
+#include "common/core/zip_archive.h"
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+CameraContract Contract() {
+  CameraContract c;
+  c.source = PinholeCamera{640, 640, 319.5, 239.5, 640, 480};
+  c.crop_x0 = 100;
+  c.crop_y0 = 20;
+  c.crop_side = 400;
+  return c;
+}
+
+TEST(CameraContract, ScalesToTheFrameSizeAndRefusesAnotherAspect) {
+  const CameraContract c = Contract();
+  const std::optional<PinholeCamera> same = ContractCameraFor(c, 640, 480);
+  ASSERT_TRUE(same);
+  EXPECT_EQ(same->fx, 640);
+  const std::optional<PinholeCamera> doubled = ContractCameraFor(c, 1280, 960);
+  ASSERT_TRUE(doubled);
+  EXPECT_DOUBLE_EQ(doubled->fx, 1280);
+  EXPECT_DOUBLE_EQ(doubled->cx, 639.5);  // pixel centres scale with the image
+  EXPECT_FALSE(ContractCameraFor(c, 1280, 720));
+  const CameraContract back = CameraContract::FromJson(c.ToJson());
+  EXPECT_EQ(back.source.width, 640);
+  EXPECT_EQ(back.crop_side, 400);
+  nlohmann::json bad = c.ToJson();
+  bad["crop"]["side"] = -1;
+  EXPECT_THROW(CameraContract::FromJson(bad), std::invalid_argument);
+  bad = c.ToJson();
+  bad.erase("source");
+  EXPECT_THROW(CameraContract::FromJson(bad), std::invalid_argument);
+}
+
+TEST(CameraContract, TheTrackerPrefersGivenThenCalibratedThenTheAvatarsCamera) {
+  LiveTrackerOptions o;
+  o.fov_deg = 40;
+  EXPECT_EQ(ChooseTrackingCamera(o, std::nullopt, 640, 480).second, "the field of view");
+  o.contract = Contract();
+  auto [k, why] = ChooseTrackingCamera(o, std::nullopt, 1280, 960);
+  EXPECT_EQ(why, "the avatar's training camera");
+  EXPECT_DOUBLE_EQ(k.fx, 1280);
+  EXPECT_EQ(ChooseTrackingCamera(o, std::nullopt, 1280, 720).second, "the field of view");
+  const PinholeCamera stereo{700, 700, 320, 240, 640, 480};
+  EXPECT_EQ(ChooseTrackingCamera(o, stereo, 640, 480).second, "the source's calibration");
+  o.camera = PinholeCamera{500, 500, 320, 240, 640, 480};
+  EXPECT_EQ(ChooseTrackingCamera(o, stereo, 640, 480).second, "given intrinsics");
+}
+
+TEST(CameraContract, ReadFromTheAvatarsManifest) {
+  const std::string dir = testing::TempDir("camera_contract");
+  const nlohmann::json manifest = {{"format", "headcast-avatar"}, {"camera", Contract().ToJson()}};
+  WriteZip(dir + "/a.hcavatar", {{"manifest.json", manifest.dump()}});
+  const std::optional<CameraContract> c = ReadAvatarCameraContract(dir + "/a.hcavatar");
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->crop_x0, 100);
+  WriteZip(dir + "/old.hcavatar", {{"manifest.json", nlohmann::json{{"format", "headcast-avatar"}}.dump()}});
+  EXPECT_FALSE(ReadAvatarCameraContract(dir + "/old.hcavatar"));
+  EXPECT_FALSE(ReadAvatarCameraContract(dir + "/params.json"));  // not an avatar: no contract
+  nlohmann::json broken = manifest;
+  broken["camera"]["source"]["fx"] = -5;
+  WriteZip(dir + "/broken.hcavatar", {{"manifest.json", broken.dump()}});
+  try {
+    ReadAvatarCameraContract(dir + "/broken.hcavatar");
+    ADD_FAILURE() << "a negative focal length was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("broken.hcavatar"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace headcast

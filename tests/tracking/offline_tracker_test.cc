@@ -1,0 +1,137 @@
+// The offline pass (TrackFrames) fed by a fake frame source: the built-in head
+// rendered at known poses, with and without depth, one frame unreadable. The
+// real dlib tracker and fitters run on the rendered pictures.
+#include "common/tracking/offline_tracker.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "common/core/rotation.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Model() {
+  static const HeadModel m = MakeBuiltinHead();
+  return m;
+}
+
+// Frames of the built-in head turning slowly; frame `skip` is unreadable.
+class FakeHeadSource : public FrameSource {
+ public:
+  FakeHeadSource(int frames, bool depth, int skip = -1) : frames_(frames), depth_(depth), skip_(skip) {
+    params_.shape = Eigen::VectorXd::Zero(Model().num_shape());
+    params_.shape[0] = 0.8;
+    params_.expression = Eigen::VectorXd::Zero(Model().num_expression());
+  }
+  ReadStatus Read(CapturedFrame* frame, std::string* problem) override {
+    if (next_ >= frames_) return ReadStatus::kEnd;
+    const int n = next_++;
+    if (n == skip_) {
+      *problem = "frame " + std::to_string(n) + ": unreadable (the fake's corrupt frame)";
+      return ReadStatus::kSkipped;
+    }
+    const HeadModel& model = Model();
+    const RigidTransform cam_from_head = CamFromHead(n);
+    const HeadRender r =
+        RenderHead(model, model.Forward(params_).vertices, cam_from_head, camera(), AlbedoTexture(model));
+    frame->bgr = r.image_bgr;
+    if (depth_) {
+      frame->depth_m = r.depth.clone();
+      frame->depth_m.setTo(1.4f, r.mask == 0);  // a wall behind the head
+      frame->camera = camera();
+    }
+    frame->capture_time_s = n / 30.0;
+    frame->index = static_cast<uint64_t>(n);
+    return ReadStatus::kFrame;
+  }
+  std::string Describe() const override { return "fake rendered head"; }
+  double fps() const override { return 30; }
+  bool has_depth() const override { return depth_; }
+
+  static PinholeCamera camera() { return PinholeCamera::FromFovY(640, 480, 45); }
+  static RigidTransform CamFromHead(int n) {
+    return FrontalCamFromHead(0.5, -10 + 2.0 * n, 0, Model().rest_landmark_centroid());
+  }
+  const HeadModelParams& params() const { return params_; }
+
+ private:
+  int frames_, next_ = 0;
+  bool depth_;
+  int skip_;
+  HeadModelParams params_;
+};
+
+TEST(OfflineTracker, RgbdFramesFreezeTheIdentityAndEveryFrameIsWritten) {
+  OfflineTrackOptions o;
+  o.input = "fake";
+  o.calibration_frames = 4;
+  o.masks = true;
+  o.fit_appearance = false;
+  int observed = 0, masks = 0;
+  const OfflineTrack t = TrackFrames(
+      Model(), o, [] { return std::make_unique<FakeHeadSource>(10, true, /*skip=*/3); },
+      [&](const OfflineFrame& f) {
+        EXPECT_EQ(f.index, observed) << "frame numbers count readable frames";
+        ++observed;
+        masks += !f.mask.empty();
+      });
+  EXPECT_EQ(t.frames_read, 9);
+  EXPECT_EQ(observed, 9);
+  EXPECT_EQ(t.report["unreadable_frames"], 1);
+  ASSERT_EQ(static_cast<int>(t.frames.size()), 9) << t.report.dump(1);
+  EXPECT_EQ(masks, 9);
+  for (size_t i = 0; i < t.frames.size(); ++i) EXPECT_EQ(t.frames[i].sequence, i);
+  EXPECT_LT(t.report["rgbd_accuracy_mm_median"].get<double>(), 1.5);
+  EXPECT_EQ(t.report["identity"], "RGB-D: median shape of the first fitted frames");
+  EXPECT_NEAR(t.subject.shape[0], 0.8, 0.3) << "the identity comes from the depth";
+  // Frame 5 of the pass is source frame 6 (frame 3 was unreadable).
+  const RigidTransform truth = FakeHeadSource::CamFromHead(6);
+  EXPECT_LT((t.frames[5].cam_translation.cast<double>() - truth.translation).norm(), 0.005);
+  const Eigen::Matrix3d fitted = AxisAngleToMatrix(t.frames[5].cam_rotation.cast<double>());
+  EXPECT_LT(MatrixToAxisAngle(fitted.transpose() * truth.rotation).norm() * 180 / M_PI, 2.0);
+}
+
+TEST(OfflineTracker, ColourFramesAreFittedWithTheGivenIdentityAndCamera) {
+  OfflineTrackOptions o;
+  o.input = "fake";
+  o.fit_appearance = false;
+  o.intrinsics = FakeHeadSource::camera();
+  FakeHeadSource reference(1, false);
+  o.identity = reference.params().shape;
+  o.identity_source = "the fake's shape";
+  const OfflineTrack t = TrackFrames(Model(), o, [] { return std::make_unique<FakeHeadSource>(6, false); });
+  ASSERT_EQ(t.frames.size(), 6u) << t.report.dump(1);
+  EXPECT_EQ(t.report["identity"], "the fake's shape");
+  EXPECT_EQ(t.subject.intrinsics.width, 640);
+  EXPECT_NEAR(t.subject.intrinsics.fx, FakeHeadSource::camera().fx, 1e-9);
+  EXPECT_LT(t.report["landmark_error_iod_mean"].get<double>(), 0.1);
+  for (int n = 0; n < 6; ++n) {
+    const RigidTransform truth = FakeHeadSource::CamFromHead(n);
+    EXPECT_LT((t.frames[n].cam_translation.cast<double>() - truth.translation).norm(), 0.03) << "frame " << n;
+  }
+}
+
+TEST(OfflineTracker, OptionsAreChecked) {
+  OfflineTrackOptions o;
+  EXPECT_THROW(o.Check(), std::invalid_argument);  // no input
+  o.input = "/dev/video0";
+  o.calibrate = true;
+  EXPECT_THROW(o.Check(), std::invalid_argument);  // a camera cannot be read twice
+  o.input = "clip.mp4";
+  o.Check();
+  o.identity = Eigen::VectorXd::Zero(3);
+  EXPECT_THROW(o.Check(), std::invalid_argument);  // calibrate and a given identity
+  o.calibrate = false;
+  EXPECT_THROW(TrackFrames(Model(), o, [] { return std::make_unique<FakeHeadSource>(1, false); }),
+               std::invalid_argument);  // 3 shape values for a 12-component model
+  o.identity.resize(0);
+  EXPECT_THROW(TrackFrames(Model(), o, [] { return std::make_unique<FakeHeadSource>(0, false); }),
+               std::runtime_error);  // no readable frames
+}
+
+}  // namespace
+}  // namespace headcast

@@ -1,0 +1,109 @@
+// headcast-track: the offline tracking pass (TrackVideo) on a video, image or
+// RGB-D folder, side-by-side stereo or a camera — writing the parameter
+// recording, head masks, an overlay video and a JSON report.
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+
+#include "common/core/image_io.h"
+#include "common/core/log.h"
+#include "common/headmodel/head_model_io.h"
+#include "common/tracking/offline_tracker.h"
+#include "proto/recording.h"
+
+namespace {
+
+using namespace headcast;
+
+struct TrackFlags {
+  OfflineTrackOptions track;
+  std::string head_model = "builtin", out, report, masks_dir, log_level, identity_from, intrinsics;
+  std::string camera_size = "640x480";
+};
+
+void AddFlags(CLI::App& app, TrackFlags& f) {
+  OfflineTrackOptions& t = f.track;
+  app.add_option("--input", t.input,
+                 "video file, image folder, RGB-D folder (with associations.txt), /dev/videoN (V4L2 camera), or "
+                 "zed:SOURCE (side-by-side stereo from a camera, video or folder)")
+      ->required();
+  app.add_option("--head-model", f.head_model, "builtin or a model .npz")->capture_default_str();
+  app.add_option("--out", f.out, "parameter recording to write (.hcrec)")->required();
+  app.add_option("--report", f.report, "JSON report to write");
+  app.add_option("--overlay", t.overlay, "MP4 with the detected and fitted landmarks over the frames");
+  app.add_option("--max-frames", t.max_frames, "stop after this many frames");
+  app.add_option("--fov", t.fov_deg, "vertical field of view of the camera, degrees (when nothing better is known)")
+      ->capture_default_str();
+  app.add_option("--predictor", t.tracker.face.predictor_path, "dlib 68-point shape predictor (.dat)")
+      ->capture_default_str();
+  SourceOptions& s = t.source;
+  app.add_option("--depth-input", s.depth_input,
+                 "RGB-D: association file (TUM style: t colour.png t depth.png) of 16-bit depth PNGs");
+  app.add_option("--depth-units", s.depth_units_per_metre,
+                 "depth PNG units per metre (1000: millimetres; TUM datasets use 5000)")
+      ->capture_default_str();
+  app.add_option("--stereo-calibration", s.stereo_calibration,
+                 "for zed:SOURCE inputs: OpenCV YAML or the camera's factory SN<serial>.conf");
+  app.add_option("--stereo-resolution", s.stereo_resolution, "section of a ZED .conf: 2K, FHD, HD, VGA")
+      ->capture_default_str();
+  app.add_flag("--realtime", s.realtime, "pace recorded inputs to their frame rate");
+  app.add_option("--intrinsics", f.intrinsics,
+                 "camera intrinsics fx,fy,cx,cy in pixels (else calibration, the stereo calibration, or --fov)");
+  app.add_option("--calibration-frames", t.calibration_frames,
+                 "RGB-D: frames whose fitted shapes give the identity (median); with --calibrate: key frames at most")
+      ->capture_default_str();
+  app.add_option("--masks", f.masks_dir, "also write a head mask (face, hair, neck) per fitted frame here, NNNNN.png");
+  app.add_option("--mask-hair-height", t.mask.hair_height,
+                 "head masks: hair may reach this far above the brows, in face heights")
+      ->capture_default_str();
+  app.add_option("--mask-head-width", t.mask.head_width, "head masks: the head's width, in jaw widths")
+      ->capture_default_str();
+  app.add_flag("!--no-appearance", t.fit_appearance, "skip the texture/light fit (stored in the recording's header)");
+  app.add_flag("--calibrate", t.calibrate,
+               "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
+               "head's yaw in a first pass, then track with them (METHOD §2)");
+  app.add_option("--camera-size", f.camera_size, "cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
+  app.add_option("--camera-fps", s.fps, "cameras: frame rate to ask for; image folders: their rate")
+      ->capture_default_str();
+  app.add_option("--pixel-format", s.pixel_format, "cameras: auto, yuyv or mjpeg")->capture_default_str();
+  app.add_option("--identity-from", f.identity_from,
+                 "take the identity (shape) from an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json");
+  app.add_option("--log", f.log_level, "log level");
+}
+
+int Run(TrackFlags& f) {
+  InitLogging(f.log_level);
+  OfflineTrackOptions& t = f.track;
+  ParseSize(f.camera_size, "--camera-size", &t.source.width, &t.source.height);
+  if (!f.intrinsics.empty()) t.intrinsics = ParseIntrinsics(f.intrinsics, "--intrinsics");
+  const HeadModel model = LoadHeadModelSpec(f.head_model);
+  if (!f.identity_from.empty()) {
+    t.identity = ReadTrackingIdentity(f.identity_from, model);
+    t.identity_source = f.identity_from;
+  }
+  t.masks = !f.masks_dir.empty();
+  if (t.masks) std::filesystem::create_directories(f.masks_dir);
+  const OfflineTrack track = TrackVideo(model, t, [&](const OfflineFrame& frame) {
+    if (!frame.mask.empty()) WriteImage(f.masks_dir + "/" + FrameFileName(frame.index), frame.mask);
+  });
+  WriteRecording(f.out, MakeRecordingInfo(model, track.fps, track.subject, "headcast-track " + t.input), track.frames);
+  std::cout << track.report.dump(2) << "\n";
+  if (!f.report.empty()) std::ofstream(f.report) << track.report.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
+  TrackFlags flags;
+  AddFlags(app, flags);
+  CLI11_PARSE(app, argc, argv);
+  try {
+    return Run(flags);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}
