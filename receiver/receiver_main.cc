@@ -9,6 +9,7 @@
 
 #include "common/avatar/avatar_backend.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_model_io.h"
@@ -194,11 +195,5 @@ int main(int argc, char** argv) {
   CLI::App app{"headcast-receiver: receive head-model parameters over gRPC and show the avatar"};
   headcast::ReceiverFlags flags;
   headcast::AddFlags(app, flags);
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return headcast::Run(flags);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  return headcast::RunProgram(app, argc, argv, [&] { return headcast::Run(flags); });
 }

@@ -12,6 +12,7 @@
 
 #include "common/capture/frame_source.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
@@ -259,11 +260,5 @@ int main(int argc, char** argv) {
   CLI::App app{"headcast-sender: stream head-model parameters to a headcast receiver"};
   headcast::SenderFlags flags;
   headcast::AddFlags(app, flags);
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return headcast::Run(flags);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  return headcast::RunProgram(app, argc, argv, [&] { return headcast::Run(flags); });
 }

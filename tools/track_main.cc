@@ -8,6 +8,7 @@
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/offline_tracker.h"
 #include "proto/recording.h"
@@ -99,11 +100,5 @@ int main(int argc, char** argv) {
   CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
   TrackFlags flags;
   AddFlags(app, flags);
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return Run(flags);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  return headcast::RunProgram(app, argc, argv, [&] { return Run(flags); });
 }

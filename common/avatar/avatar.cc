@@ -132,13 +132,7 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
                               {{"shape", ToVector(s.shape)},
                                {"texture", ToVector(s.texture)},
                                {"light", std::vector<float>(s.light.begin(), s.light.end())},
-                               {"intrinsics",
-                                {{"fx", s.intrinsics.fx},
-                                 {"fy", s.intrinsics.fy},
-                                 {"cx", s.intrinsics.cx},
-                                 {"cy", s.intrinsics.cy},
-                                 {"width", s.intrinsics.width},
-                                 {"height", s.intrinsics.height}}}}}};
+                               {"intrinsics", CameraToJson(s.intrinsics)}}}};
   if (m.camera_contract) manifest["camera"] = m.camera_contract->ToJson();
   torch::serialize::OutputArchive root, cnerf, renderer;
   m.modules.cnerf->save(cnerf);
@@ -197,13 +191,7 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
     const auto light = subj.at("light").get<std::vector<float>>();
     if (light.size() != 27) throw std::invalid_argument("light needs 27 values");
     std::copy(light.begin(), light.end(), s.light.begin());
-    const auto& k = subj.at("intrinsics");
-    s.intrinsics.fx = k.at("fx");
-    s.intrinsics.fy = k.at("fy");
-    s.intrinsics.cx = k.at("cx");
-    s.intrinsics.cy = k.at("cy");
-    s.intrinsics.width = k.at("width");
-    s.intrinsics.height = k.at("height");
+    s.intrinsics = CameraFromJson(subj.at("intrinsics"));
     CheckSubjectMatches(config, s, model);
     a.impl_->fingerprint = fingerprint;
     if (manifest.contains("camera")) a.impl_->camera_contract = CameraContract::FromJson(manifest.at("camera"));

@@ -72,6 +72,15 @@ std::string PinholeCamera::ToString() const {
   return s.str();
 }
 
+nlohmann::json CameraToJson(const PinholeCamera& k) {
+  return {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"width", k.width}, {"height", k.height}};
+}
+
+PinholeCamera CameraFromJson(const nlohmann::json& j) {
+  return PinholeCamera{j.at("fx").get<double>(), j.at("fy").get<double>(), j.at("cx").get<double>(),
+                       j.at("cy").get<double>(), j.at("width").get<int>(), j.at("height").get<int>()};
+}
+
 PinholeCamera ParseIntrinsics(const std::string& text, const std::string& flag) {
   PinholeCamera k;
   char end = 0;

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <string>
 
 namespace headcast {
@@ -32,6 +33,11 @@ struct PinholeCamera {
   void Check() const;  // throws std::invalid_argument naming what is wrong
   std::string ToString() const;
 };
+
+// {"fx", "fy", "cx", "cy", "width", "height"} in files (avatars, contracts).
+nlohmann::json CameraToJson(const PinholeCamera& camera);
+// Throws nlohmann's exception for a missing or mistyped field; the caller names the file.
+PinholeCamera CameraFromJson(const nlohmann::json& j);
 
 // "fx,fy,cx,cy" in pixels (a flag's value; `flag` names it in the error).
 // Width and height stay at their defaults: the frames say how big they are.

@@ -92,26 +92,13 @@ FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double
 }
 
 nlohmann::json CameraContract::ToJson() const {
-  return {{"source",
-           {{"fx", source.fx},
-            {"fy", source.fy},
-            {"cx", source.cx},
-            {"cy", source.cy},
-            {"width", source.width},
-            {"height", source.height}}},
-          {"crop", {{"x0", crop_x0}, {"y0", crop_y0}, {"side", crop_side}}}};
+  return {{"source", CameraToJson(source)}, {"crop", {{"x0", crop_x0}, {"y0", crop_y0}, {"side", crop_side}}}};
 }
 
 CameraContract CameraContract::FromJson(const nlohmann::json& j) {
   CameraContract c;
   try {
-    const auto& s = j.at("source");
-    c.source.fx = s.at("fx");
-    c.source.fy = s.at("fy");
-    c.source.cx = s.at("cx");
-    c.source.cy = s.at("cy");
-    c.source.width = s.at("width");
-    c.source.height = s.at("height");
+    c.source = CameraFromJson(j.at("source"));
     c.crop_x0 = j.at("crop").at("x0");
     c.crop_y0 = j.at("crop").at("y0");
     c.crop_side = j.at("crop").at("side");

@@ -10,22 +10,16 @@
 #include <mutex>
 #include <thread>
 
-#include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "receiver/receiver_sessions.h"
 #include "sender/session_client.h"
+#include "tests/integration/session_helpers.h"
 
 namespace headcast {
 namespace {
 
-const HeadModel& Model() {
-  static const HeadModel m = MakeBuiltinHead();
-  return m;
-}
-const CodecLayout& Layout() {
-  static const CodecLayout l = CodecLayout::FromModel(Model());
-  return l;
-}
+const HeadModel& Model() { return testing::SessionModel(); }
+const CodecLayout& Layout() { return testing::SessionLayout(); }
 
 ReceiverSessionOptions ReceiverOptions(int max_sessions = 4) {
   ReceiverSessionOptions o;
@@ -35,7 +29,7 @@ ReceiverSessionOptions ReceiverOptions(int max_sessions = 4) {
   return o;
 }
 
-std::map<std::string, AvatarEntry> Avatars() { return {{"demo", {Model().fingerprint(), Model().num_expression()}}}; }
+std::map<std::string, AvatarEntry> Avatars() { return testing::SessionAvatars(); }
 
 SenderOptions Options() {
   SenderOptions o;
@@ -48,14 +42,7 @@ SenderOptions Options() {
   return o;
 }
 
-bool WaitFor(const std::function<bool()>& condition, double seconds) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return condition();
-}
+using testing::WaitFor;
 
 // Each Open makes a channel pair and serves the receiver's end on its own
 // thread, as a transport adapter would. Break() cuts the current link.

@@ -9,25 +9,19 @@
 #include <limits>
 #include <thread>
 
-#include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
 #include "proto/headcast.grpc.pb.h"
 #include "proto/protocol.h"
 #include "receiver/session_server.h"
 #include "sender/session_client.h"
+#include "tests/integration/session_helpers.h"
 
 namespace headcast {
 namespace {
 
-const HeadModel& Model() {
-  static const HeadModel m = MakeBuiltinHead();
-  return m;
-}
-const CodecLayout& Layout() {
-  static const CodecLayout l = CodecLayout::FromModel(Model());
-  return l;
-}
+const HeadModel& Model() { return testing::SessionModel(); }
+const CodecLayout& Layout() { return testing::SessionLayout(); }
 
 ReceiverServerOptions ServerOptions(int port = 0) {
   ReceiverServerOptions o;
@@ -38,7 +32,7 @@ ReceiverServerOptions ServerOptions(int port = 0) {
   return o;
 }
 
-std::map<std::string, AvatarEntry> Avatars() { return {{"demo", {Model().fingerprint(), Model().num_expression()}}}; }
+std::map<std::string, AvatarEntry> Avatars() { return testing::SessionAvatars(); }
 
 SenderOptions ClientOptions(int port) {
   SenderOptions o;
@@ -66,14 +60,7 @@ struct Collector {
   }
 };
 
-bool WaitFor(const std::function<bool()>& condition, double seconds) {
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return condition();
-}
+using testing::WaitFor;
 
 class SessionTest : public ::testing::Test {
  protected:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # RGB-D tracking end to end: a rendered RGB-D sequence with known parameters
 # (headcast-headmodel render-rgbd) through headcast-track (dlib landmarks,
-# RGB-D fit, identity calibration), compared with the truth.
+# RGB-D fit, identity calibration), compared with the truth; then prepared as
+# a training dataset by headcast-train prep.
 set -u
 bin=$1 src=$2 python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
@@ -19,6 +20,12 @@ awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || ba
   --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/cmp.json" &&
   "$python" -c "import json,sys; j=json.load(open('$tmp/cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
   ok "head position within 10 mm, depth within 2 mm of the truth" || bad "truth: $(cat "$tmp/cmp.json")"
+# Prep takes every input the tracker takes: the RGB-D folder, tracked in-process.
+"$bin/headcast-train" prep --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --no-calibrate --resolutions 128 \
+  --test-frames 2 --out "$tmp/ds" > /dev/null 2> "$tmp/prep.log" &&
+  "$python" -c "import json,sys; j=json.load(open('$tmp/ds/dataset.json')); sys.exit(0 if j['frames_fitted'] == 12 and j['identity'].startswith('RGB-D') else 1)" &&
+  [ "$(ls "$tmp/ds/128/images" | wc -l)" = 12 ] && ok "prep on an RGB-D folder: 12 crops, identity from the depth" ||
+  bad "prep on RGB-D: $(tail -3 "$tmp/prep.log") $(cat "$tmp/ds/dataset.json" 2>/dev/null | head -5)"
 # Unreadable depth is a per-frame status.
 printf 'junk' > "$tmp/seq/depth/00003.png"
 "$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --max-frames 6 \

@@ -1,4 +1,4 @@
-#include "training/local_ranks.h"
+#include "common/core/local_ranks.h"
 
 #include <arpa/inet.h>
 #include <fcntl.h>

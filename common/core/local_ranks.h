@@ -1,8 +1,9 @@
-// Data parallel on one machine without four flags per process: this process
-// becomes rank 0 of N and starts ranks 1..N-1 as copies of itself on
-// loopback, each with one libtorch thread. On the 2-core machine two
-// single-threaded ranks train twice as many samples per second as one process
-// with two threads (libtorch's intra-op threads hardly help these small ops).
+// Copies of this program as the ranks of a data-parallel run on one machine:
+// this process becomes rank 0 of N and starts ranks 1..N-1 as copies of
+// itself, told their rank and a free loopback port, each with one compute
+// thread (headcast-train --processes N; on two cores two single-threaded
+// ranks beat one process with two threads: bench/DEFAULTS.md). Programs use
+// it; libraries never start processes.
 #pragma once
 
 #include <sys/types.h>

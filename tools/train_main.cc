@@ -8,8 +8,8 @@
 #include <iostream>
 #include <memory>
 
+#include "common/core/local_ranks.h"
 #include "common/core/log.h"
-#include "training/local_ranks.h"
 #include "training/run_report.h"
 #include "training/runs.h"
 
