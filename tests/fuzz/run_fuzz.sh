@@ -9,7 +9,8 @@ out=${2:-$root/build/fuzz}
 mkdir -p "$out/corpus"
 bin=$out/frame_decoder_fuzzer
 srcs=(tests/fuzz/frame_decoder_fuzzer.cc common/codec/param_codec.cc common/codec/bit_stream.cc
-      common/core/options.cc common/core/rotation.cc common/headmodel/head_model.cc common/headmodel/params.cc)
+      common/core/options.cc common/core/rotation.cc common/core/camera.cc common/headmodel/head_model.cc
+      common/headmodel/params.cc)
 newest=$(cd "$root" && ls -t "${srcs[@]}" | head -1)
 if [ ! -x "$bin" ] || [ "$root/$newest" -nt "$bin" ]; then
   (cd "$root" && clang++ -std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
