@@ -16,9 +16,9 @@ set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 python=${HEADCAST_PYTHON:-/usr/bin/python3}
 data=${HEADCAST_DATA:-$root/../shared/data}
-command="bench/before_after.sh $*"
 [ $# -ge 3 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 before=$(cd "$1" && pwd) after=$(cd "$2" && pwd) out=$3; shift 3
+command="bench/before_after.sh BEFORE_BIN AFTER_BIN OUT $*"  # no machine paths in what is written
 general="" iterations=2000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit
 while [ $# -gt 0 ]; do
   case $1 in

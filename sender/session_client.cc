@@ -81,7 +81,8 @@ struct SenderClient::Impl {
     }
     // Wait for Welcome or Reject (with a deadline: a silent receiver must not hang us).
     std::atomic<int> welcomed{0};  // 0 waiting, 1 welcomed, -1 refused/closed
-    // The reader is owned: joined below on every path (nothing in it throws).
+    // The reader is owned: joined on every path, an exception included (the
+    // guard cancels the stream first, so its Read returns).
     std::thread reader([&] {
       v1::Downlink d;
       while (stream.Read(&d)) {
@@ -124,6 +125,15 @@ struct SenderClient::Impl {
       counters.streaming = false;
       cv.notify_all();
     });
+    struct JoinReader {
+      UplinkChannel& stream;
+      std::thread& reader;
+      ~JoinReader() {
+        if (!reader.joinable()) return;
+        stream.Cancel();
+        reader.join();
+      }
+    } join_reader{stream, reader};
     {
       std::unique_lock<std::mutex> lock(mutex);
       cv.wait_for(lock, std::chrono::duration<double>(options.welcome_timeout_s),
@@ -242,7 +252,20 @@ SenderClient::SenderClient(SenderOptions options, CodecLayout layout, std::uniqu
 SenderClient::~SenderClient() { Stop("sender closed"); }
 
 void SenderClient::Start() {
-  if (!impl_->worker.joinable()) impl_->worker = std::thread([this] { impl_->Run(); });
+  if (impl_->worker.joinable()) return;
+  // Nothing may leave the worker as an exception (it would end the process):
+  // a failure is recorded and ends the streaming.
+  impl_->worker = std::thread([this] {
+    try {
+      impl_->Run();
+    } catch (const std::exception& e) {
+      impl_->SetError(std::string("sender stopped: ") + e.what());
+      spdlog::error("sender stopped: {}", e.what());
+      std::lock_guard<std::mutex> lock(impl_->mutex);
+      impl_->counters.streaming = false;
+      impl_->cv.notify_all();
+    }
+  });
 }
 
 void SenderClient::Submit(const FrameParams& frame) {

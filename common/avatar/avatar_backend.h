@@ -9,13 +9,32 @@
 
 #include <memory>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "common/core/options.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 
 namespace headcast {
+
+// What every avatar backend shares: the picture it makes and what it is
+// conditioned on. A backend's own configuration extends this (the CNeRF
+// backend's AvatarConfig); the camera and crop an avatar was trained with are
+// its CameraContract.
+struct AvatarCommonConfig {
+  int output_size = 256;  // output image edge, pixels: 128, 256 or 512
+  int num_shape = 12;     // beta components used
+  // psi components used: an upper bound that FitConfigToModel lowers to the
+  // model's count. Every component the tracker fits and the stream carries must
+  // condition the avatar: ICT-FaceKit's blendshapes are not ordered by variance,
+  // and its first 13 are brows, cheeks and eyes only — a prefix drops the mouth.
+  int num_expression = 64;
+  int num_texture = 5;  // tau components used
+  // Adds what is wrong to `check` (output size, component counts).
+  void CheckCommon(OptionsCheck* check) const;
+};
 
 // Milliseconds per stage of one frame (backends fill what applies to them).
 struct AvatarTimings {
@@ -37,10 +56,13 @@ class AvatarBackend {
   // with `why` for invalid parameters (NaN, out of range) and leaves the image alone.
   virtual bool Render(const FrameParams& params, cv::Mat* image_bgr, AvatarTimings* timings = nullptr,
                       std::string* why = nullptr) = 0;
-  virtual int output_size() const = 0;
+  virtual const AvatarCommonConfig& common_config() const = 0;
+  int output_size() const { return common_config().output_size; }
   virtual std::string kind() const = 0;
   // The person's constants (shape, texture, light) and the camera the avatar renders with.
   virtual const SubjectParams& subject() const = 0;
+  // The full frames' camera and crop the avatar was trained with, when known.
+  virtual std::optional<CameraContract> camera_contract() const { return std::nullopt; }
 };
 
 struct AvatarBackendOptions {

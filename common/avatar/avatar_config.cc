@@ -7,13 +7,18 @@
 
 namespace headcast {
 
+void AvatarCommonConfig::CheckCommon(OptionsCheck* c) const {
+  c->That(output_size == 128 || output_size == 256 || output_size == 512,
+          "output_size must be 128, 256 or 512 (got " + std::to_string(output_size) + ")");
+  c->InRange("num_shape", num_shape, 0, 400).InRange("num_expression", num_expression, 0, 400);
+  c->InRange("num_texture", num_texture, 0, 400);
+}
+
 void AvatarConfig::Check() const {
   OptionsCheck c("AvatarConfig");
-  c.That(output_size == 128 || output_size == 256 || output_size == 512,
-         "output_size must be 128, 256 or 512 (got " + std::to_string(output_size) + ")");
+  CheckCommon(&c);
   c.InRange("feature_channels", feature_channels, 3, 1024);
-  c.InRange("num_shape", num_shape, 0, 400).InRange("num_expression", num_expression, 0, 400);
-  c.InRange("num_texture", num_texture, 0, 400).InRange("pe_frequencies", pe_frequencies, 0, 16);
+  c.InRange("pe_frequencies", pe_frequencies, 0, 16);
   c.Positive("pe_scale", pe_scale).InRange("mlp_width", mlp_width, 8, 2048).InRange("mlp_layers", mlp_layers, 1, 16);
   c.That(skip_layer == -1 || (skip_layer >= 1 && skip_layer < mlp_layers),
          "skip_layer must be -1 or in [1, mlp_layers)");

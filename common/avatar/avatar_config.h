@@ -1,9 +1,11 @@
-// AvatarConfig: every size and switch of the neural avatar in one checked struct.
+// AvatarConfig: every size and switch of the CNeRF avatar backend in one checked struct.
 #pragma once
 
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "common/avatar/avatar_backend.h"
 
 namespace headcast {
 
@@ -12,18 +14,10 @@ enum class SamplingMode {
   kUniform,     // NeRF/HeadNeRF style: every ray, samples spread over a depth range
 };
 
-struct AvatarConfig {
-  // Output and feature map.
-  int output_size = 256;      // output image edge, pixels: 128, 256 or 512
+// The CNeRF backend's configuration: the shared part (output size,
+// conditioning sizes) and its own networks, sampling and speed switches.
+struct AvatarConfig : AvatarCommonConfig {
   int feature_channels = 48;  // channels of the CNeRF feature vector / feature map
-  // Conditioning sizes (must match the head model / subject).
-  int num_shape = 12;  // beta components used
-  // psi components used: an upper bound that FitConfigToModel lowers to the
-  // model's count. Every component the tracker fits and the stream carries must
-  // condition the avatar: ICT-FaceKit's blendshapes are not ordered by variance,
-  // and its first 13 are brows, cheeks and eyes only — a prefix drops the mouth.
-  int num_expression = 64;
-  int num_texture = 5;  // tau components used
   // CNeRF.
   int pe_frequencies = 6;  // positional-encoding octaves of xyz
   double pe_scale = 0.25;  // metres mapped to 1 before encoding (the head fits in +-1)

@@ -176,7 +176,8 @@ bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTim
   return true;
 }
 
-int AvatarRenderer::output_size() const { return impl_->avatar.config().output_size; }
+const AvatarCommonConfig& AvatarRenderer::common_config() const { return impl_->avatar.config(); }
+std::optional<CameraContract> AvatarRenderer::camera_contract() const { return impl_->avatar.camera_contract(); }
 const SubjectParams& AvatarRenderer::subject() const { return impl_->avatar.subject(); }
 
 }  // namespace headcast

@@ -27,9 +27,10 @@ class AvatarRenderer : public AvatarBackend {
   // with `why` for invalid parameters (NaN, out of range) and leaves the image alone.
   bool Render(const FrameParams& params, cv::Mat* image_bgr, AvatarTimings* timings = nullptr,
               std::string* why = nullptr) override;
-  int output_size() const override;
+  const AvatarCommonConfig& common_config() const override;
   std::string kind() const override { return kKind; }
   const SubjectParams& subject() const override;
+  std::optional<CameraContract> camera_contract() const override;
 
   const Avatar& avatar() const;
   const HeadModel& head_model() const;

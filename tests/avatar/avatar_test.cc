@@ -248,6 +248,50 @@ TEST_F(AvatarFileTest, RefusesOtherVersionsHeadModelsAndBrokenFiles) {
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
 }
 
+TEST_F(AvatarFileTest, TheBackendIsChosenByTheManifestsKind) {
+  const std::shared_ptr<const HeadModel> builtin = Builtin();
+  EXPECT_EQ(Avatar::ReadManifest(path_)["kind"], "cnerf");
+  std::unique_ptr<AvatarBackend> backend = OpenAvatarBackend(path_, builtin);
+  EXPECT_EQ(backend->kind(), "cnerf");
+  EXPECT_EQ(backend->output_size(), 128);
+  EXPECT_FALSE(backend->camera_contract());
+  cv::Mat image;
+  ASSERT_TRUE(backend->Render(Frontal(), &image));
+  EXPECT_EQ(image.size(), cv::Size(128, 128));
+  // Files written before the kind existed are CNeRF avatars.
+  const std::string old = WithManifest("old", [](nlohmann::json* m) { m->erase("kind"); });
+  EXPECT_EQ(OpenAvatarBackend(old, builtin)->kind(), "cnerf");
+  const std::string gaussian = WithManifest("gaussian", [](nlohmann::json* m) { (*m)["kind"] = "gaussians"; });
+  try {
+    OpenAvatarBackend(gaussian, builtin);
+    ADD_FAILURE() << "an unknown backend was opened";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("'gaussians' is not in this build (it has: cnerf)"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_NE(LoadError(gaussian, *Builtin()).find("not a CNeRF one"), std::string::npos);
+}
+
+TEST_F(AvatarFileTest, TheCameraContractTravelsWithTheAvatar) {
+  Avatar a = Avatar::Load(path_, *Builtin());
+  CameraContract c;
+  c.source = PinholeCamera{640, 640, 319.5, 239.5, 640, 480};
+  c.crop_x0 = 120;
+  c.crop_y0 = 10;
+  c.crop_side = 380;
+  a.set_camera_contract(c);
+  const std::string with = dir_ + "/contract.hcavatar";
+  a.Save(with);
+  const Avatar back = Avatar::Load(with, *Builtin());
+  ASSERT_TRUE(back.camera_contract());
+  EXPECT_EQ(back.camera_contract()->source.fx, 640);
+  EXPECT_EQ(back.camera_contract()->crop_side, 380);
+  const std::string broken = WithManifest("badcam", [&](nlohmann::json* m) {
+    (*m)["camera"] = {{"crop", {{"x0", 1}}}};
+  });
+  EXPECT_NE(LoadError(broken, *Builtin()).find("camera contract"), std::string::npos) << LoadError(broken, *Builtin());
+}
+
 // A model with many blendshapes (ICT-FaceKit has 53, named, not ordered by
 // variance): the avatar must be conditioned on all of them, so that the last
 // one (a mouth shape in ICT) still changes what it renders.

@@ -40,12 +40,17 @@ class FakeBackend : public AvatarBackend {
     if (timings) timings->total_ms = 1;
     return true;
   }
-  int output_size() const override { return 64; }
+  const AvatarCommonConfig& common_config() const override { return config_; }
   std::string kind() const override { return "fake"; }
   const SubjectParams& subject() const override { return subject_; }
 
  private:
   SubjectParams subject_;
+  AvatarCommonConfig config_ = [] {
+    AvatarCommonConfig c;
+    c.output_size = 64;
+    return c;
+  }();
 };
 
 class RenderLoopTest : public ::testing::Test {
