@@ -19,16 +19,9 @@ data=${HEADCAST_DATA:-$root/../shared/data}
 [ $# -ge 3 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 before=$(cd "$1" && pwd) after=$(cd "$2" && pwd) out=$3; shift 3
 command="bench/before_after.sh BEFORE_BIN AFTER_BIN OUT $*"  # no machine paths in what is written
-general="" iterations=2000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit
-while [ $# -gt 0 ]; do
-  case $1 in
-    --general) general=$2; shift 2 ;;
-    --iterations) iterations=$2; shift 2 ;;
-    --video) video=$2; shift 2 ;;
-    --ict) ict=$2; shift 2 ;;
-    *) echo "before_after: unknown option $1" >&2; exit 2 ;;
-  esac
-done
+iterations=2000 name=before_after
+source "$root/bench/person_args.sh"
+parse_person_args "$@"
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 step() { echo "== $*" >&2; }

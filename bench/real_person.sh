@@ -18,18 +18,9 @@ data=${HEADCAST_DATA:-$root/../shared/data}
 command="bench/real_person.sh $*"
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
-general="" iterations=10000 video=$data/video/talking_d9.mp4 ict=$data/head-models/ict-facekit test_frames=150
-while [ $# -gt 0 ]; do
-  case $1 in
-    --general) general=$2; shift 2 ;;
-    --iterations) iterations=$2; shift 2 ;;
-    --video) video=$2; shift 2 ;;
-    --ict) ict=$2; shift 2 ;;
-    *) echo "real_person: unknown option $1" >&2; exit 2 ;;
-  esac
-done
-[ -f "$video" ] || { echo "real_person: no video $video" >&2; exit 2; }
-[ -d "$ict" ] || { echo "real_person: no ICT-FaceKit folder $ict" >&2; exit 2; }
+test_frames=150 iterations=10000 name=real_person
+source "$root/bench/person_args.sh"
+parse_person_args "$@"
 mkdir -p "$out" "$root/bench/results"
 out=$(cd "$out" && pwd)
 step() { echo "== $*" >&2; }

@@ -130,8 +130,7 @@ nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
 
 int Run(ReceiverFlags& f) {
   InitLogging(f.log_level);
-  std::signal(SIGINT, [](int) { g_stop = true; });
-  std::signal(SIGTERM, [](int) { g_stop = true; });
+  StopOnSignals(&g_stop);
   if (!f.token_file.empty()) {
     std::istringstream in(ReadFileBytes(f.token_file));
     for (std::string line; std::getline(in, line);)

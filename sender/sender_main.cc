@@ -201,8 +201,7 @@ nlohmann::json Report(const SenderCounters& c, double seconds) {
 
 int Run(SenderFlags& f) {
   InitLogging(f.log_level);
-  std::signal(SIGINT, [](int) { g_stop = true; });
-  std::signal(SIGTERM, [](int) { g_stop = true; });
+  StopOnSignals(&g_stop);
   SenderOptions& o = f.session;
   const HeadModel model = LoadHeadModelSpec(f.head_model);
   std::vector<FrameParams> frames;

@@ -5,10 +5,20 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
 #include <exception>
 #include <functional>
 
 namespace headcast {
+
+// SIGINT and SIGTERM set `*stop` (a program's loops poll it and end cleanly).
+inline void StopOnSignals(std::atomic<bool>* stop) {
+  static std::atomic<bool>* flag = nullptr;
+  flag = stop;
+  std::signal(SIGINT, [](int) { *flag = true; });
+  std::signal(SIGTERM, [](int) { *flag = true; });
+}
 
 inline int RunProgram(CLI::App& app, int argc, char** argv, const std::function<int()>& run) {
   try {

@@ -31,6 +31,9 @@ token = "s3cret"
 avatar-id = "demo"
 synthetic = 60
 record = "$tmp/sent.hcrec"
+# Every frame must arrive: a loaded machine takes long over the TLS handshake,
+# and the product's 16-frame queue would drop the first frames meanwhile.
+queue = 120
 TOML
 "$bin/headcast-sender" --config "$tmp/sender.toml" > "$tmp/sender.json" 2> "$tmp/sender.log" \
   && grep -q '"frames_sent": 60' "$tmp/sender.json" && ok "sender streams 60 frames over TLS (config file)" || bad "sender: $(cat "$tmp/sender.log")"
