@@ -84,3 +84,6 @@ if pretrain:
 open(os.path.join(res, "real_person.md"), "w").write("\n".join(L) + "\n")
 print(json.dumps(result, indent=2))
 EOF
+# Committed results name no path of this machine.
+"$python" "$root/bench/strip_machine_paths.py" --root "$root" --data "$data" "$root/bench/results/real_person.json" \
+  "$root/bench/results/real_person.md"

@@ -85,4 +85,6 @@ else
   echo '{"skipped": "give --dataset and --avatar"}' > "$res/x264.json"
 fi
 "$python" "$root/bench/make_report.py" --results "$res" --command "$command" --out "$root/bench/REPORT.md"
+# Committed results name no path of this machine.
+"$python" "$root/bench/strip_machine_paths.py" --root "$root" --data "$data" "$res" "$root/bench/REPORT.md"
 echo "wrote $root/bench/REPORT.md"
