@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "common/codec/param_codec.h"
+#include "common/core/log.h"
 #include "common/core/options.h"
 #include "proto/convert.h"
 #include "proto/protocol.h"
@@ -26,6 +27,9 @@ void ReceiverSessionOptions::Check() const {
 }
 
 namespace {
+
+// The most bytes of a peer's text a Reject or a log line repeats.
+constexpr size_t kMaxEchoBytes = 300;
 
 // Constant-time comparison, so response times do not reveal a token's prefix.
 bool SameToken(const std::string& a, const std::string& b) {
@@ -107,12 +111,14 @@ SessionEnd ReceiverSessions::Reject(DownlinkChannel& channel, int reason, const 
     std::lock_guard<std::mutex> lock(mutex_);
     ++counters_.sessions_rejected;  // before the reply, so whoever reads it sees the count
   }
+  // What goes back and into the log is bounded: a huge Hello must not come back huge.
+  const std::string bounded = Printable(message, kMaxEchoBytes);
   v1::Downlink d;
   d.mutable_reject()->set_reason(static_cast<v1::Reject::Reason>(reason));
-  d.mutable_reject()->set_message(message);
+  d.mutable_reject()->set_message(bounded);
   channel.Write(d);
-  spdlog::info("session rejected: {}", message);
-  return {code, message};
+  spdlog::info("session rejected: {}", bounded);
+  return {code, bounded};
 }
 
 SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
@@ -142,8 +148,8 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   }
   auto avatar = avatars_.find(hello.avatar_id());
   if (avatar == avatars_.end())
-    return Reject(channel, v1::Reject::UNKNOWN_AVATAR, "no avatar '" + hello.avatar_id() + "' on this receiver",
-                  SessionEndCode::kNotFound);
+    return Reject(channel, v1::Reject::UNKNOWN_AVATAR,
+                  "no avatar '" + Printable(hello.avatar_id()) + "' on this receiver", SessionEndCode::kNotFound);
   CodecLayout layout;
   std::string why;
   if (!FromProto(hello.layout(), &layout, &why))
@@ -151,7 +157,7 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   if (layout.num_expression != avatar->second.num_expression)
     return Reject(channel, v1::Reject::BAD_LAYOUT,
                   "layout has " + std::to_string(layout.num_expression) + " expression components, avatar '" +
-                      hello.avatar_id() + "' has " + std::to_string(avatar->second.num_expression),
+                      Printable(hello.avatar_id()) + "' has " + std::to_string(avatar->second.num_expression),
                   SessionEndCode::kInvalidArgument);
   Session session(channel);
   SessionView& view = session.view;
@@ -162,7 +168,7 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
     if (!busy) {
       view.id = "s" + std::to_string(next_id_++);
       view.avatar_id = hello.avatar_id();
-      view.sender_name = hello.sender_name();
+      view.sender_name = Printable(hello.sender_name());  // shown in the window's overlay too
       JitterBufferOptions jb;
       jb.target_delay_s = options_.target_delay_s;
       view.buffer = std::make_shared<JitterBuffer>(jb);
@@ -175,7 +181,8 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   if (busy)
     return Reject(channel, v1::Reject::BUSY, "receiver busy (" + std::to_string(options_.max_sessions) + " sessions)",
                   SessionEndCode::kResourceExhausted);
-  spdlog::info("session {} started: avatar '{}', sender '{}'", view.id, view.avatar_id, view.sender_name);
+  spdlog::info("session {} started: avatar '{}', sender '{}'", view.id, Printable(view.avatar_id),
+               Printable(view.sender_name));
   SessionEnd end;
   try {
     end = Stream(session, layout, stats_interval_s);
@@ -234,7 +241,7 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
   v1::Uplink up;
   while (session.channel.Read(&up)) {
     if (up.has_bye()) {
-      spdlog::info("session {}: bye ({})", view.id, up.bye().reason());
+      spdlog::info("session {}: bye ({})", view.id, Printable(up.bye().reason()));
       break;
     }
     if (!up.has_frames()) {
@@ -244,8 +251,17 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
     }
     session.bytes += up.frames().payload().size();
     std::string error;
+    const double first_capture = up.frames().first_capture_time_s();
     if (!UnpackPackets(up.frames().payload(), &packets, &error)) {
       ++session.bad;
+    } else if (packets.size() != up.frames().count()) {
+      error = "the message says " + std::to_string(up.frames().count()) + " frames and carries " +
+              std::to_string(packets.size());
+      ++session.bad;
+    } else if (!std::isfinite(first_capture) || std::abs(first_capture) > 1e12) {
+      // One absurd time would shift every later frame of the batch out of the jitter buffer's window.
+      error = "first_capture_time_s is not a time";
+      session.bad += packets.size();
     } else {
       std::optional<double> batch_shift;  // relative (decoded) -> sender's absolute clock
       for (const auto& packet : packets) {
@@ -254,8 +270,8 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
           ++session.bad;
           continue;
         }
-        if (up.frames().first_capture_time_s() > 0) {
-          if (!batch_shift) batch_shift = up.frames().first_capture_time_s() - f.capture_time_s;
+        if (first_capture > 0) {
+          if (!batch_shift) batch_shift = first_capture - f.capture_time_s;
           f.capture_time_s += *batch_shift;
           // Same host (netlab, loopback tests): the clocks agree and arrival latency is meaningful.
           const double latency = SteadyNowSeconds() - f.capture_time_s;

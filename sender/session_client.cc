@@ -20,7 +20,7 @@ namespace headcast {
 void SenderOptions::Check() const {
   OptionsCheck c("SenderOptions");
   c.NotEmpty("target", target).NotEmpty("avatar_id", avatar_id).Positive("fps", fps);
-  c.InRange("queue_frames", queue_frames, 1, 100000).InRange("max_batch", max_batch, 1, 1000);
+  c.InRange("queue_frames", queue_frames, 1, 100000).InRange("max_batch", max_batch, 1, kMaxPacketsPerMessage);
   c.NonNegative("min_send_interval_s", min_send_interval_s).Positive("reconnect_initial_s", reconnect_initial_s);
   c.That(reconnect_max_s >= reconnect_initial_s, "reconnect_max_s must be >= reconnect_initial_s");
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);

@@ -227,13 +227,21 @@ std::string PackPackets(const std::vector<std::string>& packets) {
   return out;
 }
 
-bool UnpackPackets(const std::string& payload, std::vector<std::string>* packets, std::string* why) {
+bool UnpackPackets(const std::string& payload, std::vector<std::string>* packets, std::string* why, int max_packets) {
   packets->clear();
   size_t pos = 0;
   while (pos < payload.size()) {
     uint64_t len = 0;
     if (!GetVarint(payload, &pos, &len) || len > payload.size() - pos) {
       if (why) *why = "truncated or corrupt frame batch";
+      packets->clear();
+      return false;
+    }
+    if (len == 0 || static_cast<int>(packets->size()) >= max_packets) {
+      if (why)
+        *why = len == 0 ? "an empty packet in the frame batch"
+                        : "more than " + std::to_string(max_packets) + " packets in one message";
+      packets->clear();
       return false;
     }
     packets->push_back(payload.substr(pos, len));

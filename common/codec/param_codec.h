@@ -74,6 +74,15 @@ class ParamDecoder {
 
 // Several packets in one message: varint length + bytes each.
 std::string PackPackets(const std::vector<std::string>& packets);
-bool UnpackPackets(const std::string& payload, std::vector<std::string>* packets, std::string* why);
+
+// The most packets one message may carry (the sender's max_batch is at most this).
+constexpr int kMaxPacketsPerMessage = 1000;
+
+// Splits a message's payload. Refuses, saying why: a truncated or corrupt
+// length, an empty packet (no coded frame is empty), more than `max_packets`
+// packets — before anything is stored for them, so a message of tiny packets
+// cannot multiply into memory.
+bool UnpackPackets(const std::string& payload, std::vector<std::string>* packets, std::string* why,
+                   int max_packets = kMaxPacketsPerMessage);
 
 }  // namespace headcast

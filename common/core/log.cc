@@ -7,6 +7,14 @@
 #include <stdexcept>
 
 namespace headcast {
+
+std::string Printable(const std::string& text, size_t max_bytes) {
+  std::string out = text.substr(0, max_bytes);
+  for (char& c : out)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  if (text.size() > max_bytes) out += "...(" + std::to_string(text.size() - max_bytes) + " more bytes)";
+  return out;
+}
 void InitLogging(const std::string& level_name) {
   std::string name = level_name;
   if (name.empty()) {

@@ -160,6 +160,13 @@ TEST(ParamCodec, GarbageTruncationAndOutOfRangeAreRefused) {
   EXPECT_FALSE(UnpackPackets(std::string("\x05\x01", 2), &packets, &why));
   ASSERT_TRUE(UnpackPackets(PackPackets({good, good}), &packets, &why));
   EXPECT_EQ(packets.size(), 2u);
+  // A megabyte of empty packets is refused at the first one, storing nothing.
+  EXPECT_FALSE(UnpackPackets(std::string(1 << 20, '\0'), &packets, &why));
+  EXPECT_NE(why.find("empty packet"), std::string::npos) << why;
+  EXPECT_TRUE(packets.empty());
+  EXPECT_FALSE(UnpackPackets(PackPackets(std::vector<std::string>(11, good)), &packets, &why, 10));
+  EXPECT_NE(why.find("more than 10 packets"), std::string::npos) << why;
+  EXPECT_TRUE(UnpackPackets(PackPackets(std::vector<std::string>(10, good)), &packets, &why, 10));
 }
 
 }  // namespace

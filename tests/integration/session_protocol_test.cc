@@ -7,10 +7,13 @@
 #include <atomic>
 #include <chrono>
 #include <functional>
+#include <limits>
 #include <mutex>
 #include <thread>
 
 #include "common/headmodel/synthetic_motion.h"
+#include "proto/convert.h"
+#include "proto/protocol.h"
 #include "receiver/receiver_sessions.h"
 #include "sender/session_client.h"
 #include "tests/integration/session_helpers.h"
@@ -231,6 +234,92 @@ TEST(SessionProtocol, ANarrowLinkBatchesFramesWithinTheBudget) {
   EXPECT_LT(wire_kbps, 1.3 * o.max_kbps) << "paced to the budget";
   EXPECT_EQ(n.submitted, 90u);
   EXPECT_GT(n.sent, 45u) << "the budget carries 30 fps in batches";
+}
+
+// A hand-driven session: Hello, then whatever the test writes; the receiver
+// serves it on its own thread.
+struct RawSession {
+  RawSession(ReceiverSessions& receiver, v1::Uplink hello) : pair(MakeInMemoryChannelPair("secret-token")) {
+    serve = std::thread([this, &receiver] {
+      end = receiver.Serve(*pair.receiver);
+      pair.receiver->CloseWrites();
+    });
+    pair.sender->Write(hello);
+    pair.sender->Read(&first_reply);
+  }
+  ~RawSession() {
+    pair.sender->CloseWrites();
+    serve.join();
+  }
+  static v1::Uplink Hello(const std::string& avatar = "demo", const std::string& name = "raw") {
+    v1::Uplink u;
+    u.mutable_hello()->set_protocol_version(kProtocolVersion);
+    u.mutable_hello()->set_avatar_id(avatar);
+    u.mutable_hello()->set_sender_name(name);
+    ToProto(Layout(), 30, u.mutable_hello()->mutable_layout());
+    return u;
+  }
+  // The next Error the receiver sends back.
+  std::string NextError() {
+    v1::Downlink d;
+    while (pair.sender->Read(&d))
+      if (d.has_error()) return d.error().message();
+    return "(stream ended)";
+  }
+  InMemoryChannelPair pair;
+  v1::Downlink first_reply;
+  SessionEnd end;
+  std::thread serve;
+};
+
+TEST(SessionProtocol, EmptyPacketsWrongCountsAndAbsurdTimesAreRefused) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Collector got;
+  receiver.SetFrameObserver([&](const std::string&, const FrameParams& f) {
+    std::lock_guard<std::mutex> lock(got.mutex);
+    got.frames.push_back(f);
+  });
+  RawSession raw(receiver, RawSession::Hello());
+  ASSERT_TRUE(raw.first_reply.has_welcome());
+  ParamEncoder encoder(Layout());
+  const std::string good = encoder.Encode(SyntheticTalkingHead(Model(), 0));
+  auto frames = [](const std::string& payload, uint32_t count, double first_capture = 0) {
+    v1::Uplink u;
+    u.mutable_frames()->set_payload(payload);
+    u.mutable_frames()->set_count(count);
+    u.mutable_frames()->set_first_capture_time_s(first_capture);
+    return u;
+  };
+  // A megabyte of zero-length packets: refused as a whole, nothing stored for them.
+  raw.pair.sender->Write(frames(std::string(1 << 20, '\0'), 1 << 20));
+  EXPECT_NE(raw.NextError().find("empty packet"), std::string::npos);
+  raw.pair.sender->Write(frames(PackPackets({good}), 3));
+  EXPECT_NE(raw.NextError().find("says 3 frames and carries 1"), std::string::npos);
+  raw.pair.sender->Write(frames(PackPackets({good}), 1, std::numeric_limits<double>::infinity()));
+  EXPECT_NE(raw.NextError().find("not a time"), std::string::npos);
+  raw.pair.sender->Write(frames(PackPackets({good}), 1, 1e300));
+  EXPECT_NE(raw.NextError().find("not a time"), std::string::npos);
+  EXPECT_EQ(got.size(), 0u);
+  // The session goes on: a good frame is taken.
+  raw.pair.sender->Write(frames(PackPackets({good}), 1));
+  EXPECT_TRUE(WaitFor([&] { return got.size() == 1; }, 5));
+}
+
+TEST(SessionProtocol, WhatARejectOrALogLineRepeatsIsBounded) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  const std::string huge = std::string(100000, 'x') + "\nforged log line";
+  RawSession unknown(receiver, RawSession::Hello(huge));
+  ASSERT_TRUE(unknown.first_reply.has_reject());
+  const std::string& message = unknown.first_reply.reject().message();
+  EXPECT_LT(message.size(), 400u) << "a 100 kB avatar id comes back bounded";
+  EXPECT_EQ(message.find('\n'), std::string::npos);
+  EXPECT_NE(message.find("more bytes"), std::string::npos) << message;
+  RawSession named(receiver, RawSession::Hello("demo", "evil\nname" + std::string(5000, 'y')));
+  ASSERT_TRUE(named.first_reply.has_welcome());
+  ASSERT_EQ(receiver.Sessions().size(), 1u);
+  const std::string shown = receiver.Sessions()[0].sender_name;
+  EXPECT_LT(shown.size(), 100u);
+  EXPECT_EQ(shown.rfind("evil?name", 0), 0u) << shown;
 }
 
 TEST(SessionProtocol, AFailingObserverEndsOnlyItsSession) {

@@ -225,10 +225,12 @@ TEST_F(SessionTest, BadFramesAreRefusedAndTheSessionGoesOn) {
        {PackPackets({good}).substr(0, 4), std::string("\x07garbage", 8), PackPackets({far_encoder.Encode(far)})}) {
     v1::Uplink u;
     u.mutable_frames()->set_payload(payload);
+    u.mutable_frames()->set_count(1);
     ASSERT_TRUE(raw->stream->Write(u));
   }
   v1::Uplink u;
   u.mutable_frames()->set_payload(PackPackets({good}));
+  u.mutable_frames()->set_count(1);
   ASSERT_TRUE(raw->stream->Write(u));
   ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 1; }, 5));
   int errors = 0;
