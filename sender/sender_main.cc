@@ -116,8 +116,10 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     f.live.contract = ReadAvatarCameraContract(f.identity_from);
   }
   if (!f.intrinsics.empty()) f.live.camera = ParseIntrinsics(f.intrinsics, "--intrinsics");
-  auto source = OpenFrameSource(f.input, f.source);
+  // The tracker first: a camera's clock (and a paced file's) starts at open,
+  // and loading the landmark model must not make the first frames late.
   LiveTracker tracker(model, f.live);
+  auto source = OpenFrameSource(f.input, f.source);
   clock.Restart();  // the stream's time starts once the tracker is ready
   SampleStats landmarks_ms, fit_ms, read_ms;
   int read = 0, fitted = 0, skipped = 0;

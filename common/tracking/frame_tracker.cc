@@ -88,8 +88,6 @@ FrameTracker::FrameTracker(const HeadModel& model, const FrameTrackerOptions& op
       options_((options.Check(), options)),
       faces_(options.face),
       fitter_(model, options.fit),
-      rgbd_calibrating_(model, RgbdOptions(true)),
-      rgbd_(model, RgbdOptions(false)),
       identity_(Eigen::VectorXd::Zero(model.num_shape())) {
   last_.cam_translation.setZero();  // cold start
 }
@@ -99,8 +97,17 @@ FrameTracker::~FrameTracker() = default;
 void FrameTracker::SetIdentity(const Eigen::VectorXd& shape, bool frozen) {
   identity_ = shape;
   fitter_.SetIdentity(shape);
-  rgbd_.SetIdentity(shape);
+  if (rgbd_) rgbd_->SetIdentity(shape);
   identity_frozen_ = frozen;
+}
+
+RgbdFitter& FrameTracker::Rgbd(bool calibrating) {
+  std::unique_ptr<RgbdFitter>& fitter = calibrating ? rgbd_calibrating_ : rgbd_;
+  if (!fitter) {
+    fitter = std::make_unique<RgbdFitter>(model_, RgbdOptions(calibrating));
+    if (!calibrating) fitter->SetIdentity(identity_);
+  }
+  return *fitter;
 }
 
 void FrameTracker::Reset() {
@@ -125,8 +132,8 @@ bool FrameTracker::FreezeRgbdIdentity() {
 }
 
 RgbdFitResult FrameTracker::RefitRgbd(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
-                                      const RgbdFitResult* previous) const {
-  return rgbd_.Fit(landmarks, depth_m, camera, previous && previous->ok ? previous : nullptr);
+                                      const RgbdFitResult* previous) {
+  return Rgbd(false).Fit(landmarks, depth_m, camera, previous && previous->ok ? previous : nullptr);
 }
 
 TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
@@ -139,9 +146,9 @@ TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, dou
   if (r.face.status != FaceStatus::kNoFace && !depth_m.empty()) {
     // RGB-D (METHOD §3): the shape is fitted on the first frames, then frozen at their median.
     r.with_depth = true;
-    const RgbdFitResult fit = identity_frozen_
-                                  ? rgbd_.Fit(r.face.landmarks, depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
-                                  : rgbd_calibrating_.Fit(r.face.landmarks, depth_m, camera);
+    const RgbdFitResult fit =
+        identity_frozen_ ? Rgbd(false).Fit(r.face.landmarks, depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
+                         : Rgbd(true).Fit(r.face.landmarks, depth_m, camera);
     if (fit.ok) {
       ApplyRgbdFit(fit, &last_);
       r.fitted = true;

@@ -6,6 +6,7 @@
 // come from the same rule.
 #pragma once
 
+#include <memory>
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
@@ -63,7 +64,7 @@ class FrameTracker {
   // RGB-D: fits `landmarks` and `depth_m` again with the frozen identity,
   // warm from `previous` when given (frames held during identity calibration).
   RgbdFitResult RefitRgbd(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
-                          const RgbdFitResult* previous) const;
+                          const RgbdFitResult* previous);
 
   // RGB-D: freezes the identity at the median of the shapes collected so far
   // (an input shorter than rgbd_identity_frames); false when there are none.
@@ -80,7 +81,10 @@ class FrameTracker {
   FrameTrackerOptions options_;
   FaceTracker faces_;
   HeadFitter fitter_;
-  RgbdFitter rgbd_calibrating_, rgbd_;
+  // Made at the first frame with depth: their bases are large (ICT-FaceKit:
+  // ~100 MB each), and colour-only tracking never needs them.
+  RgbdFitter& Rgbd(bool calibrating);
+  std::unique_ptr<RgbdFitter> rgbd_calibrating_, rgbd_;
   Eigen::VectorXd identity_;
   bool identity_frozen_ = false;
   std::vector<Eigen::VectorXd> calibration_shapes_;

@@ -145,7 +145,7 @@ struct HeldFrame {
   FrameParams params;  // sequence and time
 };
 
-void RefitHeld(const FrameTracker& tracker, const PinholeCamera& camera, std::vector<HeldFrame>* held,
+void RefitHeld(FrameTracker& tracker, const PinholeCamera& camera, std::vector<HeldFrame>* held,
                std::vector<FrameParams>* out) {
   spdlog::info("identity frozen from {} RGB-D frames", held->size());
   RgbdFitResult previous;

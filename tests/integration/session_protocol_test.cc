@@ -105,7 +105,14 @@ struct Client {
   std::unique_ptr<SenderClient> client;
 };
 
+// Keeps every frame `receiver` decodes.
 struct Collector {
+  explicit Collector(ReceiverSessions& receiver) {
+    receiver.SetFrameObserver([this](const std::string&, const FrameParams& f) {
+      std::lock_guard<std::mutex> lock(mutex);
+      frames.push_back(f);
+    });
+  }
   std::mutex mutex;
   std::vector<FrameParams> frames;
   size_t size() {
@@ -116,11 +123,7 @@ struct Collector {
 
 TEST(SessionProtocol, FramesArriveInOrderAndStatsComeBack) {
   ReceiverSessions receiver(ReceiverOptions(), Avatars());
-  Collector got;
-  receiver.SetFrameObserver([&](const std::string&, const FrameParams& f) {
-    std::lock_guard<std::mutex> lock(got.mutex);
-    got.frames.push_back(f);
-  });
+  Collector got(receiver);
   Client c(receiver, "secret-token");
   c.client->Start();
   ASSERT_TRUE(c.client->WaitStreaming(5)) << c.client->counters().last_error;
@@ -274,11 +277,7 @@ struct RawSession {
 
 TEST(SessionProtocol, EmptyPacketsWrongCountsAndAbsurdTimesAreRefused) {
   ReceiverSessions receiver(ReceiverOptions(), Avatars());
-  Collector got;
-  receiver.SetFrameObserver([&](const std::string&, const FrameParams& f) {
-    std::lock_guard<std::mutex> lock(got.mutex);
-    got.frames.push_back(f);
-  });
+  Collector got(receiver);
   RawSession raw(receiver, RawSession::Hello());
   ASSERT_TRUE(raw.first_reply.has_welcome());
   ParamEncoder encoder(Layout());
