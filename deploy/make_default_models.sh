@@ -44,5 +44,7 @@ echo "== 4. subject fine-tune (256 px, $subject_iterations steps)"
   --eval-csv "$out/demo/eval.csv" --plots "$out/demo" --preview "$out/demo/preview.png" \
   --report "$out/demo/report.json" --checkpoint-dir "$work/ckpt_subject" --out "$out/demo_avatar.hcavatar" > /dev/null
 
+# Shipped reports name no path of this machine.
+/usr/bin/python3 "$here/bench/strip_machine_paths.py" --root "$here" "$out/demo" "$out/general"
 du -sh "$out"
 echo "wrote $out/builtin_general.hcavatar and $out/demo_avatar.hcavatar (reports beside them)"
