@@ -181,8 +181,8 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   if (busy)
     return Reject(channel, v1::Reject::BUSY, "receiver busy (" + std::to_string(options_.max_sessions) + " sessions)",
                   SessionEndCode::kResourceExhausted);
-  spdlog::info("session {} started: avatar '{}', sender '{}'", view.id, Printable(view.avatar_id),
-               Printable(view.sender_name));
+  // Both are safe to log: the avatar id is one of ours, the name was made printable above.
+  spdlog::info("session {} started: avatar '{}', sender '{}'", view.id, view.avatar_id, view.sender_name);
   SessionEnd end;
   try {
     end = Stream(session, layout, stats_interval_s);

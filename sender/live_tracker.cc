@@ -22,7 +22,7 @@ std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOpti
 }
 
 LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& options)
-    : options_(options), tracker_(model, options.tracker), camera_(options.camera) {
+    : options_(options), tracker_(model, options.tracker) {
   if (options.identity.size() > 0) tracker_.SetIdentity(options.identity);
 }
 

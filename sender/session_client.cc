@@ -128,11 +128,12 @@ struct SenderClient::Impl {
     struct JoinReader {
       UplinkChannel& stream;
       std::thread& reader;
-      ~JoinReader() {
+      void Join() {
         if (!reader.joinable()) return;
         stream.Cancel();
         reader.join();
       }
+      ~JoinReader() { Join(); }
     } join_reader{stream, reader};
     {
       std::unique_lock<std::mutex> lock(mutex);
@@ -206,8 +207,7 @@ struct SenderClient::Impl {
       stream.Write(bye);
     }
     stream.CloseWrites();
-    stream.Cancel();
-    reader.join();
+    join_reader.Join();
     const std::string ended = stream.Finish();
     if (!ended.empty() && !stop) SetError(ended);
   }

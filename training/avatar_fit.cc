@@ -377,39 +377,32 @@ TrainResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData
 
 namespace {
 
-// Renders `frame` as the receiver shows it (RenderAvatarFrame: the same
-// preparation, networks and 8-bit picture) and scores that picture against
-// `target_bgr`; adds the figures to `r`.
-class Scorer {
+// Frames of an avatar as the receiver shows them (RenderAvatarFrame: the same
+// preparation, networks and 8-bit picture), its buffers reused frame to frame.
+class ShownFrames {
  public:
-  Scorer(Avatar& avatar, const HeadModel& model, const SubjectParams& subject)
-      : avatar_(avatar),
-        model_(model),
-        subject_(subject),
-        sampler_(avatar.config()),
-        identity_(model.MakeIdentity(subject.shape.cast<double>())) {}
-  cv::Mat Score(const FrameParams& frame, const cv::Mat& target_bgr, SampleStats* ms, EvalResult* r) {
-    Stopwatch watch;
+  explicit ShownFrames(Avatar& avatar) : avatar_(avatar), sampler_(avatar.config()) {}
+  cv::Mat Render(const HeadModel& model, const HeadIdentity& identity, const SubjectParams& subject,
+                 const FrameParams& frame) {
     cv::Mat bgr;
-    RenderAvatarFrame(avatar_.modules(), avatar_.config(), model_, identity_, subject_, frame, &sampler_, &buffers_,
-                      &bgr);
-    ms->Add(watch.ElapsedMs());
-    const torch::Tensor shown = BgrToImageTensor(bgr), target = BgrToImageTensor(target_bgr);
-    const double mse = torch::mse_loss(shown, target).item<double>();
-    r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
-    r->ssim.push_back(Ssim(shown, target).item<double>());
-    r->mse_mean += mse;
+    RenderAvatarFrame(avatar_.modules(), avatar_.config(), model, identity, subject, frame, &sampler_, &buffers_, &bgr);
     return bgr;
   }
 
  private:
   Avatar& avatar_;
-  const HeadModel& model_;
-  const SubjectParams& subject_;
   RaySampler sampler_;
-  HeadIdentity identity_;
   AvatarFrameInputs buffers_;
 };
+
+// Adds the figures of the shown picture against its target to `r`.
+void Score(const cv::Mat& shown_bgr, const cv::Mat& target_bgr, EvalResult* r) {
+  const torch::Tensor shown = BgrToImageTensor(shown_bgr), target = BgrToImageTensor(target_bgr);
+  const double mse = torch::mse_loss(shown, target).item<double>();
+  r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
+  r->ssim.push_back(Ssim(shown, target).item<double>());
+  r->mse_mean += mse;
+}
 
 void Finish(const SampleStats& ms, EvalResult* r) {
   r->count = static_cast<int>(r->psnr.size());
@@ -430,9 +423,13 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
   torch::InferenceMode inference;
   SampleStats ms;
   EvalResult r;
+  ShownFrames shown(avatar);
   for (int i = 0; i < count; ++i) {
     const SyntheticSample s = data.At(first + i);
-    Scorer(avatar, model, s.subject).Score(s.frame, s.image_bgr, &ms, &r);
+    Stopwatch watch;
+    const cv::Mat bgr = shown.Render(model, model.MakeIdentity(s.subject.shape.cast<double>()), s.subject, s.frame);
+    ms.Add(watch.ElapsedMs());
+    Score(bgr, s.image_bgr, &r);
   }
   Finish(ms, &r);
   return r;
@@ -445,11 +442,15 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
   torch::InferenceMode inference;
   SampleStats ms;
   EvalResult r;
-  Scorer scorer(avatar, model, data.subject());
+  ShownFrames shown(avatar);
+  const HeadIdentity identity = model.MakeIdentity(data.subject().shape.cast<double>());
   for (int i : positions) {
     const RealSample& s = data.At(i);
     const cv::Mat target = MaskedTarget(s.image_bgr, s.mask);
-    const cv::Mat bgr = scorer.Score(s.params, target, &ms, &r);
+    Stopwatch watch;
+    const cv::Mat bgr = shown.Render(model, identity, data.subject(), s.params);
+    ms.Add(watch.ElapsedMs());
+    Score(bgr, target, &r);
     if (render) render(i, target, bgr);
   }
   Finish(ms, &r);
@@ -460,12 +461,7 @@ cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectPar
                         const FrameParams& frame) {
   avatar.modules().eval();
   torch::InferenceMode inference;
-  RaySampler sampler(avatar.config());
-  AvatarFrameInputs buffers;
-  cv::Mat bgr;
-  RenderAvatarFrame(avatar.modules(), avatar.config(), model, model.MakeIdentity(subject.shape.cast<double>()), subject,
-                    frame, &sampler, &buffers, &bgr);
-  return bgr;
+  return ShownFrames(avatar).Render(model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame);
 }
 
 }  // namespace headcast

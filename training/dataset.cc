@@ -430,7 +430,8 @@ std::optional<CameraContract> PreparedDataset::camera_contract() const {
   c.crop_x0 = crop.at("x0");
   c.crop_y0 = crop.at("y0");
   c.crop_side = crop.at("side");
-  return CameraContract::FromJson(c.ToJson());  // checked
+  c.Check();
+  return c;
 }
 
 const RealSample& PreparedDataset::At(int i) const {

@@ -151,7 +151,7 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
 }
 
 nlohmann::json Avatar::ReadManifest(const std::string& path) {
-  const ZipEntries entries = ReadZip(path);
+  const ZipEntries entries = ReadZip(path, "manifest.json");  // not the weights
   auto it = entries.find("manifest.json");
   if (it == entries.end()) throw std::runtime_error(path + ": not a headcast avatar (no manifest.json)");
   nlohmann::json manifest;

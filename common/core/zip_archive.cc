@@ -34,7 +34,7 @@ void WriteFileAtomically(const std::string& path, const std::string& bytes) {
   std::filesystem::rename(tmp, path);
 }
 
-ZipEntries ReadZip(const std::string& path) {
+ZipEntries ReadZip(const std::string& path, const std::string& only_entry) {
   if (!std::filesystem::exists(path)) Fail(path, "no such file");
   int error = 0;
   zip_t* za = zip_open(path.c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &error);
@@ -52,6 +52,7 @@ ZipEntries ReadZip(const std::string& path) {
     zip_stat_t st;
     if (zip_stat_index(za, i, 0, &st) != 0) Fail(path, "cannot stat entry " + std::to_string(i));
     const std::string name = st.name;
+    if (!only_entry.empty() && name != only_entry) continue;
     zip_file_t* zf = zip_fopen_index(za, i, 0);
     if (!zf) Fail(path + ":" + name, std::string("cannot open entry: ") + zip_strerror(za));
     std::string bytes(st.size, '\0');
@@ -61,6 +62,17 @@ ZipEntries ReadZip(const std::string& path) {
     entries[name] = std::move(bytes);
   }
   return entries;
+}
+
+nlohmann::json ReadZipJson(const std::string& path, const std::string& entry) {
+  const ZipEntries entries = ReadZip(path, entry);
+  const auto it = entries.find(entry);
+  if (it == entries.end()) Fail(path, "no " + entry);
+  try {
+    return nlohmann::json::parse(it->second);
+  } catch (const std::exception& e) {
+    Fail(path, entry + " is not valid JSON: " + e.what());
+  }
 }
 
 void WriteZip(const std::string& path, const ZipEntries& entries, bool compress) {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 
 namespace headcast {
@@ -9,8 +10,13 @@ namespace headcast {
 using ZipEntries = std::map<std::string, std::string>;
 
 // Throws std::runtime_error naming the file (and entry) if it is missing,
-// not a zip, truncated or corrupt.
-ZipEntries ReadZip(const std::string& path);
+// not a zip, truncated or corrupt. With `only_entry`, just that entry is read
+// (absent from the result when the archive has none of that name).
+ZipEntries ReadZip(const std::string& path, const std::string& only_entry = {});
+
+// The JSON document stored as `entry` (an avatar's manifest.json, say);
+// throws naming the file when it is missing or not JSON.
+nlohmann::json ReadZipJson(const std::string& path, const std::string& entry);
 
 // Written to "<path>.tmp" and renamed, so readers never see half a file.
 // `compress`: deflate at level 1 (most of the gain, little of the time).

@@ -105,10 +105,14 @@ CameraContract CameraContract::FromJson(const nlohmann::json& j) {
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("camera contract: ") + e.what());
   }
-  c.source.Check();
-  if (!(c.crop_side > 0 && std::isfinite(c.crop_x0) && std::isfinite(c.crop_y0)))
-    throw std::invalid_argument("camera contract: the crop needs a positive side and a finite corner");
+  c.Check();
   return c;
+}
+
+void CameraContract::Check() const {
+  source.Check();
+  if (!(crop_side > 0 && std::isfinite(crop_x0) && std::isfinite(crop_y0)))
+    throw std::invalid_argument("camera contract: the crop needs a positive side and a finite corner");
 }
 
 std::optional<PinholeCamera> ContractCameraFor(const CameraContract& contract, int width, int height) {

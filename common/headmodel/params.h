@@ -65,6 +65,8 @@ struct SubjectParams {
 struct CameraContract {
   PinholeCamera source;
   double crop_x0 = 0, crop_y0 = 0, crop_side = 0;  // pixels of the source frames
+  // Throws std::invalid_argument naming what is out of range.
+  void Check() const;
   nlohmann::json ToJson() const;
   // Throws std::invalid_argument naming what is missing or out of range.
   static CameraContract FromJson(const nlohmann::json& j);

@@ -20,10 +20,6 @@ RgbdFitOptions RgbdOptions(bool fit_shape) {
   return o;
 }
 
-}  // namespace
-
-namespace {
-
 bool IsAvatarFile(const std::string& path) {
   return path.size() > 9 && path.compare(path.size() - 9, 9, ".hcavatar") == 0;
 }
@@ -31,12 +27,9 @@ bool IsAvatarFile(const std::string& path) {
 // The manifest only: trackers do not load networks.
 nlohmann::json ReadAvatarManifest(const std::string& path) {
   try {
-    const ZipEntries entries = ReadZip(path);
-    const auto it = entries.find("manifest.json");
-    if (it == entries.end()) throw std::runtime_error("no manifest.json");
-    return nlohmann::json::parse(it->second);
+    return ReadZipJson(path, "manifest.json");
   } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": not a readable avatar (" + e.what() + ")");
+    throw std::runtime_error(std::string("not a readable avatar: ") + e.what());
   }
 }
 
