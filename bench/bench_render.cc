@@ -91,6 +91,16 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
                                {"ms_p95", alt["ms_p95"]},
                                {"fps_median", alt["fps_median"]},
                                {"stage_ms_median", alt["stage_ms_median"]}};
+  // The same frames with the surface texture a subject's avatar adds (its
+  // raster at output resolution, texture look-up and per-pixel branch).
+  AvatarConfig surface = AvatarConfig::Default(options.resolution);
+  surface.surface_features = kSubjectSurfaceFeatures;
+  const nlohmann::json with_surface = MeasureConfig(options, surface, frames);
+  out["with_surface"] = {{"surface_features", surface.surface_features},
+                         {"ms_median", with_surface["ms_median"]},
+                         {"ms_p95", with_surface["ms_p95"]},
+                         {"fps_median", with_surface["fps_median"]},
+                         {"stage_ms_median", with_surface["stage_ms_median"]}};
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

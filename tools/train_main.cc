@@ -89,6 +89,23 @@ void AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string
   app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")->capture_default_str();
 }
 
+// The surface texture (METHOD's baseline has none): for a new avatar, or
+// added to a general model without one in a fine-tune.
+void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
+  app->add_option("--surface-features", config->surface_features,
+                  "channels of the learned texture on the head model's surface (0: none, the thesis's avatar)")
+      ->capture_default_str();
+  app->add_option("--surface-resolution", config->surface_resolution, "texels along each of its three planes")
+      ->capture_default_str();
+  app->add_option("--surface-extent", config->surface_extent, "metres from the model's origin to a plane's edge")
+      ->capture_default_str();
+  app->add_option("--surface-lr", fit->surface_lr_scale, "the texture's learning rate as a multiple of --lr")
+      ->capture_default_str();
+  app->add_flag("--canonical-samples", config->canonical_samples,
+                "move CNeRF samples into the neutral head through the posed triangle under their ray "
+                "(the mesh carries the motion; off: rigid head frame, the thesis's avatar)");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -139,6 +156,7 @@ int main(int argc, char** argv) {
   pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
   AddArchitectureFlags(pretrain, &g.config, "");
+  AddSurfaceFlags(pretrain, &g.config, &g.fit);
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
   pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
   pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
@@ -150,6 +168,7 @@ int main(int argc, char** argv) {
   auto* subject = app.add_subcommand("subject", "fine-tune a person's avatar from the general model");
   SubjectOptions s;
   s.fit.iterations = 1000;
+  s.config.surface_features = kSubjectSurfaceFeatures;  // --surface-features 0: the thesis's avatar
   subject->add_option("--head-model", s.head_model, "builtin or a model .npz")->capture_default_str();
   subject->add_option("--general", s.general, "the general model (.hcavatar)");
   subject->add_flag("--from-scratch", s.from_scratch, "random networks instead of a general model (comparisons)");
@@ -158,6 +177,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({128, 256, 512}))
       ->capture_default_str();
   AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
+  AddSurfaceFlags(subject, &s.config, &s.fit);
   subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
   subject
       ->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
@@ -181,6 +201,9 @@ int main(int argc, char** argv) {
   eval->add_flag("--write-frames", e.write_frames,
                  "also write the ground-truth and avatar frames (PNG) under OUT/frames");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
+  eval->add_flag("!--no-landmarks", e.landmarks,
+                 "skip the expression-fidelity figures (dlib landmarks on avatar and true frames)");
+  eval->add_option("--predictor", e.landmark_predictor, "dlib's 68-point shape predictor")->capture_default_str();
 
   auto* plot = app.add_subcommand("plot", "line plot of CSV columns (logs of several runs in one picture)");
   std::vector<std::string> series;

@@ -42,6 +42,7 @@ void FitOptions::Check() const {
       .InRange("batch", batch, 1, 4096)
       .Positive("learning_rate", learning_rate)
       .InRange("final_lr_fraction", final_lr_fraction, 1e-4, 1.0)
+      .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .That(weight_average == 0 || (weight_average > 0 && weight_average < 1),
             "weight_average is 0 (off) or a decay in (0, 1)")
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
@@ -264,16 +265,24 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
-  std::vector<torch::Tensor> params;
+  // Two groups: the networks and offsets, and the surface texture, whose
+  // texels each see a small part of every picture (its own learning rate).
+  std::vector<torch::Tensor> params, surface_params;
+  if (modules.surface) surface_params = modules.surface->parameters();
   for (auto& p : modules.parameters())
-    if (p.requires_grad()) params.push_back(p);
+    if (p.requires_grad() &&
+        std::none_of(surface_params.begin(), surface_params.end(), [&](const auto& q) { return q.is_same(p); }))
+      params.push_back(p);
   Offsets offsets;
   if (data.real && options.learn_offsets && options.loss.offset_weight > 0) {
     offsets = MakeOffsets(config, data.real->size(), options.freeze_identity);
     params.push_back(offsets.geometry);
     params.push_back(offsets.appearance);
   }
-  torch::optim::Adam adam(params, torch::optim::AdamOptions(options.learning_rate));
+  std::vector<torch::optim::OptimizerParamGroup> groups = {torch::optim::OptimizerParamGroup(params)};
+  if (!surface_params.empty()) groups.emplace_back(surface_params);
+  torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
+  params.insert(params.end(), surface_params.begin(), surface_params.end());  // all of them, for the all-reduce
   std::unique_ptr<PerceptualLoss> vgg;
   TrainResult result;
   result.perceptual = "ssim";
@@ -297,8 +306,9 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     modules.train();
     std::uniform_real_distribution<double> u01(0, 1);
     const double p_synthetic = !data.real ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
-    for (auto& group : adam.param_groups())
-      static_cast<torch::optim::AdamOptions&>(group.options()).lr(options.LearningRateAt(step));
+    for (size_t g = 0; g < adam.param_groups().size(); ++g)
+      static_cast<torch::optim::AdamOptions&>(adam.param_groups()[g].options())
+          .lr(options.LearningRateAt(step) * (g == 1 ? options.surface_lr_scale : 1.0));
     adam.zero_grad();
     StepInfo info;
     info.step = step;
@@ -331,7 +341,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         p.inputs.conditioning.appearance = p.inputs.conditioning.appearance + a;
         offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
       }
-      const AvatarOutput out = RunAvatar(modules, p.inputs.rays, p.inputs.cam_from_head, p.inputs.conditioning);
+      const AvatarOutput out = RunAvatar(modules, p.inputs);
       const torch::Tensor mse = torch::mse_loss(out.image, p.target);
       torch::Tensor loss = w.mse_weight * mse + offset_penalty;
       if (vgg)

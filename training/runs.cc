@@ -16,6 +16,7 @@
 #include "common/headmodel/head_render.h"
 #include "common/tracking/mesh_fitter.h"
 #include "proto/recording.h"
+#include "training/landmark_agreement.h"
 #include "training/run_report.h"
 
 namespace headcast {
@@ -87,6 +88,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"batch", f.batch},
       {"learning_rate", f.learning_rate},
       {"final_lr_fraction", f.final_lr_fraction},
+      {"surface_lr_scale", f.surface_lr_scale},
       {"weight_average", f.weight_average},
       {"seconds", r.seconds},
       {"samples_per_s", r.samples_per_s},
@@ -204,6 +206,12 @@ nlohmann::json RunSubject(SubjectOptions o) {
     Avatar general = Avatar::Load(o.general, model);
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
+    c.canonical_samples = c.canonical_samples || o.config.canonical_samples;
+    if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
+      c.surface_features = o.config.surface_features;
+      c.surface_resolution = o.config.surface_resolution;
+      c.surface_extent = o.config.surface_extent;
+    }
     return general.WithRuntimeSwitches(c);
   }();
   avatar.mutable_subject() = subject;
@@ -302,6 +310,12 @@ nlohmann::json RunEval(const EvalOptions& o) {
   if (o.write_frames) fs::create_directories(dir / "frames");
   std::ofstream csv(dir / "per_frame.csv");
   csv << "frame,psnr,ssim\n";
+  std::unique_ptr<LandmarkAgreement> agreement;
+  nlohmann::json fidelity = "not computed (--no-landmarks)";
+  if (o.landmarks && fs::exists(o.landmark_predictor))
+    agreement = std::make_unique<LandmarkAgreement>(o.landmark_predictor);
+  else if (o.landmarks)
+    fidelity = "not computed: no dlib shape predictor at " + o.landmark_predictor;
   {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
     const EvalResult e =
@@ -309,6 +323,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
           cv::Mat row;
           cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
           side.Write(row);
+          if (agreement) agreement->Add(truth, rendered);
           if (o.write_frames) {
             char name[32];
             std::snprintf(name, sizeof(name), "_%05d.png", written++);
@@ -325,6 +340,13 @@ nlohmann::json RunEval(const EvalOptions& o) {
         {"eval", EvalJson(e, on_test ? "test split" : "training frames")},
         {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
+        {"expression_fidelity",
+         agreement ? nlohmann::json{{"how",
+                                     "dlib's 68 landmarks on the avatar's frames against the true frames', mean "
+                                     "distance over the true eye distance per region; blink: correlation of the "
+                                     "eye opening"},
+                                    {"result", agreement->Summary()}}
+                   : fidelity},
         {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};
     // Novel views: the first evaluated frame, the head turned on its vertical axis.
     const FrameParams base = data.At(positions.front()).params;

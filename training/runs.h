@@ -7,6 +7,7 @@
 #include <string>
 
 #include "common/avatar/avatar_config.h"
+#include "common/tracking/face_tracker.h"
 #include "training/avatar_fit.h"
 
 namespace headcast {
@@ -74,6 +75,10 @@ struct EvalOptions {
   int orbit_frames = 60;      // novel-view orbit video (0: none)
   double orbit_deg = 30;      // yaw swing of the orbit
   bool write_frames = false;  // also OUT/frames/truth_NNNNN.png and avatar_NNNNN.png (codec comparisons)
+  // Expression fidelity: dlib's landmarks on the avatar's frames against the
+  // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
+  bool landmarks = true;
+  std::string landmark_predictor = FaceTrackerOptions{}.predictor_path;
   void Check() const;
 };
 // Writes OUT/eval.json, per_frame.csv, side_by_side.mp4 (ground truth | avatar |

@@ -100,6 +100,11 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
       config.renderer_channels != c.renderer_channels)
     throw std::invalid_argument(
         "WithRuntimeSwitches: the network architecture differs; only run-time switches may change");
+  const bool adds_surface = !c.has_surface() && config.has_surface();
+  if (!adds_surface && (config.surface_features != c.surface_features ||
+                        config.surface_resolution != c.surface_resolution || config.surface_extent != c.surface_extent))
+    throw std::invalid_argument(
+        "WithRuntimeSwitches: the surface texture differs; it can only be added to an avatar without one");
   Avatar a;
   a.impl_ = std::make_unique<Impl>(config);
   a.impl_->subject = impl_->subject;
@@ -107,14 +112,19 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
   a.impl_->camera_contract = impl_->camera_contract;
   a.impl_->training_summary = impl_->training_summary;
   torch::NoGradGuard no_grad;
+  // Every tensor of the source; parts it lacks (an added surface texture and
+  // its renderer branch) keep their initial values, which leave the picture unchanged.
   auto copy = [](const torch::nn::Module& from, torch::nn::Module& to) {
     auto src = from.named_parameters();
-    for (auto& p : to.named_parameters()) p.value().copy_(src[p.key()]);
+    for (auto& p : to.named_parameters())
+      if (const torch::Tensor* t = src.find(p.key())) p.value().copy_(*t);
     auto bsrc = from.named_buffers();
-    for (auto& b : to.named_buffers()) b.value().copy_(bsrc[b.key()]);
+    for (auto& b : to.named_buffers())
+      if (const torch::Tensor* t = bsrc.find(b.key())) b.value().copy_(*t);
   };
   copy(*impl_->modules.cnerf, *a.impl_->modules.cnerf);
   copy(*impl_->modules.renderer, *a.impl_->modules.renderer);
+  if (impl_->modules.surface) copy(*impl_->modules.surface, *a.impl_->modules.surface);
   return a;
 }
 
@@ -134,11 +144,15 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
                                {"light", std::vector<float>(s.light.begin(), s.light.end())},
                                {"intrinsics", CameraToJson(s.intrinsics)}}}};
   if (m.camera_contract) manifest["camera"] = m.camera_contract->ToJson();
-  torch::serialize::OutputArchive root, cnerf, renderer;
+  torch::serialize::OutputArchive root, cnerf, renderer, surface;
   m.modules.cnerf->save(cnerf);
   m.modules.renderer->save(renderer);
   root.write("cnerf", cnerf);
   root.write("renderer", renderer);
+  if (m.modules.surface) {
+    m.modules.surface->save(surface);
+    root.write("surface", surface);
+  }
   std::ostringstream weights;
   root.save_to(weights);
   ZipEntries entries = {{"manifest.json", manifest.dump(2)}, {"weights.pt", weights.str()}};
@@ -203,10 +217,11 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
   if (w == entries.end()) throw std::runtime_error(path + ": no weights.pt in the avatar");
   try {
     std::istringstream in(w->second);
-    torch::serialize::InputArchive root, cnerf, renderer;
+    torch::serialize::InputArchive root, cnerf, renderer, surface;
     root.load_from(in);
     root.read("cnerf", cnerf);
     root.read("renderer", renderer);
+    if (a.impl_->modules.surface) root.read("surface", surface);
     // libtorch's load replaces tensors whole (shape included), so a file whose
     // weights disagree with its config would load "fine": compare shapes.
     auto load_checked = [&](torch::nn::Module& module, torch::serialize::InputArchive& archive,
@@ -225,6 +240,7 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
     };
     load_checked(*a.impl_->modules.cnerf, cnerf, "cnerf");
     load_checked(*a.impl_->modules.renderer, renderer, "renderer");
+    if (a.impl_->modules.surface) load_checked(*a.impl_->modules.surface, surface, "surface");
   } catch (const c10::Error& e) {
     throw std::runtime_error(
         path + ": weights do not match the avatar's config or are corrupt: " + e.what_without_backtrace());

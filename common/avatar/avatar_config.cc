@@ -31,6 +31,10 @@ void AvatarConfig::Check() const {
   for (int ch : renderer_channels) c.InRange("renderer_channels[i]", ch, 1, 1024);
   c.That(renderer_channels.empty() || renderer_channels[0] == feature_channels,
          "renderer_channels[0] must equal feature_channels");
+  c.InRange("surface_features", surface_features, 0, 64).InRange("surface_resolution", surface_resolution, 8, 2048);
+  c.InRange("surface_extent", surface_extent, 0.01, 2.0);
+  c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
+         "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.ThrowIfErrors();
 }
 
@@ -53,7 +57,11 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"uniform_near", uniform_near},
           {"uniform_far", uniform_far},
           {"precompute_conditioning", precompute_conditioning},
-          {"renderer_channels", renderer_channels}};
+          {"renderer_channels", renderer_channels},
+          {"canonical_samples", canonical_samples},
+          {"surface_features", surface_features},
+          {"surface_resolution", surface_resolution},
+          {"surface_extent", surface_extent}};
 }
 
 AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
@@ -81,6 +89,11 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.uniform_far = j.at("uniform_far");
     c.precompute_conditioning = j.at("precompute_conditioning");
     c.renderer_channels = j.at("renderer_channels").get<std::vector<int>>();
+    // Files from before surface features have none.
+    c.canonical_samples = j.value("canonical_samples", false);
+    c.surface_features = j.value("surface_features", 0);
+    c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
+    c.surface_extent = j.value("surface_extent", c.surface_extent);
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
   }

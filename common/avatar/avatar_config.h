@@ -16,6 +16,9 @@ enum class SamplingMode {
 
 // The CNeRF backend's configuration: the shared part (output size,
 // conditioning sizes) and its own networks, sampling and speed switches.
+// Surface-texture channels a subject's avatar gets by default (headcast-train subject).
+inline constexpr int kSubjectSurfaceFeatures = 8;
+
 struct AvatarConfig : AvatarCommonConfig {
   int feature_channels = 48;  // channels of the CNeRF feature vector / feature map
   // CNeRF.
@@ -24,6 +27,11 @@ struct AvatarConfig : AvatarCommonConfig {
   int mlp_width = 96;      // hidden width
   int mlp_layers = 4;      // layers before the density head
   int skip_layer = -1;     // layer whose input also gets the encoded input again (-1: none)
+  // CNeRF samples are moved into the canonical (neutral) head through the
+  // local frame of the posed triangle under their ray (mesh-guided sampling
+  // only), so geometry the head model explains is not the network's to learn.
+  // false: rigidly into the head frame, the thesis's configuration.
+  bool canonical_samples = false;
   // Sampling.
   SamplingMode sampling = SamplingMode::kMeshGuided;
   int samples_per_ray = 8;
@@ -36,6 +44,17 @@ struct AvatarConfig : AvatarCommonConfig {
   bool precompute_conditioning = true;  // first-layer conditioning term once per frame
   // 2D neural renderer: channels entering each of the three x2 levels and leaving the last.
   std::vector<int> renderer_channels = {48, 24, 12, 8};
+  // Surface features (0: off, the thesis's configuration): a learned feature
+  // texture on the head model's canonical (neutral) surface, stored as three
+  // axis-aligned planes, looked up at full output resolution through the
+  // rasterised posed mesh and fed to the 2D renderer's last level. The texture
+  // moves with the mesh (expressions, blinks) and holds sharp person-specific
+  // detail the low-resolution feature map cannot.
+  int surface_features = 0;      // channels of the texture
+  int surface_resolution = 256;  // texels along each plane edge
+  double surface_extent = 0.2;   // metres from the model origin to a plane's edge
+
+  bool has_surface() const { return surface_features > 0; }
 
   int feature_size() const { return output_size / 8; }
   int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi

@@ -138,10 +138,41 @@ torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x) {
   return F::conv2d(padded, blur_, F::Conv2dFuncOptions().groups(up.size(1)));
 }
 
+SurfaceTextureImpl::SurfaceTextureImpl(const AvatarConfig& config) : extent_(config.surface_extent) {
+  config.Check();
+  const int64_t r = config.surface_resolution;
+  planes_ = register_parameter("planes", torch::zeros({3, config.surface_features, r, r}));
+}
+
+torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical) {
+  const int64_t p = canonical.size(0);
+  const torch::Tensor u = (canonical / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
+  const torch::Tensor x = u.select(1, 0), y = u.select(1, 1), z = u.select(1, 2);
+  // (3, 1, P, 2): the point's coordinates in the xy, xz and yz planes.
+  const torch::Tensor grid =
+      torch::stack({torch::stack({x, y}, 1), torch::stack({x, z}, 1), torch::stack({y, z}, 1)}, 0).unsqueeze(1);
+  const torch::Tensor sampled = F::grid_sample(
+      planes_, grid,
+      F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(false));
+  return sampled.sum(0).view({-1, p}).t();  // (3, C, 1, P) -> (P, C)
+}
+
 NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   config.Check();
   const auto& ch = config.renderer_channels;
   input_rgb_ = register_module("input_rgb", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 3, 1)));
+  if (config.has_surface()) {
+    const int hidden = 2 * config.surface_features;
+    surface_hidden_ = register_module("surface_hidden",
+                                      torch::nn::Conv2d(torch::nn::Conv2dOptions(config.surface_features, hidden, 1)));
+    surface_out_ = register_module("surface_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, ch[3], 1)));
+    // Zero: a renderer given surface features starts as the one without (a
+    // fine-tune from a general model starts where the general model is); the
+    // texture gets gradients from the first step that moves these weights.
+    torch::NoGradGuard no_grad;
+    surface_out_->weight.zero_();
+    surface_out_->bias.zero_();
+  }
   blocks_ = register_module("blocks", torch::nn::ModuleList());
   post_ = register_module("post", torch::nn::ModuleList());
   to_rgb_ = register_module("to_rgb", torch::nn::ModuleList());
@@ -152,7 +183,7 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   }
 }
 
-torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map) {
+torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface) {
   torch::Tensor rgb = input_rgb_->forward(feature_map);
   torch::Tensor x = feature_map;
   for (int k = 0; k < 3; ++k) {
@@ -161,6 +192,10 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map) {
                                   .mode(torch::kBilinear)
                                   .align_corners(false));
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x);
+    if (k == 2 && surface.defined() && surface_out_) {
+      const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+      x = x + surface_out_->forward(F::leaky_relu(surface_hidden_->forward(surface), leaky));
+    }
     x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
     rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
   }
@@ -170,15 +205,19 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map) {
 std::vector<torch::Tensor> AvatarModules::parameters() const {
   std::vector<torch::Tensor> p = cnerf->parameters();
   for (auto& t : renderer->parameters()) p.push_back(t);
+  if (surface)
+    for (auto& t : surface->parameters()) p.push_back(t);
   return p;
 }
 void AvatarModules::eval() {
   cnerf->eval();
   renderer->eval();
+  if (surface) surface->eval();
 }
 void AvatarModules::train() {
   cnerf->train();
   renderer->train();
+  if (surface) surface->train();
 }
 
 }  // namespace headcast

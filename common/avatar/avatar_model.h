@@ -75,25 +75,44 @@ class UpsamplingBlockImpl : public torch::nn::Module {
 };
 TORCH_MODULE(UpsamplingBlock);
 
+// A learned feature texture on the canonical (neutral) head surface: three
+// axis-aligned planes (xy, xz, yz) over +-surface_extent, bilinearly sampled and
+// summed. Starts at zero, so a renderer given it first draws what it drew without.
+class SurfaceTextureImpl : public torch::nn::Module {
+ public:
+  explicit SurfaceTextureImpl(const AvatarConfig& config);
+  // canonical points (P, 3), model frame, metres -> features (P, C).
+  torch::Tensor forward(const torch::Tensor& canonical);
+
+ private:
+  double extent_;
+  torch::Tensor planes_;  // (3, C, R, R)
+};
+TORCH_MODULE(SurfaceTexture);
+
 // Three x2 levels; at each, RGB from the previous level bilinearly upsampled
 // plus RGB from the upsampled features; 1x1 convs and LeakyReLU elsewhere.
+// With surface features, a per-pixel two-layer branch of the full-resolution
+// surface image joins the last level's features.
 class NeuralRendererImpl : public torch::nn::Module {
  public:
   explicit NeuralRendererImpl(const AvatarConfig& config);
-  // (B, C0, h, w) -> (B, 3, 8h, 8w), RGB in [0, 1].
-  torch::Tensor forward(const torch::Tensor& feature_map);
+  // (B, C0, h, w) [, surface (B, Cs, 8h, 8w)] -> (B, 3, 8h, 8w), RGB in [0, 1].
+  torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface = torch::Tensor());
 
  private:
-  torch::nn::Conv2d input_rgb_{nullptr};
+  torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr};
   torch::nn::ModuleList blocks_, post_, to_rgb_;
 };
 TORCH_MODULE(NeuralRenderer);
 
-// Both networks of one avatar.
+// The networks of one avatar (the surface texture only when configured).
 struct AvatarModules {
-  explicit AvatarModules(const AvatarConfig& config) : cnerf(config), renderer(config) {}
+  explicit AvatarModules(const AvatarConfig& config)
+      : cnerf(config), renderer(config), surface(config.has_surface() ? SurfaceTexture(config) : nullptr) {}
   CNeRF cnerf;
   NeuralRenderer renderer;
+  SurfaceTexture surface;
   std::vector<torch::Tensor> parameters() const;
   void eval();
   void train();

@@ -24,24 +24,27 @@ struct AvatarOutput {
 void ImageTensorToBgr(const torch::Tensor& image, cv::Mat* out);
 torch::Tensor BgrToImageTensor(const cv::Mat& image_bgr);
 
-// Runs CNeRF on the batch's samples, composites the feature map and upsamples it.
-AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
-                       const AvatarConditioning& conditioning, AvatarTimings* timings = nullptr);
-
 // One frame's inputs to the networks; the posed-mesh buffers are reused when
 // the same object serves frame after frame.
 struct AvatarFrameInputs {
   RayBatch rays;
+  SurfaceBatch surface;             // empty unless the avatar has surface features
+  std::vector<float> to_canonical;  // with canonical_samples: 12 per ray (CanonicalTransforms)
   RigidTransform cam_from_head;
   AvatarConditioning conditioning;
   HeadModelOutput posed;
   RasterVertices v_cam;
 };
 
+// Runs CNeRF on the frame's samples, composites the feature map, looks up the
+// surface texture (when the avatar has one) and upsamples.
+AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings = nullptr);
+
 // The head model posed by `frame` with `identity` (the subject's shape), seen
 // through the subject's intrinsics at feature resolution: rays and depths
 // (jittered within their strata when `rng` is given: training), placement
-// and conditioning.
+// and conditioning; with surface features, the covered output pixels on the
+// canonical mesh (`identity`'s neutral shape).
 void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
                         const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
                         AvatarFrameInputs* out, AvatarTimings* timings = nullptr);

@@ -40,8 +40,28 @@ torch::Tensor BgrToImageTensor(const cv::Mat& bgr) {
          255.f;
 }
 
-AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const RigidTransform& cam_from_head,
-                       const AvatarConditioning& conditioning, AvatarTimings* timings) {
+namespace {
+
+// The surface texture at the covered output pixels, as a (1, C, H, W) image (0 elsewhere).
+torch::Tensor SurfaceImage(SurfaceTexture& texture, const SurfaceBatch& surface, int channels) {
+  const int64_t n = surface.num_pixels(), hw = static_cast<int64_t>(surface.width) * surface.height;
+  torch::Tensor rows = torch::zeros({hw, channels});
+  if (n > 0) {
+    const torch::Tensor canonical =
+        torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
+    const torch::Tensor index =
+        torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
+    rows = rows.index_copy(0, index, texture->forward(canonical));
+  }
+  return rows.t().reshape({1, channels, surface.height, surface.width});
+}
+
+}  // namespace
+
+AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings) {
+  const RayBatch& rays = inputs.rays;
+  const RigidTransform& cam_from_head = inputs.cam_from_head;
+  const AvatarConditioning& conditioning = inputs.conditioning;
   Stopwatch watch;
   const int64_t r = rays.num_rays(), s = rays.samples_per_ray;
   const int channels = modules.cnerf->config().feature_channels;
@@ -59,7 +79,12 @@ AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const Rigid
                                            static_cast<float>(cam_from_head.translation.y()),
                                            static_cast<float>(cam_from_head.translation.z())});
     const torch::Tensor p_cam = (z.unsqueeze(2) * dirs.unsqueeze(1)).view({r * s, 3});
-    const torch::Tensor p_head = torch::matmul(p_cam - t, R);  // (p - t) R == (R^T (p - t))^T
+    torch::Tensor p_head = torch::matmul(p_cam - t, R);  // (p - t) R == (R^T (p - t))^T
+    if (!inputs.to_canonical.empty()) {                  // per ray: p A^T + o
+      const torch::Tensor to = torch::from_blob(const_cast<float*>(inputs.to_canonical.data()), {r, 12}, torch::kFloat);
+      const torch::Tensor a = to.narrow(1, 0, 9).view({r, 3, 3}), o = to.narrow(1, 9, 3);
+      p_head = (torch::bmm(p_head.view({r, s, 3}), a.transpose(1, 2)) + o.unsqueeze(1)).view({r * s, 3});
+    }
     auto [density, features] = modules.cnerf->forward(p_head, conditioning);
     if (timings) timings->mlp_ms += watch.ElapsedMs();
     watch.Restart();
@@ -79,7 +104,10 @@ AvatarOutput RunAvatar(AvatarModules& modules, const RayBatch& rays, const Rigid
     timings->samples = static_cast<int>(r * s);
   }
   watch.Restart();
-  out.image = modules.renderer->forward(out.feature_map);
+  torch::Tensor surface;
+  if (modules.surface)
+    surface = SurfaceImage(modules.surface, inputs.surface, modules.cnerf->config().surface_features);
+  out.image = modules.renderer->forward(out.feature_map, surface);
   if (timings) timings->upsample_ms += watch.ElapsedMs();
   return out;
 }
@@ -96,6 +124,11 @@ void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, cons
   const int f = config.feature_size();
   sampler->Sample(out->v_cam, model.data().faces, subject.intrinsics.Resized(f, f), out->cam_from_head, rng,
                   &out->rays);
+  if (config.has_surface())
+    sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
+  out->to_canonical.clear();
+  if (config.canonical_samples)
+    CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical);
   out->conditioning = MakeConditioning(config, subject, frame);
   if (timings) timings->sample_ms = watch.ElapsedMs();
 }
@@ -104,7 +137,7 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
                        const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
                        RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr, AvatarTimings* timings) {
   PrepareAvatarFrame(config, model, identity, subject, frame, sampler, nullptr, buffers, timings);
-  const AvatarOutput out = RunAvatar(modules, buffers->rays, buffers->cam_from_head, buffers->conditioning, timings);
+  const AvatarOutput out = RunAvatar(modules, *buffers, timings);
   Stopwatch watch;
   ImageTensorToBgr(out.image, image_bgr);
   if (timings) timings->convert_ms = watch.ElapsedMs();

@@ -3,14 +3,16 @@
 
 #include <algorithm>
 #include <limits>
+#include <stdexcept>
 
 namespace headcast {
 
 RaySampler::RaySampler(const AvatarConfig& config) : config_(config) { config.Check(); }
 
-void RaySampler::AddRay(const PinholeCamera& cam, int x, int y, float z_near, float z_far, std::mt19937* rng,
+void RaySampler::AddRay(const PinholeCamera& cam, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,
                         RayBatch* out) const {
   out->pixel.push_back(y * cam.width + x);
+  out->face.push_back(face);
   out->directions.push_back(static_cast<float>((x - cam.cx) / cam.fx));
   out->directions.push_back(static_cast<float>((y - cam.cy) / cam.fy));
   out->directions.push_back(1.f);
@@ -30,12 +32,13 @@ void RaySampler::Sample(const RasterVertices& vertices_in_cam, const RasterFaces
   out->pixel.clear();
   out->directions.clear();
   out->depths.clear();
+  out->face.clear();
   if (config_.sampling == SamplingMode::kUniform) {
     const float centre = static_cast<float>(cam_from_head.translation.z());
     const float z_near = std::max(0.01f, centre - static_cast<float>(config_.uniform_near));
     const float z_far = centre + static_cast<float>(config_.uniform_far);
     for (int y = 0; y < cam.height; ++y)
-      for (int x = 0; x < cam.width; ++x) AddRay(cam, x, y, z_near, z_far, rng, out);
+      for (int x = 0; x < cam.width; ++x) AddRay(cam, x, y, z_near, z_far, -1, rng, out);
     return;
   }
   RasterOptions raster;
@@ -46,30 +49,101 @@ void RaySampler::Sample(const RasterVertices& vertices_in_cam, const RasterFaces
   const int w = cam.width, h = cam.height, m = config_.hair_margin_px;
   const float inf = std::numeric_limits<float>::infinity();
   surface_depth_.assign(static_cast<size_t>(w) * h, inf);
+  surface_face_.assign(static_cast<size_t>(w) * h, -1);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const size_t p = static_cast<size_t>(y) * w + x;
       if (buffers_.face[p] >= 0) {
         surface_depth_[p] = buffers_.depth[p];
+        surface_face_[p] = buffers_.face[p];
         continue;
       }
-      float best = inf;
       for (int dy = -m; dy <= m; ++dy)
         for (int dx = -m; dx <= m; ++dx) {
           const int xx = x + dx, yy = y + dy;
           if (xx < 0 || yy < 0 || xx >= w || yy >= h) continue;
           const size_t q = static_cast<size_t>(yy) * w + xx;
-          if (buffers_.face[q] >= 0) best = std::min(best, buffers_.depth[q]);
+          if (buffers_.face[q] >= 0 && buffers_.depth[q] < surface_depth_[p]) {
+            surface_depth_[p] = buffers_.depth[q];
+            surface_face_[p] = buffers_.face[q];
+          }
         }
-      surface_depth_[p] = best;
     }
   const float front = static_cast<float>(config_.shell_front), back = static_cast<float>(config_.shell_back);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      const float d = surface_depth_[static_cast<size_t>(y) * w + x];
+      const size_t p = static_cast<size_t>(y) * w + x;
+      const float d = surface_depth_[p];
       if (d == inf) continue;  // misses the head: background, no samples
-      AddRay(cam, x, y, std::max(0.01f, d - front), d + back, rng, out);
+      AddRay(cam, x, y, std::max(0.01f, d - front), d + back, surface_face_[p], rng, out);
     }
+}
+
+void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
+                               const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, SurfaceBatch* out) {
+  if (canonical_vertices.size() != 3 * vertices_in_cam.rows())
+    throw std::invalid_argument("SampleSurface: " + std::to_string(canonical_vertices.size() / 3) +
+                                " canonical vertices for a mesh of " + std::to_string(vertices_in_cam.rows()));
+  RasterOptions raster;
+  raster.cull_back_faces = true;
+  Rasterize(vertices_in_cam, faces, cam, raster, &surface_buffers_);
+  out->width = cam.width;
+  out->height = cam.height;
+  out->pixel.clear();
+  out->canonical.clear();
+  const RasterBuffers& b = surface_buffers_;
+  for (int p = 0; p < cam.width * cam.height; ++p) {
+    const int f = b.face[p];
+    if (f < 0) continue;
+    out->pixel.push_back(p);
+    float point[3] = {0, 0, 0};
+    for (int corner = 0; corner < 3; ++corner) {
+      const float w = b.bary[3 * p + corner];
+      const int v = faces(f, corner);
+      for (int k = 0; k < 3; ++k) point[k] += w * canonical_vertices[3 * v + k];
+    }
+    out->canonical.insert(out->canonical.end(), point, point + 3);
+  }
+}
+
+namespace {
+
+// Columns: the triangle's two edges and its unit normal; false when degenerate.
+bool LocalFrame(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& c, Eigen::Matrix3f* frame) {
+  const Eigen::Vector3f e1 = b - a, e2 = c - a, n = e1.cross(e2);
+  const float area2 = n.norm();
+  if (!(area2 > 1e-12f)) return false;
+  frame->col(0) = e1;
+  frame->col(1) = e2;
+  frame->col(2) = n / area2;
+  return true;
+}
+
+}  // namespace
+
+void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed, const RasterFaces& faces,
+                         const Eigen::VectorXf& canonical, std::vector<float>* out) {
+  if (canonical.size() != 3 * posed.rows())
+    throw std::invalid_argument("CanonicalTransforms: " + std::to_string(canonical.size() / 3) +
+                                " canonical vertices for a mesh of " + std::to_string(posed.rows()));
+  out->assign(12 * rays.face.size(), 0.f);
+  for (size_t r = 0; r < rays.face.size(); ++r) {
+    float* t = out->data() + 12 * r;
+    t[0] = t[4] = t[8] = 1.f;  // identity unless the ray has a usable triangle
+    const int f = rays.face[r];
+    if (f < 0 || f >= faces.rows()) continue;
+    Eigen::Matrix3f from, to;
+    const auto corner = [&](int k) { return Eigen::Vector3f(canonical.segment<3>(3 * faces(f, k))); };
+    if (!LocalFrame(posed.row(faces(f, 0)), posed.row(faces(f, 1)), posed.row(faces(f, 2)), &from) ||
+        !LocalFrame(corner(0), corner(1), corner(2), &to))
+      continue;
+    const Eigen::Matrix3f a = to * from.inverse();
+    const Eigen::Vector3f o = corner(0) - a * posed.row(faces(f, 0)).transpose();
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) t[3 * i + j] = a(i, j);
+      t[9 + i] = o[i];
+    }
+  }
 }
 
 }  // namespace headcast

@@ -10,6 +10,7 @@
 #include "common/avatar/avatar_config.h"
 #include "common/core/camera.h"
 #include "common/core/rigid_transform.h"
+#include "common/headmodel/head_model.h"
 #include "common/raster/rasterizer.h"
 
 namespace headcast {
@@ -20,8 +21,29 @@ struct RayBatch {
   std::vector<int32_t> pixel;     // ray -> y * width + x
   std::vector<float> directions;  // 3 per ray, camera frame, z = 1
   std::vector<float> depths;      // samples_per_ray per ray: camera z, increasing
+  std::vector<int32_t> face;      // mesh-guided: the triangle under the ray (or the nearest in the margin), else -1
   int num_rays() const { return static_cast<int>(pixel.size()); }
 };
+
+// Pixels of the output image that the posed mesh covers, each with the point
+// of the canonical (neutral) mesh under it: the same triangle and barycentrics
+// on the canonical vertices. What the surface texture is looked up with.
+struct SurfaceBatch {
+  int width = 0, height = 0;     // output image size
+  std::vector<int32_t> pixel;    // covered pixel -> y * width + x
+  std::vector<float> canonical;  // 3 per covered pixel, model frame, metres
+  int num_pixels() const { return static_cast<int>(pixel.size()); }
+};
+
+// Per ray, the affine map from the posed head (model frame) to the canonical
+// (neutral) one through the local frame of the ray's triangle: its two edges
+// and unit normal posed, to the same on the canonical triangle (INSTA's
+// idea: the mesh carries the motion, a point off the surface keeps its
+// distance along the normal). 12 floats per ray, row-major A then o, with
+// p_canonical = A p + o; rays without a triangle (or a degenerate one) get
+// the identity. `canonical_vertices`: 3N, x y z per vertex.
+void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed_vertices, const RasterFaces& faces,
+                         const Eigen::VectorXf& canonical_vertices, std::vector<float>* out);
 
 class RaySampler {
  public:
@@ -33,13 +55,19 @@ class RaySampler {
   void Sample(const RasterVertices& vertices_in_cam, const RasterFaces& faces, const PinholeCamera& feature_camera,
               const RigidTransform& cam_from_head, std::mt19937* rng, RayBatch* out);
 
+  // Rasterises the posed mesh at `output_camera`'s size and maps every covered
+  // pixel to the canonical mesh (`canonical_vertices`: 3N, x y z per vertex).
+  void SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
+                     const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, SurfaceBatch* out);
+
  private:
-  void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, std::mt19937* rng,
+  void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,
               RayBatch* out) const;
 
   AvatarConfig config_;
-  RasterBuffers buffers_;
+  RasterBuffers buffers_, surface_buffers_;
   std::vector<float> surface_depth_;
+  std::vector<int32_t> surface_face_;
 };
 
 }  // namespace headcast

@@ -161,18 +161,20 @@ TEST(AvatarPipeline, AFewStepsReduceTheLossOnAFixedTarget) {
   const HeadModelOutput posed = m.Forward(HeadModelParams{});
   RasterVertices v;
   TransformToCamera(posed.vertices, cam_from_head, &v);
-  RayBatch rays;
-  RaySampler(c).Sample(v, m.data().faces, avatar.subject().intrinsics.Resized(16, 16), cam_from_head, nullptr, &rays);
+  AvatarFrameInputs inputs;
+  inputs.cam_from_head = cam_from_head;
+  RaySampler(c).Sample(v, m.data().faces, avatar.subject().intrinsics.Resized(16, 16), cam_from_head, nullptr,
+                       &inputs.rays);
   // Target: the head model's own render (what the general model learns from).
   const HeadRender target_render =
       RenderHead(m, posed.vertices, cam_from_head, avatar.subject().intrinsics, AlbedoTexture(m));
   const torch::Tensor target = BgrToImageTensor(target_render.image_bgr);
-  const AvatarConditioning cond = MakeConditioning(c, avatar.subject(), p);
+  inputs.conditioning = MakeConditioning(c, avatar.subject(), p);
   torch::optim::Adam adam(avatar.modules().parameters(), torch::optim::AdamOptions(5e-3));
   std::vector<float> losses;
   for (int step = 0; step < 25; ++step) {
     adam.zero_grad();
-    const AvatarOutput out = RunAvatar(avatar.modules(), rays, cam_from_head, cond);
+    const AvatarOutput out = RunAvatar(avatar.modules(), inputs);
     const torch::Tensor loss = torch::mse_loss(out.image, target);
     loss.backward();
     adam.step();

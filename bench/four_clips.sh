@@ -1,0 +1,115 @@
+#!/usr/bin/env bash
+# The fidelity table of issue #22: every talking-head clip in the shared data,
+# ICT-FaceKit, the last 150 frames held out, one avatar per clip at 256² with
+# the default subject settings; per clip the test PSNR/SSIM, the worst 5 % of
+# test frames, the landmark error by region and the blink correlation (dlib on
+# avatar and true frames), the frames whose fit the tracker lost, and the
+# avatar's creation time (prep + fine-tune); then the receiver's frame rate at
+# 256² and 512² (headcast-bench render, default subject configuration).
+#   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N] [--ict DIR] [--clips "d9 d10 ..."]
+# Writes OUT/four_clips.{json,md} and prints the table; the work stays in OUT.
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+python=${HEADCAST_PYTHON:-/usr/bin/python3}
+data=${HEADCAST_DATA:-$root/../shared/data}
+bin=${HEADCAST_BIN:-$root/build/bin}
+[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
+out=$1; shift
+command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
+iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3"
+while [ $# -gt 0 ]; do
+  case $1 in
+    --general) general=$2; shift 2 ;;
+    --iterations) iterations=$2; shift 2 ;;
+    --ict) ict=$2; shift 2 ;;
+    --clips) clips=$2; shift 2 ;;
+    *) echo "four_clips: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+[ -d "$ict" ] || { echo "four_clips: no ICT-FaceKit folder $ict" >&2; exit 2; }
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+step() { echo "== $(date +%H:%M:%S) $*" >&2; }
+run() {  # run LOG COMMAND...
+  local log=$1; shift
+  "$@" > "$out/$log" 2>&1 || { echo "four_clips: failed, see $out/$log" >&2; exit 1; }
+}
+now() { date +%s.%N; }
+
+model=$out/ict.npz
+[ -f "$model" ] || { step "ICT-FaceKit -> npz"; run convert.log "$bin/headcast-headmodel" convert ict --folder "$ict" --out "$model"; }
+if [ -z "$general" ]; then
+  general=$out/general128.hcavatar
+  [ -f "$general" ] || { step "general model (128², 4000 steps)"; run pretrain.log "$bin/headcast-train" pretrain \
+    --head-model "$model" --resolution 128 --iterations 4000 --processes 2 --out "$general"; }
+fi
+for clip in $clips; do
+  video=$data/video/talking_$clip.mp4
+  [ -f "$video" ] || { echo "four_clips: no video $video" >&2; exit 2; }
+  t0=$(now)
+  step "$clip: prep"
+  rm -rf "$out/ds_$clip"
+  run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$out/ds_$clip" \
+    --resolutions 256 --test-frames 150
+  t1=$(now)
+  step "$clip: fine-tune ($iterations steps)"
+  run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
+    --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
+    --report "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar"
+  t2=$(now)
+  "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
+  step "$clip: eval"
+  run "eval_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
+    --data "$out/ds_$clip" --out "$out/eval_$clip" --orbit-frames 0
+done
+for r in 256 512; do
+  step "render ${r}²"
+  run "render_$r.log" "$bin/headcast-bench" render --resolution $r --repeats 100 --json "$out/render_$r.json"
+done
+
+"$python" - "$out" "$command" "$iterations" $clips <<'EOF'
+import csv, json, os, sys
+out, command, iterations, clips = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
+rows = []
+for c in clips:
+    ev = json.load(open(os.path.join(out, f"eval_{c}", "eval.json")))
+    e = ev["eval"]
+    fid = ev["expression_fidelity"]
+    fid = fid["result"] if isinstance(fid, dict) else {}
+    psnr = sorted(float(r["psnr"]) for r in csv.DictReader(open(os.path.join(out, f"eval_{c}", "per_frame.csv"))))
+    worst = psnr[:max(1, len(psnr) // 20)]
+    ds = json.load(open(os.path.join(out, f"ds_{c}", "dataset.json")))
+    t = json.load(open(os.path.join(out, f"time_{c}.json")))
+    rows.append({"clip": f"talking_{c}", "test_psnr_db": e["psnr_db"], "test_ssim": e["ssim"],
+                 "worst_5pct_psnr_db": sum(worst) / len(worst), "test_frames": e["frames"],
+                 "landmark_error_iod": fid.get("error_iod"), "landmarks_found": fid.get("found_in_both"),
+                 "blink_correlation": (fid.get("blink") or {}).get("correlation"),
+                 "frames_read": ds.get("frames_read"), "frames_fitted": ds.get("frames_fitted"), "split": ds.get("split"),
+                 "prep_s": t["prep_s"], "fine_tune_s": t["fine_tune_s"],
+                 "creation_min": (t["prep_s"] + t["fine_tune_s"]) / 60})
+render = {}
+for r in ("256", "512"):
+    j = json.load(open(os.path.join(out, f"render_{r}.json")))
+    render[r] = {k: j["with_surface"][k] for k in ("fps_median", "ms_median", "ms_p95")}
+    render[r]["threads"] = j["threads"]
+result = {"command": command, "iterations": iterations, "rows": rows, "render_with_surface": render}
+json.dump(result, open(os.path.join(out, "four_clips.json"), "w"), indent=2)
+def f(v, fmt):
+    return "–" if v is None else format(v, fmt)
+L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
+     "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
+     "frames, over the true eye distance.", "",
+     "| clip | fitted / read | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | creation (min) |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+for x in rows:
+    le = x["landmark_error_iod"] or {}
+    L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
+             f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
+             f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
+             f"{x['creation_min']:.1f} |")
+L += ["", "Receiver (headcast-bench render, random avatar of the default subject configuration): " +
+      "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
+                for r, v in render.items())]
+open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")
+print("\n".join(L))
+EOF

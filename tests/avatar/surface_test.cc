@@ -1,0 +1,277 @@
+// The canonical head: the surface texture's mapping through the rasterised
+// posed mesh, the CNeRF samples' per-ray transforms, the texture's start (the
+// picture unchanged), learning, and its file.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+
+#include "common/avatar/avatar_pipeline.h"
+#include "common/core/zip_archive.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+#include "tests/testing/test_data.h"
+#include "tests/testing/tiny_avatar.h"
+
+namespace headcast {
+namespace {
+
+std::shared_ptr<const HeadModel> Builtin() {
+  static auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
+  return model;
+}
+
+AvatarConfig TinyWithSurface() {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.surface_features = 4;
+  c.surface_resolution = 32;
+  return c;
+}
+
+// A frame with an expression and a turned head, so that the posed mesh is far
+// from the canonical one.
+FrameParams Expressive() {
+  FrameParams p;
+  p.expression = Eigen::VectorXf::Zero(Builtin()->num_expression());
+  p.expression[0] = 1.5f;  // smile
+  p.expression[8] = 1.0f;  // lips part
+  p.jaw = Eigen::Vector3f(0.25f, 0, 0);
+  p.neck = Eigen::Vector3f(0.1f, 0.3f, 0);
+  p.SetCamFromHead(FrontalCamFromHead(0.62));
+  return p;
+}
+
+struct Posed {
+  HeadIdentity identity;
+  HeadModelOutput posed;
+  RasterVertices v_cam;
+  PinholeCamera camera;
+};
+
+Posed Pose(const FrameParams& frame, int size) {
+  const HeadModel& m = *Builtin();
+  Posed p;
+  p.identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  m.Forward(p.identity, frame.expression.cast<double>(), frame.HeadPose(), &p.posed);
+  TransformToCamera(p.posed.vertices, frame.CamFromHead(), &p.v_cam);
+  p.camera = DefaultSubject(m, size).intrinsics;
+  return p;
+}
+
+// What the receiver shows for `frame`.
+cv::Mat Shown(Avatar& avatar, const FrameParams& frame) {
+  const HeadModel& m = *Builtin();
+  avatar.modules().eval();
+  torch::InferenceMode inference;
+  RaySampler sampler(avatar.config());
+  AvatarFrameInputs buffers;
+  cv::Mat image;
+  RenderAvatarFrame(avatar.modules(), avatar.config(), m, m.MakeIdentity(avatar.subject().shape.cast<double>()),
+                    avatar.subject(), frame, &sampler, &buffers, &image);
+  return image;
+}
+
+Eigen::Vector3f Corner(const Eigen::VectorXf& flat, int v) { return {flat[3 * v], flat[3 * v + 1], flat[3 * v + 2]}; }
+
+}  // namespace
+
+// Each covered pixel's canonical point lies on the canonical triangle under
+// the pixel, and carried back through that triangle's barycentrics onto the
+// posed triangle it lands on the pixel: the mapping inverts the posed mesh on its surface.
+TEST(SurfaceSampling, TheCanonicalPointMapsBackOntoThePixel) {
+  const HeadModel& m = *Builtin();
+  const Posed p = Pose(Expressive(), 128);
+  const RasterFaces& faces = m.data().faces;
+  RaySampler sampler(TinyWithSurface());
+  SurfaceBatch surface;
+  sampler.SampleSurface(p.v_cam, faces, p.identity.v_shaped, p.camera, &surface);
+  RasterBuffers raster;
+  Rasterize(p.v_cam, faces, p.camera, RasterOptions{}, &raster);
+  ASSERT_EQ(surface.num_pixels(), raster.CoveredPixels());
+  ASSERT_GT(surface.num_pixels(), 1000);
+  ASSERT_EQ(surface.canonical.size(), 3u * surface.num_pixels());
+  double worst_px = 0, worst_plane = 0, moved = 0;
+  for (int i = 0; i < surface.num_pixels(); ++i) {
+    const int px = surface.pixel[i], f = raster.face[px];
+    ASSERT_GE(f, 0);
+    const Eigen::Vector3f c(surface.canonical[3 * i], surface.canonical[3 * i + 1], surface.canonical[3 * i + 2]);
+    // Barycentrics of c in the canonical triangle (least squares on the plane).
+    const Eigen::Vector3f a = Corner(p.identity.v_shaped, faces(f, 0)), b = Corner(p.identity.v_shaped, faces(f, 1)),
+                          d = Corner(p.identity.v_shaped, faces(f, 2));
+    Eigen::Matrix<float, 3, 2> e;
+    e << b - a, d - a;
+    const Eigen::Vector2f uv = e.colPivHouseholderQr().solve(c - a);
+    worst_plane = std::max<double>(worst_plane, (a + e * uv - c).norm());
+    const Eigen::Vector3f w(1 - uv[0] - uv[1], uv[0], uv[1]);
+    EXPECT_GE(w.minCoeff(), -1e-3f) << "outside its triangle at pixel " << px;
+    // The same barycentrics on the posed triangle, in the camera frame, projected.
+    Eigen::Vector3f q = Eigen::Vector3f::Zero();
+    for (int k = 0; k < 3; ++k) q += w[k] * p.v_cam.row(faces(f, k)).transpose();
+    const Eigen::Vector2d at = p.camera.Project(q.cast<double>());
+    const double dx = at.x() - px % p.camera.width, dy = at.y() - px / p.camera.width;
+    worst_px = std::max(worst_px, std::hypot(dx, dy));
+    // Where the expression moved the surface, the canonical point is not the posed one.
+    Eigen::Vector3f posed_point = Eigen::Vector3f::Zero();
+    for (int k = 0; k < 3; ++k) posed_point += w[k] * p.posed.vertices.row(faces(f, k)).transpose();
+    moved = std::max<double>(moved, (posed_point - c).norm());
+  }
+  EXPECT_LT(worst_plane, 1e-5);
+  EXPECT_LT(worst_px, 0.02);
+  EXPECT_GT(moved, 0.005) << "the expression and jaw moved nothing: the test frame proves little";
+}
+
+TEST(SurfaceSampling, RefusesCanonicalVerticesOfAnotherMesh) {
+  const Posed p = Pose(Expressive(), 64);
+  RaySampler sampler(TinyWithSurface());
+  SurfaceBatch surface;
+  const Eigen::VectorXf fewer = p.identity.v_shaped.head(p.identity.v_shaped.size() - 3);
+  EXPECT_THROW(sampler.SampleSurface(p.v_cam, Builtin()->data().faces, fewer, p.camera, &surface),
+               std::invalid_argument);
+}
+
+// A point on the posed triangle under a ray lands on the same barycentric
+// point of the canonical triangle, and a point off it along the posed normal
+// lands as far along the canonical normal.
+TEST(CanonicalSamples, TheRaysTriangleCarriesItsSamplesToTheNeutralHead) {
+  const HeadModel& m = *Builtin();
+  const FrameParams frame = Expressive();
+  const Posed p = Pose(frame, 128);
+  const RasterFaces& faces = m.data().faces;
+  RayBatch rays;
+  RaySampler(testing::TinyAvatarConfig())
+      .Sample(p.v_cam, faces, p.camera.Resized(32, 32), frame.CamFromHead(), nullptr, &rays);
+  ASSERT_GT(rays.num_rays(), 100);
+  ASSERT_EQ(rays.face.size(), rays.pixel.size());
+  std::vector<float> to;
+  CanonicalTransforms(rays, p.posed.vertices, faces, p.identity.v_shaped, &to);
+  ASSERT_EQ(to.size(), 12u * rays.num_rays());
+  double worst = 0, moved = 0;
+  for (int r = 0; r < rays.num_rays(); ++r) {
+    const int f = rays.face[r];
+    ASSERT_GE(f, 0) << "a mesh-guided ray without a triangle";
+    const Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>> a(to.data() + 12 * r);
+    const Eigen::Map<const Eigen::Vector3f> o(to.data() + 12 * r + 9);
+    const Eigen::Vector3f pa = p.posed.vertices.row(faces(f, 0)), pb = p.posed.vertices.row(faces(f, 1)),
+                          pc = p.posed.vertices.row(faces(f, 2));
+    const Eigen::Vector3f ca = Corner(p.identity.v_shaped, faces(f, 0)), cb = Corner(p.identity.v_shaped, faces(f, 1)),
+                          cc = Corner(p.identity.v_shaped, faces(f, 2));
+    const Eigen::Vector3f pn = (pb - pa).cross(pc - pa).normalized(), cn = (cb - ca).cross(cc - ca).normalized();
+    for (const Eigen::Vector3f& w : {Eigen::Vector3f(1, 0, 0), Eigen::Vector3f(0.2f, 0.3f, 0.5f)})
+      for (float d : {0.f, 0.02f, -0.01f}) {
+        const Eigen::Vector3f posed = w[0] * pa + w[1] * pb + w[2] * pc + d * pn;
+        const Eigen::Vector3f want = w[0] * ca + w[1] * cb + w[2] * cc + d * cn;
+        worst = std::max<double>(worst, (a * posed + o - want).norm());
+        moved = std::max<double>(moved, (posed - want).norm());
+      }
+  }
+  EXPECT_LT(worst, 2e-5);
+  EXPECT_GT(moved, 0.005) << "the expression and pose moved nothing: the test frame proves little";
+  // A ray without a triangle keeps its point.
+  RayBatch lone = rays;
+  lone.face.assign(lone.face.size(), -1);
+  CanonicalTransforms(lone, p.posed.vertices, faces, p.identity.v_shaped, &to);
+  EXPECT_EQ(to[0], 1.f);
+  EXPECT_EQ(to[1], 0.f);
+  EXPECT_EQ(to[8], 1.f);
+  EXPECT_EQ(to[9], 0.f);
+  EXPECT_THROW(CanonicalTransforms(rays, p.posed.vertices, faces, p.identity.v_shaped.head(6), &to),
+               std::invalid_argument);
+}
+
+TEST(CanonicalSamples, NeedMeshGuidedSamplingAndTravelInTheFile) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.canonical_samples = true;
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).canonical_samples);
+  c.sampling = SamplingMode::kUniform;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+}
+
+TEST(SurfaceTexture, SamplesItsPlanesAtCanonicalPoints) {
+  AvatarConfig c = TinyWithSurface();
+  SurfaceTexture texture(c);
+  const torch::Tensor points = torch::tensor({0.f, 0.f, 0.f, 0.05f, -0.1f, 0.02f, 9.f, 9.f, 9.f}).view({3, 3});
+  EXPECT_EQ(texture->forward(points).abs().max().item<float>(), 0.f) << "a new texture is zero";
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : texture->parameters()) t.fill_(0.25f);
+  }
+  const torch::Tensor f = texture->forward(points);
+  ASSERT_EQ(f.sizes(), (std::vector<int64_t>{3, c.surface_features}));
+  // Three planes, each 0.25 everywhere (also beyond the extent: the border).
+  EXPECT_NEAR(f.min().item<float>(), 0.75f, 1e-6);
+  EXPECT_NEAR(f.max().item<float>(), 0.75f, 1e-6);
+}
+
+// Adding a texture to an avatar without one (a fine-tune of a general model)
+// changes nothing it draws until training moves it; then the texture learns.
+TEST(SurfaceTexture, StartsAsTheAvatarWithoutItAndLearns) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig plain = testing::TinyAvatarConfig();
+  Avatar general = Avatar::CreateRandom(plain, m, DefaultSubject(m, 128), 3);
+  Avatar with = general.WithRuntimeSwitches(TinyWithSurface());
+  ASSERT_TRUE(with.modules().surface);
+  const FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0);
+  // A changed texture, or one taken away, is refused: only adding is a switch.
+  AvatarConfig other = TinyWithSurface();
+  other.surface_resolution = 64;
+  EXPECT_THROW(with.WithRuntimeSwitches(other), std::invalid_argument);
+  EXPECT_THROW(with.WithRuntimeSwitches(plain), std::invalid_argument);
+
+  // Train on a flat target: after a few steps the texture is no longer zero.
+  with.modules().train();
+  AvatarFrameInputs inputs;
+  RaySampler sampler(with.config());
+  PrepareAvatarFrame(with.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), with.subject(), frame,
+                     &sampler, nullptr, &inputs);
+  ASSERT_GT(inputs.surface.num_pixels(), 0);
+  const torch::Tensor target = torch::full({1, 3, 128, 128}, 0.8f);
+  torch::optim::Adam adam(with.modules().parameters(), torch::optim::AdamOptions(1e-2));
+  for (int step = 0; step < 3; ++step) {
+    adam.zero_grad();
+    torch::mse_loss(RunAvatar(with.modules(), inputs).image, target).backward();
+    adam.step();
+  }
+  EXPECT_GT(with.modules().surface->parameters()[0].abs().max().item<float>(), 0.f);
+}
+
+TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
+  const HeadModel& m = *Builtin();
+  const std::string dir = testing::TempDir("surface");
+  Avatar a = Avatar::CreateRandom(TinyWithSurface(), m, DefaultSubject(m, 128), 4);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : a.modules().surface->parameters()) t.uniform_(-1, 1);
+  }
+  const std::string path = dir + "/s.hcavatar";
+  a.Save(path);
+  Avatar back = Avatar::Load(path, m);
+  EXPECT_EQ(back.config().ToJson(), TinyWithSurface().ToJson());
+  const FrameParams frame = Expressive();
+  const cv::Mat y = Shown(back, frame);
+  EXPECT_EQ(cv::norm(Shown(a, frame), y, cv::NORM_INF), 0) << "the loaded texture draws what the saved one did";
+  EXPECT_EQ(cv::norm(y, Shown(back, frame), cv::NORM_INF), 0) << "the same frame twice, the same picture";
+  // A manifest that promises a texture the weights do not hold.
+  Avatar plain = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 4);
+  const std::string plain_path = dir + "/p.hcavatar";
+  plain.Save(plain_path);
+  ZipEntries entries = ReadZip(plain_path);
+  nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+  manifest["config"]["surface_features"] = 4;
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/lying.hcavatar", entries);
+  try {
+    Avatar::Load(dir + "/lying.hcavatar", m);
+    ADD_FAILURE() << "a texture-less file claiming a texture loaded";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("weights do not match"), std::string::npos) << e.what();
+  }
+  // Files from before surface textures (no such keys) load without one.
+  manifest["config"].erase("surface_features");
+  manifest["config"].erase("surface_resolution");
+  manifest["config"].erase("surface_extent");
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/old.hcavatar", entries);
+  EXPECT_FALSE(Avatar::Load(dir + "/old.hcavatar", m).config().has_surface());
+}
+
+}  // namespace headcast

@@ -1,0 +1,73 @@
+// Expression-fidelity figures: landmark agreement and blink correlation.
+#include "training/landmark_agreement.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "tests/testing/test_data.h"
+
+namespace headcast {
+namespace {
+
+// A neutral 68-point layout with eyes of width 30 and lids `open` apart.
+Landmarks2d Eyes(double open) {
+  Landmarks2d l{};
+  for (int o : {36, 42}) {
+    const double x0 = o == 36 ? 100 : 160;
+    l[o] = {x0, 100};
+    l[o + 3] = {x0 + 30, 100};
+    l[o + 1] = {x0 + 10, 100 - open / 2};
+    l[o + 2] = {x0 + 20, 100 - open / 2};
+    l[o + 5] = {x0 + 10, 100 + open / 2};
+    l[o + 4] = {x0 + 20, 100 + open / 2};
+  }
+  return l;
+}
+
+}  // namespace
+
+TEST(LandmarkAgreement, EyeOpeningAndCorrelation) {
+  EXPECT_NEAR(EyeOpening(Eyes(9)), 0.3, 1e-12);
+  EXPECT_NEAR(EyeOpening(Eyes(0)), 0.0, 1e-12);
+  EXPECT_NEAR(PearsonCorrelation({1, 2, 3, 4}, {2, 4, 6, 8}), 1.0, 1e-12);
+  EXPECT_NEAR(PearsonCorrelation({1, 2, 3, 4}, {8, 6, 4, 2}), -1.0, 1e-12);
+  EXPECT_EQ(PearsonCorrelation({1, 1, 1}, {1, 2, 3}), 0.0);
+  EXPECT_EQ(PearsonCorrelation({1, 2}, {1, 2}), 0.0);
+}
+
+// A face against itself agrees; against itself shifted by 5 pixels every
+// region is off by about 5 pixels over the eye distance. The pictures are
+// 256² frames of a talking head, as the avatar's are.
+TEST(LandmarkAgreement, ShiftedPictureIsOffByTheShift) {
+  HEADCAST_REQUIRE_DATA("video/talking_d9.mp4");
+  const std::string predictor = FaceTrackerOptions{}.predictor_path;
+  if (!std::filesystem::exists(predictor)) GTEST_SKIP() << "no dlib shape predictor at " << predictor;
+  cv::VideoCapture video(testing::DataDir() + "/video/talking_d9.mp4");
+  cv::Mat frame, face;
+  ASSERT_TRUE(video.read(frame));
+  cv::resize(frame, face, cv::Size(256, 256), 0, 0, cv::INTER_AREA);
+  LandmarkAgreement same(predictor);
+  same.Add(face, face);
+  const nlohmann::json s = same.Summary();
+  ASSERT_EQ(s["found_in_both"], 1) << s.dump();
+  EXPECT_LT(s["error_iod"]["all"].get<double>(), 1e-9);
+  cv::Mat shifted;
+  cv::warpAffine(face, shifted, cv::Matx23d(1, 0, 5, 0, 1, 0), face.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  LandmarkAgreement moved(predictor);
+  moved.Add(face, shifted);
+  moved.Add(face, cv::Mat(face.size(), face.type(), cv::Scalar::all(90)));  // no face: counted, not scored
+  const nlohmann::json m = moved.Summary();
+  EXPECT_EQ(m["frames"], 2);
+  ASSERT_EQ(m["found_in_both"], 1) << m.dump();
+  // The eye distance is about 50 px: 5 px is about 0.1.
+  for (const char* region : {"eyes", "brows", "nose", "mouth", "jaw"}) {
+    const double e = m["error_iod"][region];
+    EXPECT_GT(e, 0.04) << region;
+    EXPECT_LT(e, 0.2) << region;
+  }
+}
+
+}  // namespace headcast

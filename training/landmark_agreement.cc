@@ -1,0 +1,108 @@
+// Landmark agreement between an avatar's pictures and the true frames.
+#include "training/landmark_agreement.h"
+
+#include <cmath>
+#include <numeric>
+
+namespace headcast {
+namespace {
+
+// dlib's 68-point layout.
+struct Region {
+  const char* name;
+  int first, last;  // inclusive
+};
+constexpr Region kRegions[] = {
+    {"eyes", 36, 47}, {"brows", 17, 26}, {"nose", 27, 35}, {"mouth", 48, 67}, {"jaw", 0, 16}};
+
+Eigen::Vector2d Mean(const Landmarks2d& l, int first, int last) {
+  Eigen::Vector2d m = Eigen::Vector2d::Zero();
+  for (int i = first; i <= last; ++i) m += l[i];
+  return m / (last - first + 1);
+}
+
+FaceTrackerOptions StillImages(const std::string& predictor_path) {
+  FaceTrackerOptions o;
+  o.predictor_path = predictor_path;
+  o.redetect_interval = 1;  // every picture on its own: no box carried over
+  return o;
+}
+
+}  // namespace
+
+double PearsonCorrelation(const std::vector<double>& a, const std::vector<double>& b) {
+  const size_t n = std::min(a.size(), b.size());
+  if (n < 3) return 0;
+  const double ma = std::accumulate(a.begin(), a.begin() + n, 0.0) / n;
+  const double mb = std::accumulate(b.begin(), b.begin() + n, 0.0) / n;
+  double sab = 0, saa = 0, sbb = 0;
+  for (size_t i = 0; i < n; ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0;
+}
+
+double EyeOpening(const Landmarks2d& l) {
+  auto eye = [&](int o) {  // o: the eye's first point (36 or 42), corners o and o + 3
+    const double width = (l[o] - l[o + 3]).norm();
+    const double lids = (l[o + 1] - l[o + 5]).norm() + (l[o + 2] - l[o + 4]).norm();
+    return width > 0 ? lids / (2 * width) : 0;
+  };
+  return 0.5 * (eye(36) + eye(42));
+}
+
+LandmarkAgreement::LandmarkAgreement(const std::string& predictor_path) : tracker_(StillImages(predictor_path)) {}
+LandmarkAgreement::~LandmarkAgreement() = default;
+
+bool LandmarkAgreement::Detect(const cv::Mat& image, Landmarks2d* out) {
+  tracker_.Reset();
+  const FaceObservation o = tracker_.Track(image, 0);
+  if (o.status == FaceStatus::kNoFace) return false;
+  *out = o.raw;
+  return true;
+}
+
+void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr) {
+  ++frames_;
+  Landmarks2d truth, avatar;
+  if (!Detect(truth_bgr, &truth) || !Detect(avatar_bgr, &avatar)) return;
+  const double iod = (Mean(truth, 36, 41) - Mean(truth, 42, 47)).norm();
+  if (!(iod > 1)) return;
+  std::array<double, 5> e{};
+  for (size_t r = 0; r < 5; ++r) {
+    const Region& g = kRegions[r];
+    for (int i = g.first; i <= g.last; ++i) e[r] += (truth[i] - avatar[i]).norm();
+    e[r] /= (g.last - g.first + 1) * iod;
+  }
+  region_errors_.push_back(e);
+  truth_opening_.push_back(EyeOpening(truth));
+  avatar_opening_.push_back(EyeOpening(avatar));
+}
+
+nlohmann::json LandmarkAgreement::Summary() const {
+  const size_t n = region_errors_.size();
+  nlohmann::json errors = nlohmann::json::object();
+  double all = 0;
+  for (size_t r = 0; r < 5; ++r) {
+    double sum = 0;
+    for (const auto& e : region_errors_) sum += e[r];
+    errors[kRegions[r].name] = n ? sum / n : 0.0;
+  }
+  for (const auto& e : region_errors_)  // every point alike: regions weighted by their point counts
+    for (size_t r = 0; r < 5; ++r) all += e[r] * (kRegions[r].last - kRegions[r].first + 1) / 68.0;
+  errors["all"] = n ? all / n : 0.0;
+  double sd = 0;
+  if (n > 1) {
+    const double m = std::accumulate(truth_opening_.begin(), truth_opening_.end(), 0.0) / n;
+    for (double v : truth_opening_) sd += (v - m) * (v - m);
+    sd = std::sqrt(sd / (n - 1));
+  }
+  return {{"frames", frames_},
+          {"found_in_both", n},
+          {"error_iod", errors},
+          {"blink", {{"correlation", PearsonCorrelation(truth_opening_, avatar_opening_)}, {"truth_opening_sd", sd}}}};
+}
+
+}  // namespace headcast
