@@ -7,6 +7,7 @@
 # avatar's creation time (prep + fine-tune); then the receiver's frame rate at
 # 256² and 512² (headcast-bench render, default subject configuration).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N] [--ict DIR] [--clips "d9 d10 ..."]
+#       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
 # Writes OUT/four_clips.{json,md} and prints the table; the work stays in OUT.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -16,13 +17,14 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
-iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3"
+iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags=""
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
     --iterations) iterations=$2; shift 2 ;;
     --ict) ict=$2; shift 2 ;;
     --clips) clips=$2; shift 2 ;;
+    --subject-flags) subject_flags=$2; shift 2 ;;
     *) echo "four_clips: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -52,10 +54,11 @@ for clip in $clips; do
   run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$out/ds_$clip" \
     --resolutions 256 --test-frames 150
   t1=$(now)
-  step "$clip: fine-tune ($iterations steps)"
+  step "$clip: fine-tune ($iterations steps) $subject_flags"
+  # shellcheck disable=SC2086  # the extra flags are words
   run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
     --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
-    --report "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar"
+    --report "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
   t2=$(now)
   "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
   step "$clip: eval"

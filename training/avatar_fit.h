@@ -50,8 +50,9 @@ struct FitOptions {
   // constant — the fine-tune is still underfitting when it ends.
   double final_lr_fraction = 1;
   double LearningRateAt(int step) const;
-  // The surface texture's rate over the networks'.
-  double surface_lr_scale = 5;
+  // The surface texture's rate over the networks' (its texels each see a
+  // small part of every picture; bench/DEFAULTS.md has the measurement).
+  double surface_lr_scale = 20;
   // Polyak averaging: with a decay d in (0, 1) the run keeps an exponential
   // moving average of the weights (decay min(d, (1 + n) / (10 + n)) at step n,
   // so the start weights fade out early); the avatar holds the average in the
