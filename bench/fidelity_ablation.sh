@@ -32,19 +32,8 @@ parse_person_args "${person[@]}"
 [ ${#variants[@]} -gt 0 ] || variants=("thesis=--surface-features 0" "surface=")
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
-step() { echo "== $(date +%H:%M:%S) $*" >&2; }
-run() {  # run LOG COMMAND...
-  local log=$1; shift
-  "$@" > "$out/$log" 2>&1 || { echo "$name: failed, see $out/$log" >&2; exit 1; }
-}
-
-model=$out/ict.npz
-[ -f "$model" ] || { step "ICT-FaceKit -> npz"; run convert.log "$bin/headcast-headmodel" convert ict --folder "$ict" --out "$model"; }
-if [ -z "$general" ]; then
-  general=$out/general128.hcavatar
-  [ -f "$general" ] || { step "general model (128², 4000 steps)"; run pretrain.log "$bin/headcast-train" pretrain \
-    --head-model "$model" --resolution 128 --iterations 4000 --processes 2 --out "$general"; }
-fi
+source "$root/bench/avatar_runs.sh"
+ict_and_general
 if [ -z "$dataset" ]; then
   dataset=$out/ds
   [ -f "$dataset/dataset.json" ] || { step "prep"; run prep.log "$bin/headcast-train" prep --input "$video" \

@@ -17,7 +17,7 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
-iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags=""
+name=four_clips iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags=""
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
@@ -25,41 +25,29 @@ while [ $# -gt 0 ]; do
     --ict) ict=$2; shift 2 ;;
     --clips) clips=$2; shift 2 ;;
     --subject-flags) subject_flags=$2; shift 2 ;;
-    *) echo "four_clips: unknown option $1" >&2; exit 2 ;;
+    *) echo "$name: unknown option $1" >&2; exit 2 ;;
   esac
 done
 [ -d "$ict" ] || { echo "four_clips: no ICT-FaceKit folder $ict" >&2; exit 2; }
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
-step() { echo "== $(date +%H:%M:%S) $*" >&2; }
-run() {  # run LOG COMMAND...
-  local log=$1; shift
-  "$@" > "$out/$log" 2>&1 || { echo "four_clips: failed, see $out/$log" >&2; exit 1; }
-}
-now() { date +%s.%N; }
-
-model=$out/ict.npz
-[ -f "$model" ] || { step "ICT-FaceKit -> npz"; run convert.log "$bin/headcast-headmodel" convert ict --folder "$ict" --out "$model"; }
-if [ -z "$general" ]; then
-  general=$out/general128.hcavatar
-  [ -f "$general" ] || { step "general model (128², 4000 steps)"; run pretrain.log "$bin/headcast-train" pretrain \
-    --head-model "$model" --resolution 128 --iterations 4000 --processes 2 --out "$general"; }
-fi
+source "$root/bench/avatar_runs.sh"
+ict_and_general
 for clip in $clips; do
   video=$data/video/talking_$clip.mp4
   [ -f "$video" ] || { echo "four_clips: no video $video" >&2; exit 2; }
-  t0=$(now)
+  t0=$(date +%s.%N)
   step "$clip: prep"
   rm -rf "$out/ds_$clip"
   run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$out/ds_$clip" \
     --resolutions 256 --test-frames 150
-  t1=$(now)
+  t1=$(date +%s.%N)
   step "$clip: fine-tune ($iterations steps) $subject_flags"
   # shellcheck disable=SC2086  # the extra flags are words
   run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
     --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
     --report "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
-  t2=$(now)
+  t2=$(date +%s.%N)
   "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
   step "$clip: eval"
   run "eval_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
