@@ -183,7 +183,23 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   }
 }
 
-torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface) {
+torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height,
+                                              int width) {
+  if (!surface_out_) throw std::logic_error("SurfaceTerm: this renderer has no surface branch");
+  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  auto branch = [&](const torch::Tensor& f) {  // (P, Cs) -> (P, C3): the 1x1 convolutions as matrices
+    const torch::Tensor h =
+        F::leaky_relu(F::linear(f, surface_hidden_->weight.flatten(1), surface_hidden_->bias), leaky);
+    return F::linear(h, surface_out_->weight.flatten(1), surface_out_->bias);
+  };
+  const int64_t channels = surface_out_->weight.size(0), in = surface_hidden_->weight.size(1);
+  const torch::Tensor background = branch(torch::zeros({1, in}));  // (1, C3)
+  torch::Tensor rows = background.expand({static_cast<int64_t>(height) * width, channels});
+  if (features.size(0) > 0) rows = rows.index_copy(0, pixels, branch(features));
+  return rows.t().reshape({1, channels, height, width});
+}
+
+torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term) {
   torch::Tensor rgb = input_rgb_->forward(feature_map);
   torch::Tensor x = feature_map;
   for (int k = 0; k < 3; ++k) {
@@ -192,10 +208,7 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
                                   .mode(torch::kBilinear)
                                   .align_corners(false));
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x);
-    if (k == 2 && surface.defined() && surface_out_) {
-      const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
-      x = x + surface_out_->forward(F::leaky_relu(surface_hidden_->forward(surface), leaky));
-    }
+    if (k == 2 && surface_term.defined()) x = x + surface_term;
     x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
     rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
   }

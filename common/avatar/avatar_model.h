@@ -97,8 +97,13 @@ TORCH_MODULE(SurfaceTexture);
 class NeuralRendererImpl : public torch::nn::Module {
  public:
   explicit NeuralRendererImpl(const AvatarConfig& config);
-  // (B, C0, h, w) [, surface (B, Cs, 8h, 8w)] -> (B, 3, 8h, 8w), RGB in [0, 1].
-  torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface = torch::Tensor());
+  // (B, C0, h, w) [, surface_term (B, C3, 8h, 8w) from SurfaceTerm] -> (B, 3, 8h, 8w), RGB in [0, 1].
+  torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term = torch::Tensor());
+  // The surface branch (two 1x1 layers) on the covered pixels only: texture
+  // features (P, Cs) at flat pixel indices `pixels` (P) of an h x w image ->
+  // (1, C3, h, w). Uncovered pixels get the branch's value for zero features,
+  // so this equals the branch run on the whole zero-filled surface image.
+  torch::Tensor SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height, int width);
 
  private:
   torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr};

@@ -40,24 +40,6 @@ torch::Tensor BgrToImageTensor(const cv::Mat& bgr) {
          255.f;
 }
 
-namespace {
-
-// The surface texture at the covered output pixels, as a (1, C, H, W) image (0 elsewhere).
-torch::Tensor SurfaceImage(SurfaceTexture& texture, const SurfaceBatch& surface, int channels) {
-  const int64_t n = surface.num_pixels(), hw = static_cast<int64_t>(surface.width) * surface.height;
-  torch::Tensor rows = torch::zeros({hw, channels});
-  if (n > 0) {
-    const torch::Tensor canonical =
-        torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
-    const torch::Tensor index =
-        torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
-    rows = rows.index_copy(0, index, texture->forward(canonical));
-  }
-  return rows.t().reshape({1, channels, surface.height, surface.width});
-}
-
-}  // namespace
-
 AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings) {
   const RayBatch& rays = inputs.rays;
   const RigidTransform& cam_from_head = inputs.cam_from_head;
@@ -104,10 +86,19 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     timings->samples = static_cast<int>(r * s);
   }
   watch.Restart();
-  torch::Tensor surface;
-  if (modules.surface)
-    surface = SurfaceImage(modules.surface, inputs.surface, modules.cnerf->config().surface_features);
-  out.image = modules.renderer->forward(out.feature_map, surface);
+  torch::Tensor surface_term;
+  if (modules.surface) {
+    const SurfaceBatch& surface = inputs.surface;
+    const int64_t n = surface.num_pixels();
+    const torch::Tensor canonical =
+        torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
+    const torch::Tensor pixels =
+        torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
+    const torch::Tensor features =
+        n > 0 ? modules.surface->forward(canonical) : torch::zeros({0, modules.cnerf->config().surface_features});
+    surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width);
+  }
+  out.image = modules.renderer->forward(out.feature_map, surface_term);
   if (timings) timings->upsample_ms += watch.ElapsedMs();
   return out;
 }
