@@ -79,11 +79,20 @@ void RaySampler::Sample(const RasterVertices& vertices_in_cam, const RasterFaces
     }
 }
 
+namespace {
+
+// The canonical mesh must be the posed one's (x y z per vertex).
+void CheckCanonicalVertices(const char* who, const Eigen::VectorXf& canonical, Eigen::Index vertices) {
+  if (canonical.size() != 3 * vertices)
+    throw std::invalid_argument(std::string(who) + ": " + std::to_string(canonical.size() / 3) +
+                                " canonical vertices for a mesh of " + std::to_string(vertices));
+}
+
+}  // namespace
+
 void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
                                const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, SurfaceBatch* out) {
-  if (canonical_vertices.size() != 3 * vertices_in_cam.rows())
-    throw std::invalid_argument("SampleSurface: " + std::to_string(canonical_vertices.size() / 3) +
-                                " canonical vertices for a mesh of " + std::to_string(vertices_in_cam.rows()));
+  CheckCanonicalVertices("SampleSurface", canonical_vertices, vertices_in_cam.rows());
   RasterOptions raster;
   raster.cull_back_faces = true;
   Rasterize(vertices_in_cam, faces, cam, raster, &surface_buffers_);
@@ -123,9 +132,7 @@ bool LocalFrame(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen:
 
 void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed, const RasterFaces& faces,
                          const Eigen::VectorXf& canonical, std::vector<float>* out) {
-  if (canonical.size() != 3 * posed.rows())
-    throw std::invalid_argument("CanonicalTransforms: " + std::to_string(canonical.size() / 3) +
-                                " canonical vertices for a mesh of " + std::to_string(posed.rows()));
+  CheckCanonicalVertices("CanonicalTransforms", canonical, posed.rows());
   out->assign(12 * rays.face.size(), 0.f);
   for (size_t r = 0; r < rays.face.size(); ++r) {
     float* t = out->data() + 12 * r;
