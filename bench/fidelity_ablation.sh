@@ -70,19 +70,22 @@ for n in names:
     rows.append({"variant": n, "flags": open(os.path.join(out, f"flags_{n}.txt")).read().strip(),
                  "test_psnr_db": e["psnr_db"], "test_ssim": e["ssim"],
                  "landmark_error_iod": fid.get("error_iod"), "blink_correlation": (fid.get("blink") or {}).get("correlation"),
+                 "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x"),
+                 "gaze_correlation_y": (fid.get("gaze") or {}).get("correlation_y"),
                  "worst_5pct_psnr_db": sum(worst) / len(worst),
                  "fine_tune_s": s["fit"]["seconds"], "frames": len(psnr)})
 result = {"command": command, "iterations": iterations, "rows": rows}
 json.dump(result, open(os.path.join(out, "ablation.json"), "w"), indent=2)
 L = [f"Made by `{command}`: {iterations} fine-tune steps at 256² per variant, same dataset, general model and seed.", "",
-     "| variant | flags | test PSNR (dB) | test SSIM | worst 5 % PSNR (dB) | landmarks eyes / mouth / all (IOD) | blink corr. | fine-tune (s) |",
-     "|---|---|---|---|---|---|---|---|"]
+     "| variant | flags | test PSNR (dB) | test SSIM | worst 5 % PSNR (dB) | landmarks eyes / mouth / all (IOD) | blink corr. | gaze corr. x / y | fine-tune (s) |",
+     "|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
     marks = " / ".join(f"{le[k]:.4f}" for k in ("eyes", "mouth", "all")) if le else "–"
     blink = "–" if x["blink_correlation"] is None else f"{x['blink_correlation']:.2f}"
+    gaze = " / ".join("–" if x[k] is None else f"{x[k]:.2f}" for k in ("gaze_correlation_x", "gaze_correlation_y"))
     L.append(f"| {x['variant']} | `{x['flags'] or '(defaults)'}` | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | "
-             f"{x['worst_5pct_psnr_db']:.3f} | {marks} | {blink} | {x['fine_tune_s']:.0f} |")
+             f"{x['worst_5pct_psnr_db']:.3f} | {marks} | {blink} | {gaze} | {x['fine_tune_s']:.0f} |")
 open(os.path.join(out, "ablation.md"), "w").write("\n".join(L) + "\n")
 print("\n".join(L))
 EOF

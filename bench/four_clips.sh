@@ -8,6 +8,8 @@
 # 256² and 512² (headcast-bench render, default subject configuration).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N] [--ict DIR] [--clips "d9 d10 ..."]
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
+#       [--prep-flags "FLAGS"]      extra `headcast-train prep` flags (default: none)
+#       [--no-render]               skip the receiver's frame rate (ablations of the avatar only)
 # Writes OUT/four_clips.{json,md} and prints the table; the work stays in OUT.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -17,7 +19,7 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
-name=four_clips iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags=""
+name=four_clips iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
@@ -25,6 +27,8 @@ while [ $# -gt 0 ]; do
     --ict) ict=$2; shift 2 ;;
     --clips) clips=$2; shift 2 ;;
     --subject-flags) subject_flags=$2; shift 2 ;;
+    --prep-flags) prep_flags=$2; shift 2 ;;
+    --no-render) render=0; shift ;;
     *) echo "$name: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -37,10 +41,11 @@ for clip in $clips; do
   video=$data/video/talking_$clip.mp4
   [ -f "$video" ] || { echo "four_clips: no video $video" >&2; exit 2; }
   t0=$(date +%s.%N)
-  step "$clip: prep"
+  step "$clip: prep $prep_flags"
   rm -rf "$out/ds_$clip"
+  # shellcheck disable=SC2086  # the extra flags are words
   run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$out/ds_$clip" \
-    --resolutions 256 --test-frames 150
+    --resolutions 256 --test-frames 150 $prep_flags
   t1=$(date +%s.%N)
   step "$clip: fine-tune ($iterations steps) $subject_flags"
   # shellcheck disable=SC2086  # the extra flags are words
@@ -54,6 +59,7 @@ for clip in $clips; do
     --data "$out/ds_$clip" --out "$out/eval_$clip" --orbit-frames 0
 done
 for r in 256 512; do
+  [ "$render" = 1 ] || break
   step "render ${r}²"
   run "render_$r.log" "$bin/headcast-bench" render --resolution $r --repeats 100 --json "$out/render_$r.json"
 done
@@ -75,11 +81,15 @@ for c in clips:
                  "worst_5pct_psnr_db": sum(worst) / len(worst), "test_frames": e["frames"],
                  "landmark_error_iod": fid.get("error_iod"), "landmarks_found": fid.get("found_in_both"),
                  "blink_correlation": (fid.get("blink") or {}).get("correlation"),
+                 "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x"),
+                 "gaze_correlation_y": (fid.get("gaze") or {}).get("correlation_y"),
                  "frames_read": ds.get("frames_read"), "frames_fitted": ds.get("frames_fitted"), "split": ds.get("split"),
                  "prep_s": t["prep_s"], "fine_tune_s": t["fine_tune_s"],
                  "creation_min": (t["prep_s"] + t["fine_tune_s"]) / 60})
 render = {}
 for r in ("256", "512"):
+    if not os.path.exists(os.path.join(out, f"render_{r}.json")):
+        continue
     j = json.load(open(os.path.join(out, f"render_{r}.json")))
     render[r] = {k: j["with_surface"][k] for k in ("fps_median", "ms_median", "ms_p95")}
     render[r]["threads"] = j["threads"]
@@ -90,15 +100,15 @@ def f(v, fmt):
 L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
      "frames, over the true eye distance.", "",
-     "| clip | fitted / read | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | creation (min) |",
-     "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+     "| clip | fitted / read | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
     L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
-             f"{x['creation_min']:.1f} |")
-L += ["", "Receiver (headcast-bench render, random avatar of the default subject configuration): " +
+             f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} |")
+L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration): " +
       "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
                 for r, v in render.items())]
 open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")

@@ -60,6 +60,8 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       ->capture_default_str();
   app.add_option("--predictor", f.live.tracker.face.predictor_path, "--input: dlib 68-point shape predictor (.dat)")
       ->capture_default_str();
+  app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
+               "--input: do not locate the irises (the eyes look straight ahead)");
   app.add_option("--camera-size", f.camera_size, "--input cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
   app.add_flag("!--as-fast-as-possible", f.source.realtime, "--input files: do not pace to their frame rate");
   app.add_option("--params", f.params, "replay this parameter recording (.hcrec)");

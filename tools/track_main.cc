@@ -38,6 +38,7 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
       ->capture_default_str();
   app.add_option("--predictor", t.tracker.face.predictor_path, "dlib 68-point shape predictor (.dat)")
       ->capture_default_str();
+  app.add_flag("!--no-gaze", t.tracker.face.locate_irises, "do not locate the irises: the eyes look straight ahead");
   SourceOptions& s = t.source;
   app.add_option("--depth-input", s.depth_input,
                  "RGB-D: association file (TUM style: t colour.png t depth.png) of 16-bit depth PNGs");

@@ -136,6 +136,7 @@ int main(int argc, char** argv) {
                    "below the eye line the silhouette grows only this much (raise it for long hair)")
       ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
+  prep->add_flag("!--no-gaze", p.gaze, "do not locate the irises: the eyes look straight ahead");
   prep->add_option("--interpolate", p.interpolate,
                    "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();

@@ -178,6 +178,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.source = o.source;
   track.max_frames = o.max_frames;
   track.calibrate = o.calibrate;
+  track.tracker.face.locate_irises = o.gaze;
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
   if (!o.identity_from.empty()) {
     track.identity = ReadTrackingIdentity(o.identity_from, model);
@@ -363,7 +364,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
         {"frames", track_report.value("frames", 0)},
         {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
-        {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)}}}};
+        {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)},
+        {"gaze", o.gaze}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }

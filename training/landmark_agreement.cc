@@ -44,6 +44,14 @@ double PearsonCorrelation(const std::vector<double>& a, const std::vector<double
   return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : 0;
 }
 
+double StandardDeviation(const std::vector<double>& v) {
+  if (v.size() < 2) return 0;
+  const double m = std::accumulate(v.begin(), v.end(), 0.0) / v.size();
+  double sum = 0;
+  for (double x : v) sum += (x - m) * (x - m);
+  return std::sqrt(sum / (v.size() - 1));
+}
+
 double EyeOpening(const Landmarks2d& l) {
   auto eye = [&](int o) {  // o: the eye's first point (36 or 42), corners o and o + 3
     const double width = (l[o] - l[o + 3]).norm();
@@ -56,18 +64,17 @@ double EyeOpening(const Landmarks2d& l) {
 LandmarkAgreement::LandmarkAgreement(const std::string& predictor_path) : tracker_(StillImages(predictor_path)) {}
 LandmarkAgreement::~LandmarkAgreement() = default;
 
-bool LandmarkAgreement::Detect(const cv::Mat& image, Landmarks2d* out) {
+bool LandmarkAgreement::Detect(const cv::Mat& image, FaceObservation* out) {
   tracker_.Reset();
-  const FaceObservation o = tracker_.Track(image, 0);
-  if (o.status == FaceStatus::kNoFace) return false;
-  *out = o.raw;
-  return true;
+  *out = tracker_.Track(image, 0);
+  return out->status != FaceStatus::kNoFace;
 }
 
 void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr) {
   ++frames_;
-  Landmarks2d truth, avatar;
-  if (!Detect(truth_bgr, &truth) || !Detect(avatar_bgr, &avatar)) return;
+  FaceObservation seen_truth, seen_avatar;
+  if (!Detect(truth_bgr, &seen_truth) || !Detect(avatar_bgr, &seen_avatar)) return;
+  const Landmarks2d &truth = seen_truth.raw, &avatar = seen_avatar.raw;
   const double iod = (Mean(truth, 36, 41) - Mean(truth, 42, 47)).norm();
   if (!(iod > 1)) return;
   std::array<double, 5> e{};
@@ -79,6 +86,18 @@ void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr)
   region_errors_.push_back(e);
   truth_opening_.push_back(EyeOpening(truth));
   avatar_opening_.push_back(EyeOpening(avatar));
+  const IrisObservation* irises[2][2] = {{&seen_truth.irises.right, &seen_avatar.irises.right},
+                                         {&seen_truth.irises.left, &seen_avatar.irises.left}};
+  for (int e = 0; e < 2; ++e) {
+    if (!irises[e][0]->found || !irises[e][1]->found) continue;
+    const int first = e == 0 ? 36 : 42;
+    const Eigen::Vector2d t = IrisInEyeFrame(irises[e][0]->center, EyeLandmarks(truth, first));
+    const Eigen::Vector2d a = IrisInEyeFrame(irises[e][1]->center, EyeLandmarks(avatar, first));
+    for (int c = 0; c < 2; ++c) {
+      truth_gaze_[c].push_back(t[c]);
+      avatar_gaze_[c].push_back(a[c]);
+    }
+  }
 }
 
 nlohmann::json LandmarkAgreement::Summary() const {
@@ -93,16 +112,23 @@ nlohmann::json LandmarkAgreement::Summary() const {
   for (const auto& e : region_errors_)  // every point alike: regions weighted by their point counts
     for (size_t r = 0; r < 5; ++r) all += e[r] * (kRegions[r].last - kRegions[r].first + 1) / 68.0;
   errors["all"] = n ? all / n : 0.0;
-  double sd = 0;
-  if (n > 1) {
-    const double m = std::accumulate(truth_opening_.begin(), truth_opening_.end(), 0.0) / n;
-    for (double v : truth_opening_) sd += (v - m) * (v - m);
-    sd = std::sqrt(sd / (n - 1));
-  }
+  const size_t eyes = truth_gaze_[0].size();
+  double gaze_error = 0;
+  for (size_t i = 0; i < eyes; ++i)
+    gaze_error += std::hypot(truth_gaze_[0][i] - avatar_gaze_[0][i], truth_gaze_[1][i] - avatar_gaze_[1][i]);
+  const nlohmann::json gaze = {{"eyes", eyes},
+                               {"correlation_x", PearsonCorrelation(truth_gaze_[0], avatar_gaze_[0])},
+                               {"correlation_y", PearsonCorrelation(truth_gaze_[1], avatar_gaze_[1])},
+                               {"error", eyes ? gaze_error / eyes : 0.0},
+                               {"truth_sd_x", StandardDeviation(truth_gaze_[0])},
+                               {"truth_sd_y", StandardDeviation(truth_gaze_[1])}};
   return {{"frames", frames_},
           {"found_in_both", n},
           {"error_iod", errors},
-          {"blink", {{"correlation", PearsonCorrelation(truth_opening_, avatar_opening_)}, {"truth_opening_sd", sd}}}};
+          {"blink",
+           {{"correlation", PearsonCorrelation(truth_opening_, avatar_opening_)},
+            {"truth_opening_sd", StandardDeviation(truth_opening_)}}},
+          {"gaze", gaze}};
 }
 
 }  // namespace headcast

@@ -344,7 +344,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
          agreement ? nlohmann::json{{"how",
                                      "dlib's 68 landmarks on the avatar's frames against the true frames', mean "
                                      "distance over the true eye distance per region; blink: correlation of the "
-                                     "eye opening"},
+                                     "eye opening; gaze: the iris in its eye's frame (eye widths), correlation "
+                                     "and mean distance"},
                                     {"result", agreement->Summary()}}
                    : fidelity},
         {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};

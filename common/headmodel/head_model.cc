@@ -72,6 +72,13 @@ HeadModel::HeadModel(HeadModelData data) : data_(std::move(data)) {
     }
     skin_begin_.push_back(static_cast<int>(skin_joint_.size()));
   }
+  for (int e = 0; e < 2; ++e) {
+    const int joint = e == 0 ? kLeftEyeJoint : kRightEyeJoint;
+    for (int i = 0; i < n; ++i)
+      if (data_.weights(i, joint) > 0.5f &&
+          (pupils_[e] < 0 || data_.v_template(i, 2) > data_.v_template(pupils_[e], 2)))
+        pupils_[e] = i;
+  }
   has_posedirs_ = data_.posedirs.size() > 0 && data_.posedirs.cwiseAbs().maxCoeff() > 0.f;
 
   Eigen::Matrix<float, kNumLandmarks, 3, Eigen::RowMajor> rest;

@@ -100,8 +100,12 @@ class HeadModel {
   bool has_texture() const { return !data_.texture_mean.empty() && data_.uvs.rows() > 0; }
   bool has_dynamic_contour() const { return data_.dyn_lmk_faces.size() > 0; }
   bool has_posedirs() const { return has_posedirs_; }
-  // Joints that move any vertex. ICT-FaceKit has only the root; FLAME all five.
+  // Joints that move any vertex. ICT-FaceKit has the root and the eyes; FLAME all five.
   bool JointIsArticulated(int joint) const { return articulated_[joint]; }
+  // The pupil of an eye joint: the front-most (largest rest z) vertex mostly
+  // skinned to it, the eyeball looking along +z at rest; -1 when the joint moves
+  // nothing. What the tracker aims at the located iris.
+  int PupilVertex(int eye_joint) const { return eye_joint == kLeftEyeJoint ? pupils_[0] : pupils_[1]; }
   // Index of a named expression component, or -1.
   int ExpressionIndex(const std::string& name) const;
   int ShapeIndex(const std::string& name) const;
@@ -154,6 +158,7 @@ class HeadModel {
   std::vector<float> skin_weight_;
   bool has_posedirs_ = false;
   std::array<bool, kNumHeadJoints> articulated_{};
+  std::array<int, 2> pupils_{-1, -1};  // left, right eye
   std::string fingerprint_;
   Eigen::Vector3d rest_landmark_centroid_;
 };

@@ -1,6 +1,7 @@
 // ICT-FaceKit conversion.
 #include "common/headmodel/ict_converter.h"
 
+#include <algorithm>
 #include <charconv>
 #include <filesystem>
 #include <fstream>
@@ -104,6 +105,39 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
   return m;
 }
 
+// Upstream's eyeLook blendshapes move the lids only; the eyeballs are meant to
+// be turned by the application. Skinning each eyeball to its eye joint, pivoting
+// at its centre, makes gaze the FLAME way: the eye joints' rotations, which the
+// stream and the avatar conditioning already carry. The subject's left eye is +x.
+void RigIctEyeballs(const std::vector<int>& remap, HeadModelData* d) {
+  const IctPart& eyeballs = IctParts()[6];
+  for (int side = 0; side < 2; ++side) {
+    const int joint = side == 0 ? kLeftEyeJoint : kRightEyeJoint;
+    std::vector<int> ids;
+    for (int i = eyeballs.first; i <= eyeballs.last; ++i)
+      if (remap[i] >= 0 && (d->v_template(remap[i], 0) > 0) == (side == 0)) ids.push_back(remap[i]);
+    if (ids.empty()) continue;
+    // The pivot: the mean of the four extreme vertices along x and y, which on
+    // a ball lie on its equator, around its centre. A linear regressor (so it
+    // follows the identity), unlike the vertices' centroid not pulled forward
+    // by the denser cornea, and unlike the z extremes not pushed back by what
+    // the mesh has behind the ball.
+    std::vector<int> extremes;
+    for (int c = 0; c < 2; ++c) {
+      auto [lo, hi] = std::minmax_element(ids.begin(), ids.end(),
+                                          [&](int a, int b) { return d->v_template(a, c) < d->v_template(b, c); });
+      extremes.push_back(*lo);
+      extremes.push_back(*hi);
+    }
+    d->j_regressor.row(joint).setZero();  // was the face's centroid, as every joint of an unrigged model
+    for (int id : extremes) d->j_regressor(joint, id) += 1.0f / extremes.size();
+    for (int id : ids) {
+      d->weights.row(id).setZero();
+      d->weights(id, joint) = 1;
+    }
+  }
+}
+
 }  // namespace
 
 HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
@@ -153,7 +187,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   d.name = "ICT-FaceKit";
   d.description =
       "ICT-FaceKit Light (MIT licence), converted by headcast: centimetres to metres; expression "
-      "components are ARKit-style blendshapes (coefficients 0..1), not orthonormal PCA; no skeleton.";
+      "components are ARKit-style blendshapes (coefficients 0..1), not orthonormal PCA; the eyeballs are skinned to "
+      "the eye joints (gaze), all else to the root.";
   d.v_template.resize(n, 3);
   for (int i = 0; i < n_all; ++i)
     if (remap[i] >= 0)
@@ -211,8 +246,8 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
     for (size_t f = 0; f < uv_faces.size(); ++f) d.uv_faces.row(f) << uv_faces[f][0], uv_faces[f][1], uv_faces[f][2];
   }
 
-  // No skeleton: every vertex on the root; joints at the centroid of the face
-  // part (so a root rotation turns the head about its middle).
+  // Every vertex on the root (the eyeballs move to the eye joints below);
+  // joints at the centroid of the face part (so a root rotation turns the head about its middle).
   d.weights = decltype(d.weights)::Zero(n, kNumHeadJoints);
   d.weights.col(kRootJoint).setOnes();
   d.j_regressor = Eigen::MatrixXf::Zero(kNumHeadJoints, n);
@@ -221,6 +256,7 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   for (int i = face.first; i <= face.last; ++i) face_count += remap[i] >= 0;
   for (int i = face.first; i <= face.last; ++i)
     if (remap[i] >= 0) d.j_regressor.col(remap[i]).setConstant(1.0f / face_count);
+  RigIctEyeballs(remap, &d);
   d.posedirs.resize(0, 0);
 
   // Landmarks: the fixed vertex ids, each as a corner of a face that uses it.

@@ -24,8 +24,8 @@ struct IctConvertOptions {
 
 // Reads generic_neutral_mesh.obj, the expression OBJs listed in
 // vertex_indices.json and identityNNN.obj; converts centimetres to metres;
-// quads are split into triangles. No skeleton: all vertices are skinned to the
-// root joint only (jaw and gaze are blendshapes). Throws naming the file.
+// quads are split into triangles. The jaw is a blendshape; each eyeball is
+// skinned to its eye joint (gaze), everything else to the root. Throws naming the file.
 HeadModel ConvertIctFaceKit(const IctConvertOptions& options);
 
 // The 68 iBUG landmark vertex ids of the full ICT mesh.

@@ -21,6 +21,7 @@ void FaceTrackerOptions::Check() const {
   c.InRange("redetect_interval", redetect_interval, 1, 100000).Positive("min_face_px", min_face_px);
   c.Positive("filter_min_cutoff", filter_min_cutoff).NonNegative("filter_beta", filter_beta);
   c.ThrowIfErrors();
+  iris.Check();
 }
 
 const char* FaceStatusName(FaceStatus s) {
@@ -117,7 +118,8 @@ FaceTracker::FaceTracker(const FaceTrackerOptions& options) : impl_(std::make_un
   } catch (const std::exception& e) {
     throw std::runtime_error(options.predictor_path + ": not a dlib shape predictor: " + e.what());
   }
-  for (int i = 0; i < 2 * kNumLandmarks; ++i)
+  // The landmarks', then the two irises' (left x, y, right x, y).
+  for (int i = 0; i < 2 * kNumLandmarks + 4; ++i)
     impl_->filters.emplace_back(options.filter_min_cutoff, options.filter_beta);
 }
 
@@ -192,6 +194,20 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   for (int l = 0; l < kNumLandmarks; ++l)
     obs.landmarks[l] = Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
                                        m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
+  if (m.options.locate_irises) {
+    obs.irises = LocateIrises(gray, obs.raw, m.options.iris);
+    IrisObservation* irises[2] = {&obs.irises.left, &obs.irises.right};
+    for (int e = 0; e < 2; ++e) {
+      OneEuroFilter* f = &m.filters[2 * kNumLandmarks + 2 * e];
+      if (!irises[e]->found) {
+        f[0].Reset();  // a blink: the iris comes back somewhere else
+        f[1].Reset();
+        continue;
+      }
+      irises[e]->center =
+          Eigen::Vector2d(f[0].Filter(irises[e]->center.x(), time_s), f[1].Filter(irises[e]->center.y(), time_s));
+    }
+  }
   if (detect && m.options.box_from_detection) m.MeasureMargins(box, obs.raw);
   obs.box = found;
   m.previous = obs.raw;

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/iris_locator.h"
 
 namespace headcast {
 
@@ -25,6 +26,8 @@ struct FaceTrackerOptions {
   double min_face_px = 40;         // smaller faces are ignored, pixels (full frame)
   double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
+  bool locate_irises = true;       // the irises in the eyes the landmarks give (gaze), filtered like them
+  IrisLocatorOptions iris;
   void Check() const;
 };
 
@@ -35,6 +38,7 @@ struct FaceObservation {
   FaceStatus status = FaceStatus::kNoFace;
   Landmarks2d landmarks{};  // filtered, pixels
   Landmarks2d raw{};        // as the predictor gave them
+  EyeIrises irises;         // filtered; not found when closed, or not looked for
   cv::Rect box;
   int faces_detected = 0;  // faces the detector saw (when it ran)
 };

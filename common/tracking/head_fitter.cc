@@ -9,6 +9,7 @@
 
 #include "common/core/options.h"
 #include "common/core/rotation.h"
+#include "common/tracking/iris_locator.h"
 #include "common/tracking/landmark_costs.h"
 
 namespace headcast {
@@ -20,6 +21,9 @@ void HeadFitterOptions::Check() const {
   c.InRange("expression_limit", expression_limit, 0.1, 5.0)
       .NonNegative("expression_range_weight", expression_range_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
+  c.NonNegative("iris_weight", iris_weight).NonNegative("gaze_prior", gaze_prior);
+  c.NonNegative("vergence_weight", vergence_weight).NonNegative("eye_roll_weight", eye_roll_weight);
+  c.InRange("max_gaze_rad", max_gaze_rad, 0.0, 1.5);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.ThrowIfErrors();
 }
@@ -75,25 +79,37 @@ HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose, bool sha
 
 namespace {
 
-// w * x for a whole parameter block, with its (diagonal) Jacobian.
+// w_i * x_i for a whole parameter block, with its (diagonal) Jacobian.
 class PriorCost : public ceres::CostFunction {
  public:
-  PriorCost(int size, double weight) : weight_(weight) {
-    set_num_residuals(size);
-    mutable_parameter_block_sizes()->push_back(size);
+  PriorCost(int size, double weight) : PriorCost(std::vector<double>(size, weight)) {}
+  explicit PriorCost(std::vector<double> weights) : weights_(std::move(weights)) {
+    set_num_residuals(static_cast<int>(weights_.size()));
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(weights_.size()));
   }
   bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
     const int n = num_residuals();
-    for (int i = 0; i < n; ++i) residuals[i] = weight_ * x[0][i];
+    for (int i = 0; i < n; ++i) residuals[i] = weights_[i] * x[0][i];
     if (jacobians && jacobians[0]) {
       std::fill(jacobians[0], jacobians[0] + n * n, 0.0);
-      for (int i = 0; i < n; ++i) jacobians[0][i * n + i] = weight_;
+      for (int i = 0; i < n; ++i) jacobians[0][i * n + i] = weights_[i];
     }
     return true;
   }
 
  private:
-  double weight_;
+  std::vector<double> weights_;
+};
+
+// w * (a - b) for two 3-blocks: the eyes turn together.
+struct VergenceCost {
+  explicit VergenceCost(double weight) : weight(weight) {}
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* residual) const {
+    for (int c = 0; c < 3; ++c) residual[c] = T(weight) * (a[c] - b[c]);
+    return true;
+  }
+  double weight;
 };
 
 // Zero inside [lo, hi], weight * (distance outside) beyond: a soft box that
@@ -131,6 +147,48 @@ void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression
         nullptr, expression);
 }
 
+bool HeadFitter::AddGaze(ceres::Problem* problem, const EyeIrises& irises, const PinholeCamera& cam, double* rotation,
+                         double* translation, double* left_eye, double* right_eye) const {
+  const int joints[2] = {kLeftEyeJoint, kRightEyeJoint};
+  const IrisObservation* seen[2] = {&irises.left, &irises.right};
+  double* eyes[2] = {left_eye, right_eye};
+  bool any = false;
+  for (int e = 0; e < 2; ++e) {
+    const int pupil = model_.PupilVertex(joints[e]);
+    if (!seen[e]->found || pupil < 0 || !seen[e]->center.allFinite()) continue;
+    auto* cost = new ceres::AutoDiffCostFunction<PupilResidual, 2, 3, 3, 3>(new PupilResidual(
+        identity_.v_shaped.segment<3>(3 * pupil).cast<double>(),
+        identity_.joints.row(joints[e]).transpose().cast<double>(), seen[e]->center, cam, options_.iris_weight));
+    problem->AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px), rotation, translation, eyes[e]);
+    any = true;
+  }
+  if (!any) return false;
+  const double g = std::sqrt(options_.gaze_prior), roll = std::sqrt(options_.eye_roll_weight);
+  for (double* eye : eyes) problem->AddResidualBlock(new PriorCost({g, g, roll}), nullptr, eye);
+  problem->AddResidualBlock(
+      new ceres::AutoDiffCostFunction<VergenceCost, 3, 3, 3>(new VergenceCost(std::sqrt(options_.vergence_weight))),
+      nullptr, left_eye, right_eye);
+  return true;
+}
+
+bool HeadFitter::ProjectPupils(const FrameParams& frame, const PinholeCamera& cam, Eigen::Vector2d* left,
+                               Eigen::Vector2d* right) const {
+  const int joints[2] = {kLeftEyeJoint, kRightEyeJoint};
+  const Eigen::Vector3f* rotations[2] = {&frame.left_eye, &frame.right_eye};
+  Eigen::Vector2d* out[2] = {left, right};
+  const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
+  for (int e = 0; e < 2; ++e) {
+    const int pupil = model_.PupilVertex(joints[e]);
+    if (pupil < 0) return false;
+    const Eigen::Vector3d joint = identity_.joints.row(joints[e]).transpose().cast<double>();
+    const Eigen::Vector3d p = AxisAngleToMatrix(rotations[e]->cast<double>()) *
+                                  (identity_.v_shaped.segment<3>(3 * pupil).cast<double>() - joint) +
+                              joint;
+    *out[e] = cam.Project(R * p + frame.cam_translation.cast<double>());
+  }
+  return true;
+}
+
 Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& cam) const {
   const LandmarkBasis b = MakeBasis(frame.ViewPose());
   const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
@@ -146,7 +204,8 @@ Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& c
   return out;
 }
 
-LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame) const {
+LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame,
+                                  const EyeIrises* irises) const {
   if (frame->expression.size() != model_.num_expression())
     frame->expression = Eigen::VectorXf::Zero(model_.num_expression());
   const LandmarkBasis b = MakeBasis(frame->ViewPose());
@@ -168,11 +227,13 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
     frame->cam_rotation = Eigen::Vector3f(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
     frame->cam_translation = Eigen::Vector3f(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
   }
-  double rotation[3], translation[3], jaw[3];
+  double rotation[3], translation[3], jaw[3], left_eye[3], right_eye[3];
   for (int i = 0; i < 3; ++i) {
     rotation[i] = frame->cam_rotation[i];
     translation[i] = frame->cam_translation[i];
     jaw[i] = frame->jaw[i];
+    left_eye[i] = frame->left_eye[i];
+    right_eye[i] = frame->right_eye[i];
   }
   std::vector<double> expression(num_expression_);
   const double limit = options_.expression_limit;
@@ -193,6 +254,7 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
   AddExpressionPriors(&problem, expression.data());
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
+  const bool gaze = irises && AddGaze(&problem, *irises, cam, rotation, translation, left_eye, right_eye);
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = options_.max_iterations;
@@ -212,7 +274,13 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
     frame->cam_rotation[i] = static_cast<float>(w[i]);
     frame->cam_translation[i] = static_cast<float>(translation[i]);
     frame->jaw[i] = static_cast<float>(jaw[i]);
+    if (gaze) {
+      frame->left_eye[i] = static_cast<float>(left_eye[i]);
+      frame->right_eye[i] = static_cast<float>(right_eye[i]);
+    }
   }
+  for (Eigen::Vector3f* eye : {&frame->left_eye, &frame->right_eye})
+    if (eye->norm() > options_.max_gaze_rad) *eye *= static_cast<float>(options_.max_gaze_rad / eye->norm());
   // Clamped after the solve rather than bounded in it: Ceres' bounded trust
   // region made the per-frame fit ~3x slower (ICT, 53 components).
   for (int k = 0; k < num_expression_; ++k)

@@ -19,6 +19,7 @@ class Problem;
 namespace headcast {
 
 using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
+struct EyeIrises;  // iris_locator.h
 
 struct HeadFitterOptions {
   int num_expression = 0;          // expression components fitted (0: all the model has)
@@ -36,8 +37,14 @@ struct HeadFitterOptions {
   double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;      // Levenberg-Marquardt iterations per frame
   double huber_px = 3;          // robust loss scale on landmark residuals, pixels
-  double shape_prior = 1e-2;    // calibration: weight of sum(beta^2) against squared pixels per landmark
-  double max_focal_change = 2;  // calibration: the focal length stays within this factor of the initial one
+  // Gaze (the eye joints), fitted to located irises when the model's eyes are articulated.
+  double iris_weight = 1;        // an iris against a landmark
+  double gaze_prior = 10;        // weight of the eyes' pitch and yaw^2 (radians^2) against squared pixels
+  double vergence_weight = 50;   // weight of |left - right|^2: the eyes look together, which steadies one-eye noise
+  double eye_roll_weight = 1e4;  // an eye does not roll about its line of sight (unobservable from the iris)
+  double max_gaze_rad = 0.7;     // an eye turns about 45 degrees at most; a larger fit is a wrong iris
+  double shape_prior = 1e-2;     // calibration: weight of sum(beta^2) against squared pixels per landmark
+  double max_focal_change = 2;   // calibration: the focal length stays within this factor of the initial one
   void Check() const;
 };
 
@@ -54,8 +61,14 @@ class HeadFitter {
   void SetIdentity(const Eigen::VectorXd& shape);
   // Fits `frame` (expression, jaw, cam_from_head) to `landmarks`, starting from
   // its current values. A frame whose cam_translation.z <= 0 is initialised
-  // from the landmarks (PnP on a neutral face) first.
-  LandmarkFitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame) const;
+  // from the landmarks (PnP on a neutral face) first. With `irises`, the eye
+  // joints (left_eye, right_eye) are fitted too when the model's eyes move and
+  // an iris was found; otherwise the frame keeps its gaze (held through blinks).
+  LandmarkFitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame,
+                        const EyeIrises* irises = nullptr) const;
+  // Where the model's pupils project for `frame` (left, right); false when the model has no eyes to turn.
+  bool ProjectPupils(const FrameParams& frame, const PinholeCamera& camera, Eigen::Vector2d* left,
+                     Eigen::Vector2d* right) const;
   // Identity calibration over key frames of one person and one fixed camera
   // (METHOD §2): shape and focal length shared by all frames, pose,
   // expression and jaw per frame, starting from per-frame fits with the
@@ -82,6 +95,9 @@ class HeadFitter {
   LandmarkBasis MakeBasis(const PoseVector& pose, bool shape_free = false) const;
   // The expression regulariser and, for models with a natural range, the soft box.
   void AddExpressionPriors(ceres::Problem* problem, double* expression) const;
+  // The pupil residuals and gaze priors; false when no iris was usable.
+  bool AddGaze(ceres::Problem* problem, const EyeIrises& irises, const PinholeCamera& camera, double* rotation,
+               double* translation, double* left_eye, double* right_eye) const;
   const HeadModel& model_;
   HeadFitterOptions options_;
   HeadIdentity identity_;

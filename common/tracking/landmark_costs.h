@@ -121,4 +121,30 @@ struct CalibrationResidual {
   double weight;
 };
 
+// The pupil against the located iris: the pupil's rest point turned about its
+// eye joint (gaze), then cam_from_head and the pinhole. Blocks: rotation,
+// translation, eye rotation (axis-angle).
+struct PupilResidual {
+  PupilResidual(const Eigen::Vector3d& pupil, const Eigen::Vector3d& eye_joint, const Eigen::Vector2d& observed,
+                const PinholeCamera& cam, double weight)
+      : pupil(pupil), eye_joint(eye_joint), observed(observed), cam(cam), weight(weight) {}
+
+  template <typename T>
+  bool operator()(const T* cam_rotation, const T* cam_translation, const T* eye, T* residual) const {
+    T rel[3] = {T(pupil[0] - eye_joint[0]), T(pupil[1] - eye_joint[1]), T(pupil[2] - eye_joint[2])}, p[3], x[3];
+    ceres::AngleAxisRotatePoint(eye, rel, p);
+    for (int c = 0; c < 3; ++c) p[c] += T(eye_joint[c]);
+    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
+    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
+    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    return true;
+  }
+
+  Eigen::Vector3d pupil, eye_joint;
+  Eigen::Vector2d observed;
+  PinholeCamera cam;
+  double weight;
+};
+
 }  // namespace headcast

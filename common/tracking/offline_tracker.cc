@@ -123,16 +123,23 @@ class FitQuality {
   int last_frame_ = -2;
 };
 
-void DrawOverlay(const cv::Mat& frame, const TrackedFrame& t, const Landmarks2d* model_landmarks, cv::Mat* shown) {
+// Detected landmarks and irises filled (orange, red); the model's landmarks and pupils as rings (green, cyan).
+void DrawOverlay(const cv::Mat& frame, const TrackedFrame& t, const Landmarks2d* model_landmarks,
+                 const std::array<Eigen::Vector2d, 2>* model_pupils, cv::Mat* shown) {
   *shown = frame.clone();
+  auto dot = [&](const Eigen::Vector2d& p, const cv::Scalar& colour, int thickness) {
+    cv::circle(*shown, cv::Point2d(p.x(), p.y()), 2, colour, thickness, cv::LINE_AA);
+  };
   if (model_landmarks) {
     for (int l = 0; l < kNumLandmarks; ++l) {
-      cv::circle(*shown, cv::Point2d(t.face.raw[l].x(), t.face.raw[l].y()), 2, cv::Scalar(0, 200, 255), cv::FILLED,
-                 cv::LINE_AA);
-      cv::circle(*shown, cv::Point2d((*model_landmarks)[l].x(), (*model_landmarks)[l].y()), 2, cv::Scalar(80, 255, 80),
-                 1, cv::LINE_AA);
+      dot(t.face.raw[l], cv::Scalar(0, 200, 255), cv::FILLED);
+      dot((*model_landmarks)[l], cv::Scalar(80, 255, 80), 1);
     }
   }
+  for (const IrisObservation* iris : {&t.face.irises.left, &t.face.irises.right})
+    if (iris->found) dot(iris->center, cv::Scalar(0, 0, 255), cv::FILLED);
+  if (model_pupils)
+    for (const Eigen::Vector2d& p : *model_pupils) dot(p, cv::Scalar(255, 255, 0), 1);
   cv::putText(*shown, std::string(FaceStatusName(t.face.status)) + (t.fitted ? " fitted" : ""), {8, 20},
               cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
 }
@@ -207,7 +214,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   std::vector<HeldFrame> held;
   FitQuality quality;
   SampleStats ms, accuracy_mm;
-  int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0;
+  int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0, gaze_frames = 0;
   std::map<std::string, int> statuses;
   for (;;) {
     if (o.max_frames > 0 && frames >= o.max_frames) break;
@@ -236,8 +243,11 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];
     OfflineFrame seen{index, &frame, t.fitted, cv::Mat()};
     Landmarks2d model_landmarks{};
+    std::array<Eigen::Vector2d, 2> model_pupils;
+    bool have_pupils = false;
     if (t.fitted) {
       ++fitted;
+      gaze_frames += t.face.irises.left.found || t.face.irises.right.found;
       params.sequence = static_cast<uint64_t>(index);
       params.capture_time_s = captured.capture_time_s;
       params.confidence = 1.f;
@@ -257,12 +267,14 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         if (sample) appearance_samples.push_back({frame.clone(), seen.mask, params, camera});
       }
       model_landmarks = tracker.fitter().Project(params, camera);
+      have_pupils = tracker.fitter().ProjectPupils(params, camera, &model_pupils[0], &model_pupils[1]);
       quality.Add(index, model_landmarks, t.face.raw);
     }
     if (observer) observer(seen);
     if (overlay) {
       cv::Mat shown;
-      DrawOverlay(frame, t, t.fitted ? &model_landmarks : nullptr, &shown);
+      DrawOverlay(frame, t, t.fitted ? &model_landmarks : nullptr, t.fitted && have_pupils ? &model_pupils : nullptr,
+                  &shown);
       overlay->Write(shown);
     }
   }
@@ -301,6 +313,9 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
                                                     : "neutral (beta = 0)"},
             {"camera", camera.ToString()}};
   quality.Report(&report);
+  if (o.tracker.face.locate_irises)
+    report["gaze"] = {{"fitted_frames_with_an_iris", gaze_frames},
+                      {"how", "irises located in the landmarks' eye regions; the eye joints fitted to them"}};
   if (!accuracy_mm.empty()) {
     report["rgbd_accuracy_mm_median"] = accuracy_mm.Median();
     report["rgbd_accuracy_mm_p95"] = accuracy_mm.Percentile(95);

@@ -8,8 +8,12 @@ LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation
     params->cam_translation.setZero();
     return {};
   }
-  if (face.status == FaceStatus::kDetected && !(params->cam_translation.z() > 0)) params->expression.resize(0);
-  const LandmarkFitResult fit = fitter.Fit(face.landmarks, camera, params);
+  if (face.status == FaceStatus::kDetected && !(params->cam_translation.z() > 0)) {
+    params->expression.resize(0);
+    params->left_eye.setZero();
+    params->right_eye.setZero();
+  }
+  const LandmarkFitResult fit = fitter.Fit(face.landmarks, camera, params, &face.irises);
   if (!fit.ok) params->cam_translation.setZero();
   return fit;
 }

@@ -32,7 +32,8 @@ TEST(IctConverter, ConvertsTheSharedSubset) {
   EXPECT_EQ(m.num_shape(), 20);
   EXPECT_GE(m.ExpressionIndex("jawOpen"), 0);
   EXPECT_TRUE(m.JointIsArticulated(kRootJoint));
-  for (int j = 1; j < kNumHeadJoints; ++j) EXPECT_FALSE(m.JointIsArticulated(j));
+  for (int j : {kNeckJoint, kJawJoint}) EXPECT_FALSE(m.JointIsArticulated(j));
+  for (int j : {kLeftEyeJoint, kRightEyeJoint}) EXPECT_TRUE(m.JointIsArticulated(j));
   const HeadModelOutput rest = m.Forward(HeadModelParams{});
   // Metres: eye centres 5-8 cm apart, outer eye corners ~8.9 cm as upstream says.
   const float iod = (EyeCentre(rest, 42) - EyeCentre(rest, 36)).norm();
@@ -55,6 +56,32 @@ TEST(IctConverter, JawOpenMovesTheChinDown) {
   const HeadModelOutput open = m.Forward(p);
   EXPECT_LT(open.landmarks(8, 1), rest.landmarks(8, 1) - 0.015);  // ~2.8 cm down upstream
   EXPECT_NEAR(open.landmarks(27, 1), rest.landmarks(27, 1), 0.002);
+}
+
+// Gaze is the eye joints' rotation: each eyeball turns about its centre, the
+// pupil (its front) moves the way the eye looks, and nothing else moves.
+TEST(IctConverter, EyeJointsTurnTheEyeballsAboutTheirCentres) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  const HeadModel& m = Ict();
+  const int left = m.PupilVertex(kLeftEyeJoint), right = m.PupilVertex(kRightEyeJoint);
+  ASSERT_GE(left, 0);
+  ASSERT_GE(right, 0);
+  const HeadModelOutput rest = m.Forward(HeadModelParams{});
+  EXPECT_GT(rest.vertices(left, 0), 0.02f);  // the subject's left eye is +x
+  EXPECT_LT(rest.vertices(right, 0), -0.02f);
+  // The pupil sits an eyeball radius in front of the pivot, on its axis
+  // (ICT-FaceKit's eyeball with its shells is ~31 mm across, more than a real eye's 24).
+  const float radius = (rest.vertices.row(left) - rest.joints.row(kLeftEyeJoint)).norm();
+  EXPECT_NEAR(radius, 0.0155, 0.0015);
+  EXPECT_NEAR(rest.vertices(left, 0), rest.joints(kLeftEyeJoint, 0), 0.002);
+  EXPECT_NEAR(rest.vertices(left, 1), rest.joints(kLeftEyeJoint, 1), 0.002);
+  HeadModelParams p;
+  p.pose.segment<3>(3 * kLeftEyeJoint) << 0, 0.3, 0;  // about +y: the pupil moves to +x
+  const HeadModelOutput turned = m.Forward(p);
+  EXPECT_NEAR(turned.vertices(left, 0) - rest.vertices(left, 0), radius * std::sin(0.3), 4e-4);
+  EXPECT_NEAR((turned.vertices.row(left) - turned.joints.row(kLeftEyeJoint)).norm(), radius, 1e-5);
+  EXPECT_LT((turned.vertices.row(right) - rest.vertices.row(right)).norm(), 1e-7);
+  EXPECT_LT((turned.landmarks - rest.landmarks).cwiseAbs().maxCoeff(), 1e-7);
 }
 
 TEST(IctConverter, PartsRestrictionAndRoundTrip) {
