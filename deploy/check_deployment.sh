@@ -59,14 +59,14 @@ in_box 'set -e; cd /opt/headcast
   cp deploy/examples/receiver.toml /etc/headcast/receiver.toml
   deploy/make_certs.sh /etc/headcast/certs localhost 127.0.0.1 > /dev/null
   chown -R headcast /etc/headcast/certs
-  echo check-token > /etc/headcast/tokens.txt
+  echo check-token-0123456789 > /etc/headcast/tokens.txt
   cp deploy/systemd/headcast-receiver.service /etc/systemd/system/
   systemctl daemon-reload && systemctl enable --now headcast-receiver' > "$out/systemd.log" 2>&1
 sleep 3
 in_box 'systemctl is-active headcast-receiver' >> "$out/systemd.log" 2>&1 || {
   in_box 'journalctl -u headcast-receiver --no-pager | tail -20' >&2; exit 1; }
 in_box 'cd /opt/headcast && build/bin/headcast-sender --target localhost:50051 --tls-ca /etc/headcast/certs/ca.pem \
-  --token check-token --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
+  --token check-token-0123456789 --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
 in_box 'systemctl stop headcast-receiver; cat /var/lib/headcast/receiver_stats.json' > "$out/receiver_stats.json"
 in_box 'journalctl -u headcast-receiver --no-pager' > "$out/journal.log" 2>&1 || true
 in_box 'cat /tmp/sender.json' > "$out/sender.json"

@@ -24,7 +24,7 @@ packages=(
   # display: real window and headless rendering (libopengl-dev: CMake's OpenGL::OpenGL target)
   libglfw3-dev libosmesa6-dev libgl-dev libopengl-dev libglvnd-dev xvfb xauth
   # utilities
-  libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libzip-dev libjemalloc-dev
+  libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev libzip-dev zlib1g-dev libjemalloc-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # converters, the Python test client, plots

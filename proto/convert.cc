@@ -95,6 +95,7 @@ void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out) {
   out->set_key_frame_interval(in.key_frame_interval);
   out->set_fps(fps);
   out->set_codec_version(kCodecVersion);
+  out->set_head_model_fingerprint(in.head_model_fingerprint);
 }
 
 bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why) {
@@ -110,6 +111,7 @@ bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why
     l.expression_components.push_back(static_cast<int>(std::min<uint32_t>(c, 1u << 20)));
   l.steps.assign(in.steps().begin(), in.steps().end());
   l.key_frame_interval = static_cast<int>(std::min<uint32_t>(in.key_frame_interval(), 1u << 20));
+  l.head_model_fingerprint = in.head_model_fingerprint();  // Check bounds its length
   try {
     l.Check();
   } catch (const std::invalid_argument& e) {

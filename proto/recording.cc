@@ -3,8 +3,10 @@
 
 #include <google/protobuf/io/zero_copy_stream_impl.h>
 #include <google/protobuf/util/delimited_message_util.h>
+#include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <stdexcept>
 
@@ -13,7 +15,8 @@
 namespace headcast {
 namespace {
 constexpr char kMagic[8] = {'H', 'C', 'A', 'S', 'T', 'R', 'E', 'C'};
-}
+constexpr double kMaxCaptureTimeS = 1e12;  // ~31,700 years: any clock's seconds fit
+}  // namespace
 
 RecordingWriter::RecordingWriter(const std::string& path, const RecordingInfo& info) : path_(path) {
   const auto parent = std::filesystem::path(path).parent_path();
@@ -57,7 +60,7 @@ RecordingWriter::~RecordingWriter() { Close(); }
 void RecordingWriter::Write(const FrameParams& frame) {
   v1::FrameParams message;
   ToProto(frame, &message);
-  if (!google::protobuf::util::SerializeDelimitedToOstream(message, &out_))
+  if (!google::protobuf::util::SerializeDelimitedToOstream(message, &out_) || !out_.flush())
     throw std::runtime_error(path_ + ": write failed");
   ++frames_;
 }
@@ -113,15 +116,28 @@ bool RecordingReader::Next(FrameParams* frame) {
     error_ = path_ + ": bad record: " + why;
     return false;
   }
+  // Pacing waits for capture times: a NaN or 1e300 one would never come.
+  if (!std::isfinite(frame->capture_time_s) || std::abs(frame->capture_time_s) > kMaxCaptureTimeS) {
+    error_ = path_ + ": bad record: capture time " + std::to_string(frame->capture_time_s) +
+             " is not a time; the recording ends there";
+    return false;
+  }
   return true;
 }
 
-std::vector<FrameParams> ReadRecording(const std::string& path, RecordingInfo* info) {
+std::vector<FrameParams> ReadRecording(const std::string& path, RecordingInfo* info, std::string* cut) {
   RecordingReader reader(path);
   std::vector<FrameParams> frames;
   FrameParams f;
   while (reader.Next(&f)) frames.push_back(f);
-  if (!reader.error().empty()) throw std::runtime_error(reader.error());
+  if (!reader.error().empty()) {
+    if (frames.empty()) throw std::runtime_error(reader.error());
+    const std::string reason = reader.error() + " (" + std::to_string(frames.size()) + " frames before it kept)";
+    if (cut)
+      *cut = reason;
+    else
+      spdlog::warn("{}", reason);
+  }
   if (info) *info = reader.info();
   return frames;
 }

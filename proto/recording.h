@@ -36,8 +36,10 @@ class RecordingWriter {
   // Throws naming the file if it cannot be created.
   RecordingWriter(const std::string& path, const RecordingInfo& info);
   ~RecordingWriter();
+  // Each frame is handed to the operating system before Write returns, so a
+  // crash or SIGKILL loses at most the frame being written.
   void Write(const FrameParams& frame);
-  void Close();  // flushes; also done by the destructor
+  void Close();  // also done by the destructor
   int frames_written() const { return frames_; }
 
  private:
@@ -53,8 +55,9 @@ class RecordingReader {
   explicit RecordingReader(const std::string& path);
   ~RecordingReader();
   const RecordingInfo& info() const { return info_; }
-  // Next frame; false at the end. A truncated or corrupt record ends the
-  // recording there: `error()` then says so (the frames before it are kept).
+  // Next frame; false at the end. A truncated or corrupt record (a capture
+  // time that is not a time included) ends the recording there: `error()`
+  // then says so (the frames before it are kept).
   bool Next(FrameParams* frame);
   const std::string& error() const { return error_; }
 
@@ -65,7 +68,11 @@ class RecordingReader {
   std::string path_, error_;
 };
 
-// Reads a whole recording; throws like RecordingReader, and also when a record is corrupt.
-std::vector<FrameParams> ReadRecording(const std::string& path, RecordingInfo* info = nullptr);
+// Reads a whole recording; throws like RecordingReader. A recording cut or
+// corrupt after some frames (a recorder killed mid-write) gives the frames
+// before the cut, with the reason in *cut, or logged as a warning when `cut`
+// is null; one without a single whole frame throws.
+std::vector<FrameParams> ReadRecording(const std::string& path, RecordingInfo* info = nullptr,
+                                       std::string* cut = nullptr);
 
 }  // namespace headcast

@@ -1,5 +1,6 @@
-// headcast-receiver: serves sessions over gRPC and shows the first session's
-// avatar (window, offscreen, video), optionally recording the received stream.
+// headcast-receiver: serves sessions over gRPC and shows one session's avatar
+// (--show chooses which; window, offscreen, video), optionally recording the
+// received stream.
 #include <CLI/CLI.hpp>
 #include <csignal>
 #include <fstream>
@@ -13,6 +14,7 @@
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_model_io.h"
+#include "proto/protocol.h"
 #include "proto/recording.h"
 #include "receiver/render_loop.h"
 #include "receiver/session_server.h"
@@ -22,23 +24,9 @@ namespace {
 
 std::atomic<bool> g_stop{false};
 
-// Parameters for the render loop from the oldest live session's jitter buffer.
-class SessionSource : public FrameParamsSource {
- public:
-  explicit SessionSource(ReceiverServer* server) : server_(server) {}
-  std::optional<FrameParams> Next(double, bool* finished) override {
-    *finished = g_stop;
-    const auto sessions = server_->Sessions();
-    if (sessions.empty()) return std::nullopt;
-    return sessions.front().buffer->Sample(server_->Now());
-  }
-
- private:
-  ReceiverServer* server_;
-};
-
 struct ReceiverFlags {
   std::string log_level, head_model_spec = "builtin", display = "window", video, record, stats_json, token_file;
+  std::string show = "first";
   std::string latency_csv, display_csv;
   std::vector<std::string> avatars, tokens;
   ReceiverServerOptions server;
@@ -47,12 +35,13 @@ struct ReceiverFlags {
 };
 
 void AddFlags(CLI::App& app, ReceiverFlags& f) {
-  app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
+  AddConfigFile(app);
   ReceiverServerOptions& s = f.server;
   app.add_option("--log", f.log_level, "log level");
   app.add_option("--listen", s.listen, "host:port to listen on")->capture_default_str();
   app.add_option("--token", f.tokens, "accepted bearer token (repeatable)");
-  app.add_option("--token-file", f.token_file, "file with accepted bearer tokens, one per line");
+  app.add_option("--token-file", f.token_file,
+                 "file with accepted bearer tokens, one per line (# comments; at least 16 characters each)");
   app.add_flag("--plaintext", s.plaintext, "no TLS (loopback addresses only)");
   app.add_flag("--allow-no-token", s.allow_no_token, "accept senders without a token (plaintext loopback only)");
   app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain");
@@ -60,6 +49,14 @@ void AddFlags(CLI::App& app, ReceiverFlags& f) {
   app.add_option("--tls-client-ca", s.tls_client_ca, "PEM CA: require client certificates signed by it");
   app.add_option("--max-sessions", s.max_sessions, "concurrent sessions at most")->capture_default_str();
   app.add_option("--target-delay", s.target_delay_s, "jitter-buffer delay, seconds")->capture_default_str();
+  app.add_option("--show", f.show,
+                 "which session is shown: first (the earliest keeps the display), latest (a new one takes over) or "
+                 "name:SENDER; sessions with nothing to show are passed over")
+      ->capture_default_str();
+  app.add_option("--hello-timeout", s.hello_timeout_s, "close streams that have not said Hello after this long, s")
+      ->capture_default_str();
+  app.add_option("--idle-timeout", s.idle_timeout_s, "end sessions that sent nothing this long, s (0: never)")
+      ->capture_default_str();
   app.add_option("--head-model", f.head_model_spec, "head model of the avatars: builtin or .npz")
       ->capture_default_str();
   app.add_option("--avatar", f.avatars, "ID=PATH.hcavatar (repeatable); senders name the ID")->required();
@@ -123,6 +120,8 @@ nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
           {"glass_to_glass_ms_p95", stats.glass_to_glass_ms.empty() ? -1.0 : stats.glass_to_glass_ms.Percentile(95)},
           {"sessions_started", c.sessions_started},
           {"sessions_rejected", c.sessions_rejected},
+          {"hello_timeouts", c.hello_timeouts},
+          {"idle_timeouts", c.idle_timeouts},
           {"frames_received", c.frames_received},
           {"frames_bad", c.frames_bad},
           {"payload_bytes_received", c.bytes_received}};
@@ -131,27 +130,26 @@ nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
 int Run(ReceiverFlags& f) {
   InitLogging(f.log_level);
   StopOnSignals(&g_stop);
-  if (!f.token_file.empty()) {
-    std::istringstream in(ReadFileBytes(f.token_file));
-    for (std::string line; std::getline(in, line);)
-      if (!line.empty()) f.tokens.push_back(line);
-  }
+  if (!f.token_file.empty())
+    for (const std::string& t : ReadTokenFile(f.token_file)) f.tokens.push_back(t);
   f.server.tokens = f.tokens;
   auto model = std::make_shared<const HeadModel>(LoadHeadModelSpec(f.head_model_spec));
   AvatarBackendOptions backend_options;
   backend_options.threads = f.threads;
-  // Every avatar is opened (and so checked) at start; the first is shown.
+  const ShowPolicy show = ShowPolicy::Parse(f.show);
+  // Every avatar is opened (and so checked) at start; each session is drawn with the one it names.
   std::map<std::string, AvatarEntry> catalog;
-  std::unique_ptr<AvatarBackend> shown;
+  std::map<std::string, std::unique_ptr<AvatarBackend>> avatars;
   for (const std::string& arg : f.avatars) {
     const auto eq = arg.find('=');
-    if (eq == std::string::npos) throw std::invalid_argument("--avatar wants ID=PATH, got '" + arg + "'");
-    std::unique_ptr<AvatarBackend> avatar = OpenAvatarBackend(arg.substr(eq + 1), model, backend_options);
-    catalog[arg.substr(0, eq)] = {model->fingerprint(), model->num_expression()};
-    if (!shown) shown = std::move(avatar);
+    if (eq == std::string::npos || eq == 0) throw std::invalid_argument("--avatar wants ID=PATH, got '" + arg + "'");
+    const std::string id = arg.substr(0, eq);
+    if (avatars.count(id)) throw std::invalid_argument("--avatar: the id '" + id + "' is given twice");
+    avatars[id] = OpenAvatarBackend(arg.substr(eq + 1), model, backend_options);
+    catalog[id] = {model->fingerprint(), model->num_expression()};
   }
   ReceiverServer server(f.server, catalog);
-  StreamTaps taps(f, *model, shown->subject());
+  StreamTaps taps(f, *model, avatars.begin()->second->subject());
   if (taps.active()) server.SetFrameObserver([&](const std::string& id, const FrameParams& p) { taps(id, p); });
   server.Start();
   DisplayOptions display_options;
@@ -168,20 +166,26 @@ int Run(ReceiverFlags& f) {
     display_log.open(f.display_csv);
     if (!display_log) throw std::runtime_error(f.display_csv + ": cannot write");
     display_log << "shown_s,sequence,glass_to_glass_ms,render_ms\n";
-    loop.on_shown = [&](const FrameParams& p, double glass_ms, double render_ms) {
+  }
+  SessionFrameSource source(server.sessions(), show, &g_stop);
+  std::map<std::string, int> shown_senders;  // frames shown per sender name (the first 100 names)
+  loop.on_shown = [&](const FrameParams& p, double glass_ms, double render_ms) {
+    const std::string name = source.shown().sender_name;
+    if (shown_senders.size() < 100 || shown_senders.count(name)) ++shown_senders[name];
+    if (display_log.is_open())
       display_log << std::fixed << SteadyNowSeconds() << "," << p.sequence << "," << glass_ms << "," << render_ms
                   << "\n";
-    };
-  }
-  SessionSource source(&server);
-  const RenderLoopStats stats = RunRenderLoop(*shown, source, *display, loop, [&](DisplayOverlay* o) {
+  };
+  const auto pick = [&]() -> AvatarBackend& { return *avatars.at(source.shown().avatar_id); };
+  const RenderLoopStats stats = RunRenderLoop(pick, source, *display, loop, [&](DisplayOverlay* o) {
     server.SetRenderFps(o->fps);
-    const auto sessions = server.Sessions();
-    o->note = sessions.empty() ? "no session" : sessions.front().id + " " + sessions.front().sender_name;
+    const SessionView shown = source.shown();
+    o->note = shown.id + " " + shown.sender_name + " (" + shown.avatar_id + ")";
   });
   server.Shutdown();
   taps.Close();
-  const nlohmann::json report = Report(stats, server.counters());
+  nlohmann::json report = Report(stats, server.counters());
+  report["shown_senders"] = shown_senders;
   std::cout << report.dump(2) << "\n";
   if (!f.stats_json.empty()) std::ofstream(f.stats_json) << report.dump(2) << "\n";
   return 0;

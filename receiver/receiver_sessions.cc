@@ -23,7 +23,38 @@ void ReceiverSessionOptions::Check() const {
   c.InRange("max_sessions", max_sessions, 1, 10000);
   c.InRange("target_delay_s", target_delay_s, 0, 10).InRange("stats_interval_s", stats_interval_s, 0.05, 3600);
   c.That(!tokens.empty() || allow_no_token, "bearer tokens are required (or allow_no_token)");
+  c.InRange("hello_timeout_s", hello_timeout_s, 0.05, 600).InRange("idle_timeout_s", idle_timeout_s, 0, 86400);
   c.ThrowIfErrors();
+}
+
+ShowPolicy ShowPolicy::Parse(const std::string& text) {
+  ShowPolicy p;
+  if (text == "first") {
+    p.kind = Kind::kFirst;
+  } else if (text == "latest") {
+    p.kind = Kind::kLatest;
+  } else if (text.rfind("name:", 0) == 0 && text.size() > 5) {
+    p.kind = Kind::kNamed;
+    p.name = text.substr(5);
+  } else {
+    throw std::invalid_argument("--show wants first, latest or name:SENDER (got '" + text + "')");
+  }
+  return p;
+}
+
+std::vector<SessionView> DisplayOrder(std::vector<SessionView> sessions, const ShowPolicy& policy) {
+  switch (policy.kind) {
+    case ShowPolicy::Kind::kFirst:
+      break;
+    case ShowPolicy::Kind::kLatest:
+      std::reverse(sessions.begin(), sessions.end());
+      break;
+    case ShowPolicy::Kind::kNamed:
+      std::stable_partition(sessions.begin(), sessions.end(),
+                            [&](const SessionView& s) { return s.sender_name == policy.name; });
+      break;
+  }
+  return sessions;
 }
 
 namespace {
@@ -50,6 +81,8 @@ struct ReceiverSessions::Session {
   std::atomic<uint64_t> bad{0}, bytes{0}, decoded{0};
   std::mutex latency_mutex;
   SampleStats latency_ms;  // capture -> arrival, this stats interval
+  std::atomic<double> last_message_s{0};
+  std::atomic<bool> idle_ended{false};  // the watchdog cancelled the stream
 
   bool Write(const v1::Downlink& d) {
     std::lock_guard<std::mutex> lock(write_mutex);
@@ -101,9 +134,39 @@ class StatsThread {
 }  // namespace
 
 ReceiverSessions::ReceiverSessions(ReceiverSessionOptions options, std::map<std::string, AvatarEntry> avatars)
-    : options_((options.Check(), std::move(options))), avatars_(std::move(avatars)) {}
+    : options_((options.Check(), std::move(options))), avatars_(std::move(avatars)), watchdog_([this] { Watch(); }) {}
 
-ReceiverSessions::~ReceiverSessions() = default;
+ReceiverSessions::~ReceiverSessions() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  watch_cv_.notify_all();
+  watchdog_.join();
+}
+
+void ReceiverSessions::Watch() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!watch_cv_.wait_for(lock, std::chrono::milliseconds(100), [&] { return stopping_; })) {
+    const double now = Now();
+    for (auto it = awaiting_hello_.begin(); it != awaiting_hello_.end();) {
+      if (now - it->second < options_.hello_timeout_s) {
+        ++it;
+        continue;
+      }
+      it->first->Cancel();  // its Serve sees the entry gone and says why
+      ++counters_.hello_timeouts;
+      it = awaiting_hello_.erase(it);
+    }
+    if (options_.idle_timeout_s <= 0) continue;
+    for (auto& [id, session] : live_) {
+      if (session->idle_ended || now - session->last_message_s < options_.idle_timeout_s) continue;
+      session->idle_ended = true;
+      ++counters_.idle_timeouts;
+      session->channel.Cancel();
+    }
+  }
+}
 
 SessionEnd ReceiverSessions::Reject(DownlinkChannel& channel, int reason, const std::string& message,
                                     SessionEndCode code) {
@@ -123,7 +186,21 @@ SessionEnd ReceiverSessions::Reject(DownlinkChannel& channel, int reason, const 
 
 SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   v1::Uplink up;
-  if (!channel.Read(&up)) return {SessionEndCode::kCancelled, "stream closed before Hello"};
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    awaiting_hello_[&channel] = Now();
+  }
+  const bool read = channel.Read(&up);
+  bool timed_out = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    timed_out = awaiting_hello_.erase(&channel) == 0;  // the watchdog took it out and cancelled the stream
+  }
+  if (timed_out) {
+    spdlog::info("stream closed: no Hello within {} s", options_.hello_timeout_s);
+    return {SessionEndCode::kDeadlineExceeded, "no Hello within the deadline"};
+  }
+  if (!read) return {SessionEndCode::kCancelled, "stream closed before Hello"};
   if (!up.has_hello())
     return Reject(channel, v1::Reject::PROTOCOL, "the stream must start with Hello", SessionEndCode::kInvalidArgument);
   const v1::Hello& hello = up.hello();
@@ -159,6 +236,14 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
                   "layout has " + std::to_string(layout.num_expression) + " expression components, avatar '" +
                       Printable(hello.avatar_id()) + "' has " + std::to_string(avatar->second.num_expression),
                   SessionEndCode::kInvalidArgument);
+  // Same-sized expression bases of two models are still different bases.
+  if (layout.head_model_fingerprint != avatar->second.head_model_fingerprint)
+    return Reject(channel, v1::Reject::BAD_LAYOUT,
+                  layout.head_model_fingerprint.empty()
+                      ? "the layout names no head model (head_model_fingerprint); the sender is too old"
+                      : "the sender fits head model " + Printable(layout.head_model_fingerprint) + ", avatar '" +
+                            Printable(hello.avatar_id()) + "' belongs to " + avatar->second.head_model_fingerprint,
+                  SessionEndCode::kInvalidArgument);
   Session session(channel);
   SessionView& view = session.view;
   bool busy = false;
@@ -173,7 +258,9 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
       jb.target_delay_s = options_.target_delay_s;
       view.buffer = std::make_shared<JitterBuffer>(jb);
       view.started_s = Now();
+      session.last_message_s = view.started_s;
       sessions_[view.id] = view;
+      live_[view.id] = &session;
       ++counters_.sessions_started;
     }
   }
@@ -191,9 +278,15 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
     spdlog::error("session {}: {}", view.id, end.message);
     session.SendError(end.message);
   }
+  if (session.idle_ended) {
+    end = {SessionEndCode::kDeadlineExceeded,
+           "nothing received for " + std::to_string(static_cast<int>(options_.idle_timeout_s)) + " s"};
+    spdlog::info("session {} ended: {}", view.id, end.message);
+  }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     sessions_.erase(view.id);
+    live_.erase(view.id);
     counters_.frames_received += session.decoded;
     counters_.frames_bad += session.bad;
     counters_.bytes_received += session.bytes;
@@ -240,6 +333,7 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
   const double origin = 0;
   v1::Uplink up;
   while (session.channel.Read(&up)) {
+    session.last_message_s = Now();
     if (up.has_bye()) {
       spdlog::info("session {}: bye ({})", view.id, Printable(up.bye().reason()));
       break;
@@ -293,7 +387,10 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
 std::vector<SessionView> ReceiverSessions::Sessions() const {
   std::lock_guard<std::mutex> lock(mutex_);
   std::vector<SessionView> v;
-  for (const auto& [id, s] : sessions_) v.push_back(s);
+  for (const auto& [id, s] : sessions_) {
+    v.push_back(s);
+    v.back().last_message_s = live_.at(id)->last_message_s;
+  }
   std::sort(v.begin(), v.end(), [](const SessionView& a, const SessionView& b) { return a.started_s < b.started_s; });
   return v;
 }

@@ -7,11 +7,13 @@
 #pragma once
 
 #include <atomic>
+#include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "common/codec/param_codec.h"
@@ -27,7 +29,24 @@ struct ReceiverSessionOptions {
   int max_sessions = 16;
   double target_delay_s = 0.1;    // jitter buffer delay, seconds
   double stats_interval_s = 1.0;  // how often Stats go back, seconds
+  // A stream that has not said Hello by then is closed: unauthenticated
+  // clients must not hold server threads.
+  double hello_timeout_s = 5;
+  // A session that sends nothing (no frames, no Bye) this long is ended: a
+  // stopped or vanished sender must not hold a slot. 0: never.
+  double idle_timeout_s = 30;
   void Check() const;
+};
+
+// Which live session the display shows. Sessions whose jitter buffer has
+// nothing to show (a sender that stopped, a face out of view) are passed over
+// for the next one in this order.
+struct ShowPolicy {
+  enum class Kind { kFirst, kLatest, kNamed };
+  Kind kind = Kind::kFirst;  // first: the session that came first keeps the display (a call)
+  std::string name;          // kNamed: this sender name first, then the others as kFirst
+  // "first", "latest" or "name:SENDER"; throws std::invalid_argument otherwise.
+  static ShowPolicy Parse(const std::string& text);
 };
 
 // What an avatar id stands for, to validate layouts.
@@ -41,16 +60,22 @@ struct SessionView {
   std::string id, avatar_id, sender_name;
   std::shared_ptr<JitterBuffer> buffer;
   double started_s = 0;
+  double last_message_s = 0;  // receiver clock of the session's last message
 };
+
+// `sessions` (oldest first, as Sessions() gives them) in the order the display tries them.
+std::vector<SessionView> DisplayOrder(std::vector<SessionView> sessions, const ShowPolicy& policy);
 
 struct ServerCounters {
   uint64_t sessions_started = 0, sessions_rejected = 0, frames_received = 0, frames_bad = 0, bytes_received = 0;
+  uint64_t hello_timeouts = 0, idle_timeouts = 0;
 };
 
 // How a session ended, for the transport to pass on (gRPC: the call's status).
 enum class SessionEndCode {
   kOk,
   kCancelled,           // the stream closed before Hello
+  kDeadlineExceeded,    // no Hello in time, or a session silent too long
   kInvalidArgument,     // not a Hello first, a bad layout
   kFailedPrecondition,  // another protocol version
   kUnauthenticated,     // no or a wrong bearer token
@@ -89,15 +114,21 @@ class ReceiverSessions {
   struct Session;
   SessionEnd Stream(Session& session, const CodecLayout& layout, double stats_interval_s);
   SessionEnd Reject(DownlinkChannel& channel, int reason, const std::string& message, SessionEndCode code);
+  void Watch();  // the watchdog: Hello deadlines and idle sessions
   ReceiverSessionOptions options_;
   std::map<std::string, AvatarEntry> avatars_;
   double t0_ = SteadyNowSeconds();
   mutable std::mutex mutex_;
   std::map<std::string, SessionView> sessions_;
+  std::map<std::string, Session*> live_;               // the streams behind sessions_, for the watchdog
+  std::map<DownlinkChannel*, double> awaiting_hello_;  // streams not yet past Hello, since when
+  std::condition_variable watch_cv_;
+  bool stopping_ = false;
   ServerCounters counters_;
   std::atomic<double> render_fps_{0};
   std::atomic<uint64_t> next_id_{1};
   std::function<void(const std::string&, const FrameParams&)> observer_;
+  std::thread watchdog_;  // last: started once everything it reads exists
 };
 
 }  // namespace headcast

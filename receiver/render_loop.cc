@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <stdexcept>
 #include <thread>
 
 #include "common/core/options.h"
@@ -11,7 +12,17 @@
 namespace headcast {
 
 SequenceSource::SequenceSource(std::vector<FrameParams> frames, bool paced)
-    : frames_(std::move(frames)), paced_(paced) {}
+    : frames_(std::move(frames)), paced_(paced) {
+  // Paced replay waits for each capture time: one that is not a time, or
+  // that lies ages after the first, would stall the loop for good.
+  for (size_t i = 0; i < frames_.size(); ++i) {
+    const double t = frames_[i].capture_time_s;
+    if (!std::isfinite(t) || (paced_ && std::abs(t - frames_.front().capture_time_s) > kMaxReplaySpanS))
+      throw std::invalid_argument("frame " + std::to_string(i) + ": capture time " + std::to_string(t) +
+                                  " cannot be paced (not finite, or more than " +
+                                  std::to_string(static_cast<long>(kMaxReplaySpanS)) + " s from the first frame)");
+  }
+}
 
 std::optional<FrameParams> SequenceSource::Next(double now_s, bool* finished) {
   *finished = next_ >= frames_.size();
@@ -28,6 +39,29 @@ std::optional<FrameParams> SequenceSource::Next(double now_s, bool* finished) {
   return newest;
 }
 
+SessionFrameSource::SessionFrameSource(const ReceiverSessions& sessions, ShowPolicy policy,
+                                       const std::atomic<bool>* stop)
+    : sessions_(sessions), policy_(std::move(policy)), stop_(stop) {}
+
+std::optional<FrameParams> SessionFrameSource::Next(double, bool* finished) {
+  *finished = stop_ && *stop_;
+  // The receiver's clock, not the loop's: the jitter buffers run on it.
+  const double now = sessions_.Now();
+  for (const SessionView& s : DisplayOrder(sessions_.Sessions(), policy_)) {
+    if (auto p = s.buffer->Sample(now)) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      shown_ = s;
+      return p;
+    }
+  }
+  return std::nullopt;
+}
+
+SessionView SessionFrameSource::shown() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return shown_;
+}
+
 void RenderLoopOptions::Check() const {
   OptionsCheck c("RenderLoopOptions");
   c.InRange("target_fps", target_fps, 0.1, 1000).NonNegative("max_seconds", max_seconds);
@@ -35,6 +69,11 @@ void RenderLoopOptions::Check() const {
 }
 
 RenderLoopStats RunRenderLoop(AvatarBackend& avatar, FrameParamsSource& source, Display& display,
+                              const RenderLoopOptions& options, const std::function<void(DisplayOverlay*)>& overlay) {
+  return RunRenderLoop([&]() -> AvatarBackend& { return avatar; }, source, display, options, overlay);
+}
+
+RenderLoopStats RunRenderLoop(const AvatarPicker& pick, FrameParamsSource& source, Display& display,
                               const RenderLoopOptions& options, const std::function<void(DisplayOverlay*)>& overlay) {
   options.Check();
   using Clock = std::chrono::steady_clock;
@@ -56,7 +95,7 @@ RenderLoopStats RunRenderLoop(AvatarBackend& avatar, FrameParamsSource& source, 
       Stopwatch frame_watch;
       AvatarTimings t;
       std::string why;
-      if (avatar.Render(*params, &image, &t, &why)) {
+      if (pick().Render(*params, &image, &t, &why)) {
         Stopwatch show_watch;
         DisplayOverlay o;
         if (fps_window.ElapsedSeconds() >= 0.5) {

@@ -2,13 +2,16 @@
 // rate, skips ticks rather than lag behind, shows frames and keeps statistics.
 #pragma once
 
+#include <atomic>
 #include <functional>
+#include <mutex>
 #include <optional>
 #include <vector>
 
 #include "common/avatar/avatar_backend.h"
 #include "common/core/timer.h"
 #include "receiver/display/display.h"
+#include "receiver/receiver_sessions.h"
 
 namespace headcast {
 
@@ -22,7 +25,9 @@ class FrameParamsSource {
 };
 
 // Replays frames by their capture timestamps (paced) or one per call (unpaced,
-// for offline export where every frame must be rendered).
+// for offline export where every frame must be rendered). Throws
+// std::invalid_argument for capture times that cannot be paced.
+constexpr double kMaxReplaySpanS = 7 * 24 * 3600.0;
 class SequenceSource : public FrameParamsSource {
  public:
   SequenceSource(std::vector<FrameParams> frames, bool paced);
@@ -32,6 +37,24 @@ class SequenceSource : public FrameParamsSource {
   std::vector<FrameParams> frames_;
   bool paced_;
   size_t next_ = 0;
+};
+
+// A receiver's live sessions: the first session in the ShowPolicy's order
+// whose jitter buffer has something to show. Remembers which session that
+// was, so the frame is drawn with the avatar that session asked for.
+class SessionFrameSource : public FrameParamsSource {
+ public:
+  // `stop` (optional): once set, the source says it is finished.
+  SessionFrameSource(const ReceiverSessions& sessions, ShowPolicy policy, const std::atomic<bool>* stop = nullptr);
+  std::optional<FrameParams> Next(double now_s, bool* finished) override;
+  SessionView shown() const;  // the session of the last frame given (empty before the first)
+
+ private:
+  const ReceiverSessions& sessions_;
+  ShowPolicy policy_;
+  const std::atomic<bool>* stop_;
+  mutable std::mutex mutex_;
+  SessionView shown_;
 };
 
 struct RenderLoopOptions {
@@ -61,6 +84,13 @@ struct RenderLoopStats {
 // Runs until the source finishes, the display asks to quit, or max_seconds.
 // `overlay` (optional) supplies extra overlay figures (latency, kbit/s).
 RenderLoopStats RunRenderLoop(AvatarBackend& avatar, FrameParamsSource& source, Display& display,
+                              const RenderLoopOptions& options,
+                              const std::function<void(DisplayOverlay*)>& overlay = nullptr);
+// The same with the avatar chosen per frame, after the source gave its
+// parameters (a receiver with several avatars renders the one the shown
+// session drives).
+using AvatarPicker = std::function<AvatarBackend&()>;
+RenderLoopStats RunRenderLoop(const AvatarPicker& avatar, FrameParamsSource& source, Display& display,
                               const RenderLoopOptions& options,
                               const std::function<void(DisplayOverlay*)>& overlay = nullptr);
 

@@ -4,6 +4,7 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/resource_quota.h>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -17,7 +18,11 @@ namespace headcast {
 
 void ReceiverServerOptions::Check() const {
   OptionsCheck c("receiver");
-  c.NotEmpty("listen", listen);
+  std::string why;
+  const bool parsed = ParseHostPort(listen, nullptr, &why);
+  c.That(parsed, "listen: " + why);
+  c.That(tls_cert.empty() == tls_key.empty(), "tls_cert and tls_key go together");
+  c.ReadableFile("tls_cert", tls_cert).ReadableFile("tls_key", tls_key).ReadableFile("tls_client_ca", tls_client_ca);
   c.That(!plaintext || IsLoopbackAddress(listen),
          "plaintext is only allowed on a loopback address (got " + listen + "); configure TLS");
   c.That(plaintext || (!tls_cert.empty() && !tls_key.empty()),
@@ -59,6 +64,8 @@ grpc::StatusCode ToGrpc(SessionEndCode code) {
       return grpc::StatusCode::OK;
     case SessionEndCode::kCancelled:
       return grpc::StatusCode::CANCELLED;
+    case SessionEndCode::kDeadlineExceeded:
+      return grpc::StatusCode::DEADLINE_EXCEEDED;
     case SessionEndCode::kInvalidArgument:
       return grpc::StatusCode::INVALID_ARGUMENT;
     case SessionEndCode::kFailedPrecondition:
@@ -115,7 +122,20 @@ void ReceiverServer::Start() {
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   builder.AddListeningPort(o.listen, credentials, &impl_->port);
+  // gRPC sets SO_REUSEPORT by default: a second receiver on the same port
+  // would start, say "listening" and take half the senders. Refuse instead.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.RegisterService(impl_.get());
+  // Each open stream holds one of gRPC's threads: bounded, so a flood of
+  // streams that never say Hello (the watchdog closes them after
+  // hello_timeout_s) cannot take the machine's threads; beyond the quota
+  // gRPC answers RESOURCE_EXHAUSTED and a real sender retries.
+  grpc::ResourceQuota quota("headcast-receiver");
+  quota.SetMaxThreads(MaxServerThreads(o));
+  builder.SetResourceQuota(quota);
+  // Pings find half-open connections (a laptop asleep, a cut cable) the idle timeout would wait for.
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 20000);
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 10000);
   // Let senders keep the stream alive with pings; answer them promptly.
   builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 5000);
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
@@ -139,5 +159,7 @@ void ReceiverServer::Shutdown() {
 }
 
 int ReceiverServer::port() const { return impl_->port; }
+
+int MaxServerThreads(const ReceiverServerOptions& o) { return 2 * o.max_sessions + 16; }
 
 }  // namespace headcast

@@ -1,7 +1,7 @@
 // The receiver's gRPC adapter: one bidirectional stream per session, each
 // handed to ReceiverSessions (the transport-free protocol) through a
-// DownlinkChannel over the stream. TLS (optionally mutual), keepalive and the
-// listening address live here; everything the protocol says lives there.
+// DownlinkChannel over the stream. TLS (optionally mutual), keepalive, the thread
+// quota and the listening address live here; everything the protocol says lives there.
 #pragma once
 
 #include <functional>
@@ -21,6 +21,10 @@ struct ReceiverServerOptions : ReceiverSessionOptions {
   std::string tls_client_ca;               // PEM: if set, clients must present a certificate signed by it
   void Check() const;                      // throws std::invalid_argument, e.g. plaintext on a non-loopback address
 };
+
+// gRPC's thread quota for the server: every session's stream, as many again
+// for streams still before Hello, and gRPC's own pollers.
+int MaxServerThreads(const ReceiverServerOptions& options);
 
 class ReceiverServer {
  public:

@@ -16,6 +16,7 @@
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
+#include "proto/protocol.h"
 #include "proto/recording.h"
 #include "sender/live_tracker.h"
 #include "sender/session_client.h"
@@ -27,7 +28,7 @@ std::atomic<bool> g_stop{false};
 
 struct SenderFlags {
   SenderOptions session;
-  std::string log_level, head_model = "builtin", params, record, stats_json, components;
+  std::string log_level, head_model = "builtin", params, record, stats_json, components, token_file;
   int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
@@ -39,13 +40,14 @@ struct SenderFlags {
 };
 
 void AddFlags(CLI::App& app, SenderFlags& f) {
-  app.set_config("--config", "", "read options from this file (TOML/INI: key = value)");
+  AddConfigFile(app);
   SenderOptions& o = f.session;
   f.source.realtime = true;
   app.add_option("--log", f.log_level, "log level");
   app.add_option("--target", o.target, "receiver host:port")->capture_default_str();
   app.add_option("--avatar-id", o.avatar_id, "which of the receiver's avatars to drive")->capture_default_str();
-  app.add_option("--token", o.token, "bearer token");
+  app.add_option("--token", o.token, "bearer token (visible to other users in ps: prefer --token-file)")
+      ->excludes(app.add_option("--token-file", f.token_file, "file holding the bearer token (mode 0600)"));
   app.add_flag("--plaintext", o.plaintext, "no TLS (loopback targets only)");
   app.add_option("--tls-ca", o.tls_ca, "PEM CA of the receiver's certificate");
   app.add_option("--tls-cert", o.tls_client_cert, "PEM client certificate (if the receiver requires one)");
@@ -126,7 +128,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   SampleStats landmarks_ms, fit_ms, read_ms;
   int read = 0, fitted = 0, skipped = 0;
   uint64_t sequence = 0;
-  while (!g_stop && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {
+  while (!g_stop && !client.counters().gave_up && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {
     CapturedFrame frame;
     std::string problem;
     Stopwatch read_watch;
@@ -168,7 +170,7 @@ void Replay(const SenderFlags& f, const std::vector<FrameParams>& frames, double
             RecordingWriter* recorder, const Stopwatch& clock) {
   const double t0 = frames.front().capture_time_s, span = frames.back().capture_time_s - t0 + 1.0 / fps;
   uint64_t sequence = 0;
-  for (size_t i = 0; !g_stop; ++i) {
+  for (size_t i = 0; !g_stop && !client.counters().gave_up; ++i) {
     if (i == frames.size()) {
       if (!f.loop) break;
       i = 0;
@@ -197,6 +199,7 @@ nlohmann::json Report(const SenderCounters& c, double seconds) {
           {"seconds", seconds},
           {"connects", c.connects},
           {"rejection", c.last_rejection},
+          {"gave_up", c.gave_up},
           {"last_error", c.last_error},
           {"receiver_frames", c.receiver_frames},
           {"receiver_bad", c.receiver_bad},
@@ -207,6 +210,11 @@ int Run(SenderFlags& f) {
   InitLogging(f.log_level);
   StopOnSignals(&g_stop);
   SenderOptions& o = f.session;
+  if (!f.token_file.empty()) {
+    const std::vector<std::string> tokens = ReadTokenFile(f.token_file);
+    if (tokens.size() != 1) throw std::runtime_error(f.token_file + ": a sender's token file holds one token");
+    o.token = tokens.front();
+  }
   const HeadModel model = LoadHeadModelSpec(f.head_model);
   std::vector<FrameParams> frames;
   RecordingInfo info;
@@ -242,15 +250,16 @@ int Run(SenderFlags& f) {
     tracking = StreamLive(f, model, client, recorder.get(), clock);
   else
     Replay(f, frames, o.fps, client, recorder.get(), clock);
-  client.Flush(2.0);
+  if (!client.counters().gave_up) client.Flush(2.0);
   client.Stop(g_stop ? "interrupted" : "end of source");
   const SenderCounters c = client.counters();
   nlohmann::json report = Report(c, clock.ElapsedSeconds());
   if (!tracking.empty()) report["tracking"] = tracking;
   std::cout << report.dump(2) << "\n";
   if (!f.stats_json.empty()) std::ofstream(f.stats_json) << report.dump(2) << "\n";
-  if (c.connects == 0) {
-    spdlog::error("never streamed: {}", c.last_rejection.empty() ? c.last_error : c.last_rejection);
+  if (c.gave_up || c.connects == 0) {
+    spdlog::error("{}: {}", c.gave_up ? "stopped" : "never streamed",
+                  c.last_rejection.empty() ? c.last_error : c.last_rejection);
     return 2;
   }
   return 0;

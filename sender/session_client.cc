@@ -27,6 +27,14 @@ void SenderOptions::Check() const {
   c.NonNegative("max_kbps", max_kbps).InRange("wire_overhead_bytes", wire_overhead_bytes, 0, 10000);
   c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000)
       .InRange("stats_interval_s", stats_interval_s, 0, 60);
+  std::string why;
+  const bool parsed = ParseHostPort(target, nullptr, &why);
+  c.That(parsed, "target: " + why);
+  // TLS files are checked here, before any thread or connection: a typo must
+  // stop the program at once, with the file's name.
+  c.That(tls_client_cert.empty() == tls_client_key.empty(), "tls_client_cert and tls_client_key go together");
+  c.ReadableFile("tls_ca", tls_ca).ReadableFile("tls_client_cert", tls_client_cert);
+  c.ReadableFile("tls_client_key", tls_client_key);
   c.That(!plaintext || IsLoopbackAddress(target),
          "plaintext is only allowed to a loopback target (got " + target + ")");
   c.That(plaintext || !tls_ca.empty(),
@@ -53,6 +61,7 @@ struct SenderClient::Impl {
   std::atomic<int> downlink_debt_bytes{0};  // uplink cost of downlink messages, not yet charged
 
   uint64_t sent_before_session = 0;
+  v1::Reject::Reason session_rejection = v1::Reject::UNSPECIFIED;  // this session's Reject, if any
 
   Impl(SenderOptions o, CodecLayout l, std::unique_ptr<UplinkConnector> c)
       : options(std::move(o)), layout(std::move(l)), connector(std::move(c)), queue(options.queue_frames) {
@@ -73,10 +82,12 @@ struct SenderClient::Impl {
     hello.mutable_hello()->set_sender_name(options.sender_name);
     hello.mutable_hello()->set_stats_interval_s(options.stats_interval_s);
     ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
+    session_rejection = v1::Reject::UNSPECIFIED;
     if (!stream.Write(hello)) {
-      SetError("cannot reach the receiver at " + connector->Describe());
+      // The transport's status says why (refused, TLS verification, name): pass it on.
       stream.Cancel();
-      stream.Finish();
+      const std::string why = stream.Finish();
+      SetError("cannot reach the receiver at " + connector->Describe() + (why.empty() ? "" : ": " + why));
       return;
     }
     // Wait for Welcome or Reject (with a deadline: a silent receiver must not hang us).
@@ -94,6 +105,8 @@ struct SenderClient::Impl {
           cv.notify_all();
         } else if (d.has_reject()) {
           counters.last_rejection = v1::Reject::Reason_Name(d.reject().reason()) + ": " + d.reject().message();
+          counters.last_error = counters.last_rejection;
+          session_rejection = d.reject().reason();
           ++counters.rejections;
           welcomed = -1;
           cv.notify_all();
@@ -209,7 +222,16 @@ struct SenderClient::Impl {
     stream.CloseWrites();
     join_reader.Join();
     const std::string ended = stream.Finish();
-    if (!ended.empty() && !stop) SetError(ended);
+    // After a Reject the call's status (CANCELLED, ...) would only hide the reason.
+    if (!ended.empty() && !stop && session_rejection == v1::Reject::UNSPECIFIED) SetError(ended);
+  }
+
+  void GiveUp(const std::string& why) {
+    spdlog::error("sender: {}; not retrying", why);
+    std::lock_guard<std::mutex> lock(mutex);
+    counters.gave_up = true;
+    counters.streaming = false;
+    cv.notify_all();
   }
 
   void Run() {
@@ -220,12 +242,17 @@ struct SenderClient::Impl {
       std::unique_ptr<UplinkChannel> channel = connector->Open(&error);
       if (!channel) {
         SetError(error);
-        spdlog::error("sender: {}", error);
+        GiveUp(error);
         return;
       }
       RunSession(*channel);
       channel.reset();
       if (stop) break;
+      // Only a busy receiver may let us in later; every other refusal stands.
+      if (session_rejection != v1::Reject::UNSPECIFIED && session_rejection != v1::Reject::BUSY) {
+        GiveUp("the receiver refused the session: " + counters.last_rejection);
+        return;
+      }
       {
         std::lock_guard<std::mutex> lock(mutex);
         counters.streaming = false;
@@ -240,7 +267,7 @@ struct SenderClient::Impl {
 };
 
 SenderClient::SenderClient(SenderOptions options, CodecLayout layout)
-    : SenderClient(options, std::move(layout), MakeGrpcUplinkConnector(options)) {}
+    : SenderClient(options, std::move(layout), MakeGrpcUplinkConnector((options.Check(), options))) {}
 
 SenderClient::SenderClient(SenderOptions options, CodecLayout layout, std::unique_ptr<UplinkConnector> connector) {
   options.Check();

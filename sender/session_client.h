@@ -60,7 +60,10 @@ constexpr double kNarrowLinkKeySeconds = 10;
 struct SenderCounters {
   uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0,
            rejections = 0;
-  bool streaming = false;      // welcomed and streaming now
+  bool streaming = false;  // welcomed and streaming now
+  // Stopped trying: the receiver refused us for a reason that retrying cannot
+  // heal (token, avatar, versions, layout), or the configuration is unusable.
+  bool gave_up = false;
   std::string last_rejection;  // the receiver's reason, if it refused us
   std::string last_error;      // the last receiver Error or transport problem
   double receiver_render_fps = 0, receiver_kbps = 0;

@@ -217,6 +217,7 @@ int main(int argc, char** argv) {
   plot->add_option("--y-label", y_label, "y axis");
   plot->add_flag("--log-y", log_y, "logarithmic y axis");
 
+  EndWithParentRank();
   CLI11_PARSE(app, argc, argv);
   try {
     InitLogging(log_level);

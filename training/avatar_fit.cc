@@ -2,6 +2,7 @@
 #include "training/avatar_fit.h"
 
 #include <dlfcn.h>
+#include <spdlog/spdlog.h>
 
 #include <filesystem>
 #include <fstream>
@@ -11,6 +12,7 @@
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
+#include "common/core/zip_archive.h"
 #include "common/headmodel/head_render.h"
 #include "training/image_losses.h"
 
@@ -174,17 +176,6 @@ std::mt19937 SampleRng(uint64_t seed, int step, int b) {
 
 namespace fs = std::filesystem;
 
-// Writes `text` to `path` through a temporary file and a rename (atomic on POSIX).
-void WriteAtomically(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp);
-    out << text;
-    if (!out) throw std::runtime_error(tmp.string() + ": cannot write");
-  }
-  fs::rename(tmp, path);
-}
-
 void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam,
                     const Offsets& offsets, WeightAverage* average) {
   const fs::path staging = dir / ("staging-" + std::to_string(next_step));
@@ -197,14 +188,32 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   if (offsets.enabled())
     torch::save(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance}, (staging / "offsets.pt").string());
   if (average) torch::save(average->average(), (staging / "average.pt").string());
-  WriteAtomically(staging / "state.json", nlohmann::json{{"next_step", next_step}}.dump() + "\n");
+  WriteFileAtomically((staging / "state.json").string(), nlohmann::json{{"next_step", next_step}}.dump() + "\n");
+  // Everything on the disk before the checkpoint is named; the previous one
+  // goes only once LATEST names the new one durably.
+  for (const auto& entry : fs::directory_iterator(staging)) SyncToDisk(entry.path().string());
+  SyncToDisk(staging.string());
   const fs::path final_dir = dir / ("step-" + std::to_string(next_step));
   fs::remove_all(final_dir);
   fs::rename(staging, final_dir);
+  SyncToDisk(dir.string());
   std::string previous;
   if (std::ifstream latest(dir / "LATEST"); latest) std::getline(latest, previous);
-  WriteAtomically(dir / "LATEST", final_dir.filename().string() + "\n");
+  WriteFileAtomically((dir / "LATEST").string(), final_dir.filename().string() + "\n");
   if (!previous.empty() && previous != final_dir.filename().string()) fs::remove_all(dir / previous);
+}
+
+// A checkpoint folder is continued on purpose or not at all: without
+// --resume, an earlier run's checkpoint is not overwritten; with it, a folder
+// that does not exist is a typo, not a fresh start.
+void CheckCheckpointFolder(const fs::path& dir, bool resume) {
+  const bool has_checkpoint = fs::exists(dir / "LATEST");
+  if (!resume && has_checkpoint)
+    throw std::runtime_error(dir.string() +
+                             " holds a checkpoint of an earlier run: --resume continues it; to start afresh, remove "
+                             "the folder or choose another --checkpoint-dir");
+  if (resume && !fs::is_directory(dir)) throw std::runtime_error("--resume: no checkpoint folder " + dir.string());
+  if (resume && !has_checkpoint) spdlog::warn("--resume: no checkpoint in {} yet; starting at step 0", dir.string());
 }
 
 // Copies `from` into `to` (same count and shapes, else throws `mismatch`).
@@ -293,10 +302,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   RaySampler sampler(config);
   std::unique_ptr<WeightAverage> average;
   if (options.weight_average > 0) average = std::make_unique<WeightAverage>(modules.parameters());
-  if (options.resume)
-    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, average.get());
   const DistributedOptions& dp = options.distributed;
   const bool writes = dp.rank == 0;
+  if (writes && !options.checkpoint_dir.empty()) CheckCheckpointFolder(options.checkpoint_dir, options.resume);
+  if (options.resume)
+    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, average.get());
   if (!options.checkpoint_dir.empty() && writes) fs::create_directories(options.checkpoint_dir);
   std::unique_ptr<GradientAllReduce> group;
   if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);

@@ -66,6 +66,7 @@ void CodecLayout::Check() const {
   c.That(static_cast<int>(steps.size()) == num_values(),
          "steps has " + std::to_string(steps.size()) + " values, the layout codes " + std::to_string(num_values()));
   for (float s : steps) c.That(s > 1e-7f && s < 10.f && std::isfinite(s), "every step must be in (1e-7, 10)");
+  c.That(head_model_fingerprint.size() <= kMaxFingerprintBytes, "the head-model fingerprint is too long");
   c.ThrowIfErrors();
 }
 
@@ -73,10 +74,20 @@ CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vect
   CodecLayout l;
   l.num_expression = model.num_expression();
   l.key_frame_interval = key_interval;
+  l.head_model_fingerprint = model.fingerprint();
   if (components.empty())
     for (int i = 0; i < model.num_expression(); ++i) components.push_back(i);
   std::sort(components.begin(), components.end());
   l.expression_components = components;
+  // The indices are checked before they index the basis (a user typed them).
+  for (size_t i = 0; i < components.size(); ++i) {
+    if (components[i] < 0 || components[i] >= model.num_expression())
+      throw std::invalid_argument("expression component " + std::to_string(components[i]) + " is outside 0.." +
+                                  std::to_string(model.num_expression() - 1) + " (the head model has " +
+                                  std::to_string(model.num_expression()) + " expression components)");
+    if (i > 0 && components[i] == components[i - 1])
+      throw std::invalid_argument("expression component " + std::to_string(components[i]) + " is listed twice");
+  }
   const auto& d = model.data();
   const int n = model.num_vertices();
   for (int c : components) {
@@ -172,6 +183,11 @@ bool ParamDecoder::Decode(const std::string& packet, FrameParams* out, std::stri
   if (!GetVarint(packet, &pos, &chain) || !GetVarint(packet, &pos, &seq) || !GetVarint(packet, &pos, &time))
     return fail("truncated packet header");
   if (key != (chain == 0)) return fail("inconsistent key-frame marker");
+  // Times stay far inside int64 milliseconds, so a key time plus any chain of
+  // deltas cannot overflow (a peer chooses both).
+  constexpr uint64_t kMaxTimeMs = uint64_t{1} << 45;  // about 1100 years
+  if (time > kMaxTimeMs || (!key && previous_time_ms_ > static_cast<int64_t>(kMaxTimeMs - time)))
+    return fail("capture time out of range");
   if (!key) {
     if (!have_reference_) return fail("delta frame without a reference; waiting for a key frame");
     if (chain != coded_ + 1) {

@@ -13,6 +13,7 @@
 namespace headcast {
 
 constexpr int kCodecVersion = 1;
+constexpr size_t kMaxFingerprintBytes = 128;
 
 // What both ends agree on when a session starts (sent in Hello).
 struct CodecLayout {
@@ -23,6 +24,9 @@ struct CodecLayout {
   // (3, radians), cam translation (3, metres).
   std::vector<float> steps;
   int key_frame_interval = 30;  // a key frame at least this often, frames
+  // HeadModel::fingerprint() of the model the parameters belong to: a receiver
+  // refuses to drive an avatar of another model with them.
+  std::string head_model_fingerprint;
 
   int num_values() const { return static_cast<int>(expression_components.size()) + 18; }
   void Check() const;  // throws std::invalid_argument naming the problem

@@ -5,11 +5,13 @@
 #include <netinet/in.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 
@@ -18,6 +20,19 @@
 extern char** environ;
 
 namespace headcast {
+
+namespace {
+constexpr const char* kParentRankEnv = "HEADCAST_PARENT_RANK_PID";
+}  // namespace
+
+void EndWithParentRank() {
+  const char* parent = std::getenv(kParentRankEnv);
+  if (!parent) return;
+  // Killed rank 0 (kill -9, OOM) would otherwise leave this copy in an
+  // all-reduce until Gloo's 300 s timeout.
+  prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (getppid() != static_cast<pid_t>(std::atoll(parent))) _exit(1);  // it died before prctl
+}
 
 int FreeLoopbackPort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -39,9 +54,11 @@ LocalRanks::LocalRanks(int processes, const std::vector<std::string>& args) {
   if (processes < 2 || processes > 64) throw std::invalid_argument("--processes must be 2..64 to start copies");
   port_ = FreeLoopbackPort();
   // One thread for OpenMP and OpenBLAS from the start (their pools are made when the libraries load).
-  std::vector<std::string> env_strings = {"OMP_NUM_THREADS=1", "OPENBLAS_NUM_THREADS=1"};
+  std::vector<std::string> env_strings = {"OMP_NUM_THREADS=1", "OPENBLAS_NUM_THREADS=1",
+                                          std::string(kParentRankEnv) + "=" + std::to_string(getpid())};
   for (char** e = environ; *e; ++e)
-    if (std::strncmp(*e, "OMP_NUM_THREADS=", 16) != 0 && std::strncmp(*e, "OPENBLAS_NUM_THREADS=", 21) != 0)
+    if (std::strncmp(*e, "OMP_NUM_THREADS=", 16) != 0 && std::strncmp(*e, "OPENBLAS_NUM_THREADS=", 21) != 0 &&
+        std::strncmp(*e, kParentRankEnv, std::strlen(kParentRankEnv)) != 0)
       env_strings.emplace_back(*e);
   std::vector<char*> env;
   for (std::string& e : env_strings) env.push_back(e.data());

@@ -40,6 +40,10 @@ class LocalRanks {
   std::thread watcher_;
 };
 
+// In a copy LocalRanks started: ends this process when its rank 0 dies, however
+// it dies. Does nothing in other processes. Call first thing in main.
+void EndWithParentRank();
+
 // A TCP port on 127.0.0.1 nobody listens on now (bind to port 0, read it back).
 int FreeLoopbackPort();
 

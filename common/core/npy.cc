@@ -35,6 +35,18 @@ const DTypeInfo& Info(DType dtype) {
 
 [[noreturn]] void Fail(const std::string& what, const std::string& why) { throw std::runtime_error(what + ": " + why); }
 
+// Bytes of an array of `shape`, or -1 when a dimension is negative or the
+// product passes `limit` (checked before multiplying, so it cannot wrap).
+int64_t ArrayBytes(const std::vector<int64_t>& shape, int element_size, int64_t limit) {
+  int64_t n = element_size;
+  for (int64_t d : shape) {
+    if (d < 0) return -1;
+    if (d > 0 && n > limit / d) return -1;
+    n *= d;
+  }
+  return n <= limit ? n : -1;
+}
+
 // Value of `key` in the header dict, as the raw text up to the next top-level comma.
 std::string HeaderField(const std::string& header, const std::string& key, const std::string& what) {
   const std::string quoted = "'" + key + "'";
@@ -64,7 +76,9 @@ int DTypeSize(DType dtype) { return Info(dtype).size; }
 NpyArray::NpyArray(DType dtype, std::vector<int64_t> shape) : dtype_(dtype), shape_(std::move(shape)) {
   for (int64_t d : shape_)
     if (d < 0) throw std::invalid_argument("NpyArray: negative dimension");
-  bytes_.assign(static_cast<size_t>(size()) * DTypeSize(dtype_), 0);
+  const int64_t bytes = ArrayBytes(shape_, DTypeSize(dtype_), kMaxNpyBytes);
+  if (bytes < 0) throw std::invalid_argument("NpyArray: shape " + ShapeString() + " is larger than any array we hold");
+  bytes_.assign(static_cast<size_t>(bytes), 0);
 }
 
 int64_t NpyArray::size() const {
@@ -179,12 +193,14 @@ NpyArray ParseNpy(const std::string& bytes, const std::string& what) {
       Fail(what, "malformed shape " + shape_text);
     }
   }
+  // The claim is checked against the bytes present before anything is allocated for it.
+  const int64_t present = static_cast<int64_t>(bytes.size() - offset);
+  const int64_t need = ArrayBytes(shape, info->size, present);
+  if (need < 0)
+    Fail(what, "truncated data: shape " + shape_text + " of " + info->name + " needs more than the " +
+                   std::to_string(present) + " bytes present");
   NpyArray array(info->dtype, shape);
-  const size_t need = array.bytes().size();
-  if (bytes.size() - offset < need)
-    Fail(what, "truncated data: shape " + array.ShapeString() + " needs " + std::to_string(need) + " bytes, file has " +
-                   std::to_string(bytes.size() - offset));
-  std::memcpy(array.mutable_bytes().data(), bytes.data() + offset, need);
+  std::memcpy(array.mutable_bytes().data(), bytes.data() + offset, static_cast<size_t>(need));
   return array;
 }
 

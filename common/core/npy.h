@@ -16,11 +16,16 @@ enum class DType { kFloat32, kFloat64, kInt32, kInt64, kUInt8, kBool };
 const char* DTypeName(DType dtype);
 int DTypeSize(DType dtype);
 
+// The most bytes one array may hold: far above any head model or avatar, far
+// below what a forged shape could ask a machine for.
+constexpr int64_t kMaxNpyBytes = int64_t(1) << 32;
+
 // A dense N-d array as stored in a .npy file: element type, shape, raw bytes.
 class NpyArray {
  public:
   NpyArray() = default;
-  // Zero-filled array of the given type and shape.
+  // Zero-filled array of the given type and shape; throws std::invalid_argument
+  // on a negative dimension or more than kMaxNpyBytes.
   NpyArray(DType dtype, std::vector<int64_t> shape);
 
   template <typename T>

@@ -2,6 +2,7 @@
 #include "common/core/options.h"
 
 #include <cmath>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 
@@ -33,6 +34,11 @@ OptionsCheck& OptionsCheck::InRange(const char* name, double v, double lo, doubl
 }
 OptionsCheck& OptionsCheck::NotEmpty(const char* name, const std::string& v) {
   if (v.empty()) errors_.push_back(std::string(name) + " must not be empty");
+  return *this;
+}
+OptionsCheck& OptionsCheck::ReadableFile(const char* name, const std::string& path) {
+  if (!path.empty() && !std::ifstream(path).good())
+    errors_.push_back(std::string(name) + ": cannot read " + path + " (does it exist, and may we read it?)");
   return *this;
 }
 OptionsCheck& OptionsCheck::That(bool condition, const std::string& message) {

@@ -15,6 +15,8 @@ class OptionsCheck {
   OptionsCheck& Finite(const char* name, double value);
   OptionsCheck& InRange(const char* name, double value, double lo, double hi);  // inclusive
   OptionsCheck& NotEmpty(const char* name, const std::string& value);
+  // Empty passes (an optional file); otherwise the file must open for reading.
+  OptionsCheck& ReadableFile(const char* name, const std::string& path);
   OptionsCheck& That(bool condition, const std::string& message);
 
   bool ok() const { return errors_.empty(); }

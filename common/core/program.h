@@ -20,6 +20,14 @@ inline void StopOnSignals(std::atomic<bool>* stop) {
   std::signal(SIGTERM, [](int) { *flag = true; });
 }
 
+// --config FILE (TOML/INI, key = value). A key that names no option is an
+// error naming it, not silently dropped: a misspelt tls-client-ca would
+// otherwise turn mutual TLS off without a word.
+inline void AddConfigFile(CLI::App& app) {
+  app.set_config("--config", "", "read options from this file (TOML/INI: key = value; unknown keys are errors)");
+  app.allow_config_extras(CLI::config_extras_mode::error);
+}
+
 inline int RunProgram(CLI::App& app, int argc, char** argv, const std::function<int()>& run) {
   try {
     app.parse(argc, argv);

@@ -102,6 +102,33 @@ TEST(ParamCodec, SubsetDecodesUnsentComponentsAsZero) {
   EXPECT_EQ(out.expression[3], 0.f);
 }
 
+TEST(ParamCodec, OutOfRangeComponentsAreRefusedBeforeTheBasisIsRead) {
+  const int e = Model().num_expression();
+  for (const std::vector<int>& bad : std::vector<std::vector<int>>{{100000}, {e}, {-5}, {0, 3, 3}}) {
+    try {
+      CodecLayout::FromModel(Model(), 2e-4, bad);
+      ADD_FAILURE() << "accepted component " << bad.back();
+    } catch (const std::invalid_argument& err) {
+      EXPECT_NE(std::string(err.what()).find("expression component"), std::string::npos) << err.what();
+    }
+  }
+}
+
+TEST(ParamCodec, AbsurdCaptureTimesAreRefusedNotOverflowed) {
+  const CodecLayout l = CodecLayout::FromModel(Model());
+  ParamEncoder enc(l);
+  ParamDecoder dec(l);
+  FrameParams f = SyntheticTalkingHead(Model(), 0);
+  f.capture_time_s = 0x1p62 / 1000;  // a key frame near 2^62 ms; a delta after it would overflow int64
+  std::string why;
+  EXPECT_FALSE(dec.Decode(enc.Encode(f), nullptr, &why));
+  EXPECT_EQ(why, "capture time out of range");
+  f.capture_time_s = 1000;  // an ordinary time still decodes
+  enc.ForceKeyFrame();
+  FrameParams out;
+  EXPECT_TRUE(dec.Decode(enc.Encode(f), &out, &why)) << why;
+}
+
 TEST(ParamCodec, RecoversAtTheNextKeyFrameAfterALoss) {
   const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4, {}, 10);
   ParamEncoder enc(l);

@@ -2,10 +2,14 @@
 #include "common/core/npy.h"
 
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
+#include "common/core/zip_archive.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -75,6 +79,97 @@ TEST(Npy, RefusesWhatItCannotRead) {
   EXPECT_EQ(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')),
             "no error");
   EXPECT_NE(message("x.npy").find("x.npy"), std::string::npos);  // errors name the source
+}
+
+std::string MessageOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    return std::string("wrong exception type: ") + e.what();
+  }
+  return "no error";
+}
+
+long PeakRssMb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024;
+}
+
+TEST(Npy, ForgedShapesAreRefusedBeforeAllocating) {
+  const long before = PeakRssMb();
+  const std::string data(8, '\0');
+  // 2e9 floats claimed by an 8-byte payload: refused, not an 8 GB allocation.
+  EXPECT_NE(MessageOf([&] {
+              ParseNpy(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2000000000,), }") + data, "x");
+            }).find("truncated data"),
+            std::string::npos);
+  // A product that wraps to zero in 64 bits must not pass as an empty array.
+  EXPECT_NE(MessageOf([&] {
+              ParseNpy(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 4294967296), }") + data,
+                       "x");
+            }).find("truncated data"),
+            std::string::npos);
+  // 1e15 elements: a clear error naming the source, not std::bad_alloc.
+  EXPECT_NE(MessageOf([&] {
+              ParseNpy(Header("{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000000,), }") + data,
+                       "x.npy");
+            }).find("x.npy"),
+            std::string::npos);
+  EXPECT_THROW(NpyArray(DType::kFloat64, {int64_t(1) << 40, 1 << 20}), std::invalid_argument);
+  EXPECT_LT(PeakRssMb() - before, 200);
+}
+
+// Sets the uncompressed size of every entry in a zip's local and central headers.
+void ForgeUncompressedSize(const std::string& path, uint32_t size) {
+  std::string bytes = ReadFileBytes(path);
+  const auto patch = [&](const char* signature, size_t field) {
+    for (size_t at = bytes.find(signature, 0, 4); at != std::string::npos; at = bytes.find(signature, at + 4, 4))
+      std::memcpy(&bytes[at + field], &size, 4);
+  };
+  patch("PK\x03\x04", 22);
+  patch("PK\x01\x02", 24);
+  std::ofstream(path, std::ios::binary) << bytes;
+}
+
+TEST(Npz, CorruptBitsFailTheCrc) {
+  const std::string dir = testing::TempDir("crc");
+  std::vector<float> values(1000);
+  for (size_t i = 0; i < values.size(); ++i) values[i] = 0.25f * static_cast<float>(i);
+  NpzArchive a;
+  a["x"] = NpyArray::From<float>({1000}, values.data());
+  WriteNpz(dir + "/a.npz", a, /*compress=*/false);
+  std::string bytes = ReadFileBytes(dir + "/a.npz");
+  const float probe = 0.25f * 500;
+  char pattern[4];
+  std::memcpy(pattern, &probe, 4);
+  const size_t at = bytes.find(std::string(pattern, 4));
+  ASSERT_NE(at, std::string::npos);
+  bytes[at] ^= 0x01;  // one flipped bit in the array's data
+  std::ofstream(dir + "/a.npz", std::ios::binary) << bytes;
+  const std::string message = MessageOf([&] { ReadNpz(dir + "/a.npz"); });
+  EXPECT_NE(message.find("CRC"), std::string::npos) << message;
+  EXPECT_NE(message.find("a.npz"), std::string::npos) << message;
+}
+
+TEST(Zip, ForgedSizesAndBombsAreRefusedBeforeUnpacking) {
+  const std::string dir = testing::TempDir("bomb");
+  const long before = PeakRssMb();
+  // A stored 4 KB entry whose headers claim 3 GB.
+  WriteZip(dir + "/forged.zip", {{"a", std::string(4096, 'a')}}, /*compress=*/false);
+  ForgeUncompressedSize(dir + "/forged.zip", 3000000000u);
+  std::string message = MessageOf([&] { ReadZip(dir + "/forged.zip"); });
+  EXPECT_NE(message.find("forged.zip:a"), std::string::npos) << message;
+  EXPECT_LT(PeakRssMb() - before, 100);  // nothing was allocated for the claim
+  // 200 MB of zeros deflated to a few hundred KB: a zip bomb.
+  WriteZip(dir + "/bomb.zip", {{"zeros", std::string(200u << 20, '\0')}});
+  message = MessageOf([&] { ReadZip(dir + "/bomb.zip"); });
+  EXPECT_NE(message.find("zip bomb"), std::string::npos) << message;
+  // Highly compressible but modest content still loads: 16 MB of zeros (a fresh texture, say).
+  WriteZip(dir + "/zeros.zip", {{"zeros", std::string(16u << 20, '\0')}});
+  EXPECT_EQ(ReadZip(dir + "/zeros.zip").at("zeros").size(), 16u << 20);
 }
 
 TEST(Npz, RoundTripAndStrings) {

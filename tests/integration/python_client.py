@@ -87,7 +87,8 @@ def main():
     hello = pb.Uplink(hello=pb.Hello(
         protocol_version=1, avatar_id=args.avatar_id, sender_name="python third-party client",
         layout=pb.ParameterLayout(num_expression=header.num_expression, expression_components=components,
-                                  steps=steps, key_frame_interval=1, fps=args.fps, codec_version=1)))
+                                  steps=steps, key_frame_interval=1, fps=args.fps, codec_version=1,
+                                  head_model_fingerprint=header.head_model_fingerprint)))
 
     def uplink():
         yield hello

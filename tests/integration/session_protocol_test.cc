@@ -150,9 +150,14 @@ TEST(SessionProtocol, WrongTokenUnknownAvatarAndOldVersionsAreRejected) {
   Client wrong(receiver, "guess");
   wrong.client->Start();
   EXPECT_FALSE(wrong.client->WaitStreaming(0.5));
-  EXPECT_TRUE(WaitFor([&] { return !wrong.client->counters().last_rejection.empty(); }, 5));
+  // A refusal that retrying cannot heal ends the client's attempts, with the receiver's reason.
+  EXPECT_TRUE(WaitFor([&] { return wrong.client->counters().gave_up; }, 5));
   EXPECT_NE(wrong.client->counters().last_rejection.find("UNAUTHENTICATED"), std::string::npos)
       << wrong.client->counters().last_rejection;
+  EXPECT_EQ(wrong.client->counters().last_error, wrong.client->counters().last_rejection);
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));  // several back-off periods
+  EXPECT_EQ(wrong.connector->opened(), 1);
+  EXPECT_EQ(wrong.client->counters().rejections, 1u);
   wrong.client->Stop();
   ASSERT_FALSE(wrong.connector->ends().empty());
   EXPECT_EQ(wrong.connector->ends()[0].code, SessionEndCode::kUnauthenticated);
@@ -161,9 +166,10 @@ TEST(SessionProtocol, WrongTokenUnknownAvatarAndOldVersionsAreRejected) {
   o.avatar_id = "nobody";
   Client unknown(receiver, "secret-token", o);
   unknown.client->Start();
-  EXPECT_TRUE(WaitFor([&] { return !unknown.client->counters().last_rejection.empty(); }, 5));
+  EXPECT_TRUE(WaitFor([&] { return unknown.client->counters().gave_up; }, 5));
   EXPECT_NE(unknown.client->counters().last_rejection.find("UNKNOWN_AVATAR"), std::string::npos);
   unknown.client->Stop();
+  EXPECT_EQ(unknown.connector->opened(), 1);
 
   // A hand-made Hello of another protocol version.
   InMemoryChannelPair pair = MakeInMemoryChannelPair("secret-token");
@@ -176,7 +182,7 @@ TEST(SessionProtocol, WrongTokenUnknownAvatarAndOldVersionsAreRejected) {
   ASSERT_TRUE(reply.has_reject());
   EXPECT_NE(reply.reject().message().find("version 99"), std::string::npos);
   serve.join();
-  EXPECT_GE(receiver.counters().sessions_rejected, 3u);  // refused senders retry with back-off
+  EXPECT_EQ(receiver.counters().sessions_rejected, 3u);  // one attempt each: no retries
   EXPECT_EQ(receiver.counters().sessions_started, 0u);
 }
 
@@ -190,6 +196,9 @@ TEST(SessionProtocol, TheSessionOverTheLimitIsRefusedAndTheReceiverGoesOn) {
   ASSERT_TRUE(WaitFor([&] { return !second.client->counters().last_rejection.empty(); }, 5))
       << "the busy path must answer, not hang";
   EXPECT_NE(second.client->counters().last_rejection.find("BUSY"), std::string::npos);
+  // Busy heals: the second sender keeps trying with back-off.
+  EXPECT_TRUE(WaitFor([&] { return second.client->counters().rejections >= 2; }, 5));
+  EXPECT_FALSE(second.client->counters().gave_up);
   // The receiver is not stuck: it lists sessions and the first one still streams.
   EXPECT_EQ(receiver.Sessions().size(), 1u);
   first.client->Submit(SyntheticTalkingHead(Model(), 0));
@@ -198,6 +207,48 @@ TEST(SessionProtocol, TheSessionOverTheLimitIsRefusedAndTheReceiverGoesOn) {
   first.client->Stop();
   EXPECT_TRUE(WaitFor([&] { return receiver.Sessions().empty(); }, 5));
   EXPECT_EQ(receiver.counters().frames_received, 1u);
+}
+
+TEST(SessionProtocol, StreamsWithoutHelloAndSilentSessionsAreClosed) {
+  ReceiverSessionOptions o = ReceiverOptions();
+  o.hello_timeout_s = 0.3;
+  o.idle_timeout_s = 0.6;
+  ReceiverSessions receiver(o, Avatars());
+  // A client that connects and never says Hello holds nothing for long.
+  InMemoryChannelPair mute = MakeInMemoryChannelPair("secret-token");
+  SessionEnd mute_end;
+  std::thread mute_serve([&] { mute_end = receiver.Serve(*mute.receiver); });
+  // An authenticated client that says Hello, then nothing.
+  InMemoryChannelPair idle = MakeInMemoryChannelPair("secret-token");
+  SessionEnd idle_end;
+  std::thread idle_serve([&] { idle_end = receiver.Serve(*idle.receiver); });
+  v1::Uplink hello;
+  hello.mutable_hello()->set_protocol_version(kProtocolVersion);
+  hello.mutable_hello()->set_avatar_id("demo");
+  ToProto(Layout(), 30, hello.mutable_hello()->mutable_layout());
+  ASSERT_TRUE(idle.sender->Write(hello));
+  const auto start = std::chrono::steady_clock::now();
+  mute_serve.join();
+  const double mute_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(mute_end.code, SessionEndCode::kDeadlineExceeded) << mute_end.message;
+  EXPECT_LT(mute_s, 2.0);
+  EXPECT_EQ(receiver.Sessions().size(), 1u);
+  idle_serve.join();
+  EXPECT_EQ(idle_end.code, SessionEndCode::kDeadlineExceeded) << idle_end.message;
+  EXPECT_TRUE(receiver.Sessions().empty());
+  EXPECT_EQ(receiver.counters().hello_timeouts, 1u);
+  EXPECT_EQ(receiver.counters().idle_timeouts, 1u);
+  // A sender that keeps streaming is not idle, however long it runs.
+  Client c(receiver, "secret-token");
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  for (int i = 0; i < 40; ++i) {
+    c.client->Submit(SyntheticTalkingHead(Model(), i));
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  }
+  EXPECT_EQ(c.client->counters().connects, 1u);
+  EXPECT_EQ(receiver.counters().idle_timeouts, 1u);
+  c.client->Stop();
 }
 
 TEST(SessionProtocol, ABrokenLinkIsReconnected) {

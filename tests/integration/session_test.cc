@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
+#include <functional>
 #include <limits>
 #include <thread>
 
@@ -16,6 +18,7 @@
 #include "receiver/session_server.h"
 #include "sender/session_client.h"
 #include "tests/integration/session_helpers.h"
+#include "tests/testing/test_data.h"
 
 namespace headcast {
 namespace {
@@ -192,6 +195,11 @@ TEST_F(SessionTest, RefusalsSayWhy) {
   wrong_size.mutable_hello()->mutable_layout()->set_num_expression(53);
   v1::Uplink not_hello;
   not_hello.mutable_frames()->set_payload("x");
+  // Another model with the same number of expression components, and a sender that names none.
+  v1::Uplink other_model = Hello();
+  other_model.mutable_hello()->mutable_layout()->set_head_model_fingerprint("another-model-0123");
+  v1::Uplink no_model = Hello();
+  no_model.mutable_hello()->mutable_layout()->clear_head_model_fingerprint();
   const std::vector<Case> cases = {
       {"secret-token", Hello(2), v1::Reject::PROTOCOL_VERSION, "protocol version 2"},
       {"secret-token", Hello(kProtocolVersion, "nobody"), v1::Reject::UNKNOWN_AVATAR, "no avatar 'nobody'"},
@@ -200,6 +208,8 @@ TEST_F(SessionTest, RefusalsSayWhy) {
       {"secret-token", bad_layout, v1::Reject::BAD_LAYOUT, "step"},
       {"secret-token", wrong_size, v1::Reject::BAD_LAYOUT, "avatar 'demo' has 13"},
       {"secret-token", not_hello, v1::Reject::PROTOCOL, "must start with Hello"},
+      {"secret-token", other_model, v1::Reject::BAD_LAYOUT, "fits head model another-model-0123"},
+      {"secret-token", no_model, v1::Reject::BAD_LAYOUT, "names no head model"},
   };
   for (const Case& c : cases) {
     auto raw = Raw(c.token);
@@ -345,6 +355,85 @@ TEST(ReceiverServerOptions, RefuseInsecureSetups) {
   EXPECT_TRUE(IsLoopbackAddress("[::1]:5"));
   EXPECT_TRUE(IsLoopbackAddress("localhost:5"));
   EXPECT_FALSE(IsLoopbackAddress("128.0.0.1:5"));
+  // A name is not an address: these would carry the token in clear text off the machine.
+  EXPECT_FALSE(IsLoopbackAddress("127.attacker.example:5"));
+  EXPECT_FALSE(IsLoopbackAddress("127.0.0.1.nip.io:5"));
+  EXPECT_FALSE(IsLoopbackAddress("[::ffff:10.0.0.1]:5"));
+  s.target = "127.attacker.example:50051";
+  EXPECT_THROW(s.Check(), std::invalid_argument);
+}
+
+std::string CheckMessage(const std::function<void()>& check) {
+  try {
+    check();
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "accepted";
+}
+
+TEST(ReceiverServerOptions, AddressesNeedAPortInRange) {
+  for (const char* listen : {"127.0.0.1:99999", "127.0.0.1", "[::1]", "::1:50051", ":50051", "127.0.0.1:5x"}) {
+    ReceiverServerOptions o = ServerOptions();
+    o.listen = listen;
+    const std::string message = CheckMessage([&] { o.Check(); });
+    EXPECT_NE(message.find("is not host:port"), std::string::npos) << listen << ": " << message;
+  }
+  for (const char* listen : {"127.0.0.1:0", "[::1]:50051", "localhost:65535"}) {
+    ReceiverServerOptions o = ServerOptions();
+    o.listen = listen;
+    EXPECT_EQ(CheckMessage([&] { o.Check(); }), "accepted") << listen;
+  }
+  SenderOptions s = ClientOptions(1);
+  s.target = "127.0.0.1";  // gRPC would quietly dial port 443
+  EXPECT_NE(CheckMessage([&] { s.Check(); }).find("no port"), std::string::npos);
+}
+
+TEST(SenderOptions, MissingTlsFilesAreRefusedBeforeConnecting) {
+  SenderOptions s = ClientOptions(50051);
+  s.plaintext = false;
+  s.tls_ca = "/nonexistent/ca.pem";
+  EXPECT_NE(CheckMessage([&] { s.Check(); }).find("cannot read /nonexistent/ca.pem"), std::string::npos);
+  const std::string dir = testing::TempDir("tlsfiles");
+  std::ofstream(dir + "/ca.pem") << "x";
+  s.tls_ca = dir + "/ca.pem";
+  EXPECT_EQ(CheckMessage([&] { s.Check(); }), "accepted");
+  s.tls_client_cert = dir + "/ca.pem";  // a certificate without its key
+  EXPECT_NE(CheckMessage([&] { s.Check(); }).find("go together"), std::string::npos);
+  // The client refuses at construction, not in its worker thread.
+  EXPECT_THROW(SenderClient(s, Layout()), std::invalid_argument);
+}
+
+TEST(TokenFile, LineEndingsCommentsAndBlanksAreNotTokens) {
+  const std::string dir = testing::TempDir("tokens");
+  std::ofstream(dir + "/crlf.txt", std::ios::binary)
+      << "# made with openssl rand -hex 16\r\n\r\n  0123456789abcdef0123  \r\n   \r\nfedcba9876543210\r\n";
+  EXPECT_EQ(ReadTokenFile(dir + "/crlf.txt"), (std::vector<std::string>{"0123456789abcdef0123", "fedcba9876543210"}));
+  auto refusal = [&](const std::string& name, const std::string& content) {
+    std::ofstream(dir + "/" + name, std::ios::binary) << content;
+    try {
+      ReadTokenFile(dir + "/" + name);
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(refusal("short.txt", "0123456789abcdef\nshort\n").find("short.txt: line 2: a token needs at least 16"),
+            std::string::npos);
+  EXPECT_NE(refusal("empty.txt", "# only a comment\n\n").find("no token"), std::string::npos);
+  EXPECT_NE(refusal("binary.txt", std::string("\x7f"
+                                              "ELF\x01\x00\x00garbage-garbage-garbage",
+                                              27))
+                .find("printable"),
+            std::string::npos);
+  EXPECT_NE(refusal("spaces.txt", "0123456789 abcdef0123\n").find("printable ASCII without blanks"), std::string::npos);
+}
+
+TEST(ReceiverServer, ABusyPortIsRefused) {
+  ReceiverServer first(ServerOptions(), Avatars());
+  first.Start();
+  ReceiverServer second(ServerOptions(first.port()), Avatars());
+  EXPECT_THROW(second.Start(), std::runtime_error);
 }
 
 }  // namespace

@@ -3,8 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
@@ -73,6 +75,33 @@ TEST(Recording, WritesAndReadsEveryFrame) {
   }
 }
 
+TEST(Recording, EveryWrittenFrameIsOnDiskBeforeWriteReturns) {
+  const std::string path = testing::TempDir("flush") + "/live.hcrec";
+  RecordingWriter w(path, Info());
+  for (int i = 0; i < 5; ++i) w.Write(SyntheticTalkingHead(Model(), i));
+  // Read while the writer is still open, as after a SIGKILL: nothing may sit in a buffer.
+  std::string cut;
+  EXPECT_EQ(ReadRecording(path, nullptr, &cut).size(), 5u);
+  EXPECT_TRUE(cut.empty()) << cut;
+}
+
+TEST(Recording, CaptureTimesThatAreNotTimesEndTheRecording) {
+  for (double bad : {std::nan(""), 1e300, -std::numeric_limits<double>::infinity()}) {
+    const std::string path = testing::TempDir("times") + "/t.hcrec";
+    {
+      RecordingWriter w(path, Info());
+      for (int i = 0; i < 6; ++i) {
+        FrameParams f = SyntheticTalkingHead(Model(), i);
+        if (i == 3) f.capture_time_s = bad;
+        w.Write(f);
+      }
+    }
+    std::string cut;
+    EXPECT_EQ(ReadRecording(path, nullptr, &cut).size(), 3u) << bad;
+    EXPECT_NE(cut.find("is not a time"), std::string::npos) << cut;
+  }
+}
+
 TEST(Recording, TruncatedForeignAndMissingFiles) {
   const std::string dir = testing::TempDir("bad");
   const std::string path = dir + "/a.hcrec";
@@ -87,6 +116,14 @@ TEST(Recording, TruncatedForeignAndMissingFiles) {
   while (reader.Next(&f)) ++n;
   EXPECT_EQ(n, 19);  // every complete frame before the cut
   EXPECT_NE(reader.error().find("truncated"), std::string::npos);
+  // A recorder killed mid-write leaves a replayable recording: the whole frames, and why it ends.
+  std::string cut;
+  EXPECT_EQ(ReadRecording(path, nullptr, &cut).size(), 19u);
+  EXPECT_NE(cut.find("truncated or corrupt record"), std::string::npos) << cut;
+  // Cut inside the first record: nothing to replay, an error.
+  const std::string empty = dir + "/empty.hcrec";
+  RecordingWriter(empty, Info()).Close();
+  std::filesystem::resize_file(path, std::filesystem::file_size(empty) + 3);
   EXPECT_THROW(ReadRecording(path), std::runtime_error);
   { std::ofstream(dir + "/foreign.hcrec") << "GIF89a..."; }
   try {

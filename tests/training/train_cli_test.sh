@@ -22,6 +22,23 @@ at=$(cat "$tmp/ckpt/LATEST" 2>/dev/null)
 rows=$(tail -n +2 "$tmp/loss.csv" | cut -d, -f1 | sort -n | uniq | wc -l)
 all=$(tail -n +2 "$tmp/loss.csv" | wc -l)
 [ "$rows" -eq 200 ] && [ "$all" -eq 200 ] && ok "the loss log has each of the 200 steps once" || bad "log: $rows unique of $all rows"
+kept=$(cat "$tmp/ckpt/LATEST")
+out=$("$bin/headcast-train" "${common[@]}" --iterations 8 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "holds a checkpoint of an earlier run" <<<"$out" && [ "$(cat "$tmp/ckpt/LATEST")" = "$kept" ] &&
+  [ -d "$tmp/ckpt/$kept" ] && ok "a new run without --resume leaves the earlier checkpoint alone" || bad "no resume: $out"
+out=$("$bin/headcast-train" pretrain --resolution 128 --iterations 4 --checkpoint-dir "$tmp/no-such-ckpt" --resume \
+  --out "$tmp/b.hcavatar" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "no checkpoint folder" <<<"$out" && ok "--resume on a missing folder is refused" || bad "resume typo: $out"
+# Rank 0 killed with -9: its copy must not wait out Gloo's 300 s timeout.
+"$bin/headcast-train" pretrain --resolution 128 --batch 1 --iterations 100000 --processes 2 --out "$tmp/c.hcavatar" \
+  > /dev/null 2>&1 &
+pid=$!
+for _ in $(seq 300); do child=$(pgrep -P "$pid" | head -1); [ -n "$child" ] && break; sleep 0.1; done
+sleep 2
+kill -9 "$pid" 2>/dev/null; wait "$pid" 2>/dev/null; pid=
+gone=no
+for _ in $(seq 100); do kill -0 "$child" 2>/dev/null || { gone=yes; break; }; sleep 0.1; done
+[ -n "$child" ] && [ $gone = yes ] && ok "a copy rank ends with its killed rank 0" || { bad "copy rank $child still running"; kill -9 "$child" 2>/dev/null; }
 echo "garbage" > "$tmp/ckpt/$(cat "$tmp/ckpt/LATEST")/state.json"
 out=$("$bin/headcast-train" "${common[@]}" --iterations 240 --resume 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "cannot resume" <<<"$out" && ok "corrupt checkpoint refused by name" || bad "corrupt: $out"
