@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The receiver under a bounded flood (loopback only), issue #21: a default
 # receiver (plaintext on 127.0.0.1, 16 sessions, 5 s Hello deadline, 30 s idle
-# timeout), 300 streams that never say Hello and 50 authenticated sessions
-# that say Hello and then nothing, and after 2 s one real sender. Reports the
+# timeout), 50 authenticated sessions that say Hello and then nothing, 1 s
+# later 300 streams that never say Hello, and at 2 s one real sender. Reports the
 # receiver's threads and RSS (before, peak, at the end), how the flood's
 # streams ended, when the real sender got in, and what the receiver showed.
 #   bench/flood.sh OUT [--mute N] [--idle N] [--duration S]
@@ -24,7 +24,7 @@ done
 mkdir -p "$out"
 token=flood-token-0123456789
 port=$((20000 + RANDOM % 20000))
-"$bin/headcast-avatar" create --resolution 64 --out "$out/demo.hcavatar" > /dev/null
+"$bin/headcast-avatar" create --resolution 128 --out "$out/demo.hcavatar" > /dev/null
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --token "$token" --avatar demo="$out/demo.hcavatar" \
   --display none --duration $((duration + 5)) --stats-json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
 rpid=$!

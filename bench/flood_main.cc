@@ -23,6 +23,7 @@
 #include <thread>
 
 #include "common/codec/param_codec.h"
+#include "common/core/log.h"
 #include "common/core/options.h"
 #include "common/core/program.h"
 #include "common/core/timer.h"
@@ -119,6 +120,7 @@ ProcSample SampleProc(int pid) {
 }
 
 int Run(const FloodOptions& o) {
+  InitLogging("");
   o.Check();
   const HeadModel model = MakeBuiltinHead();
   const CodecLayout layout = CodecLayout::FromModel(model);
@@ -148,12 +150,14 @@ int Run(const FloodOptions& o) {
   });
   Outcomes mute, idle;
   std::vector<std::thread> streams;
-  for (int i = 0; i < o.mute; ++i)
-    streams.emplace_back([&, i] { RawStream(*stubs[i % o.channels], o, nullptr, &mute); });
+  // The authenticated sessions first, so they take the session slots (and the
+  // rest get BUSY), then the streams that never say Hello.
   for (int i = 0; i < o.idle; ++i)
     streams.emplace_back([&, i] { RawStream(*stubs[i % o.channels], o, &hello, &idle); });
-
-  std::this_thread::sleep_for(std::chrono::duration<double>(o.legit_after_s));
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  for (int i = 0; i < o.mute; ++i)
+    streams.emplace_back([&, i] { RawStream(*stubs[i % o.channels], o, nullptr, &mute); });
+  std::this_thread::sleep_for(std::chrono::duration<double>(std::max(0.0, o.legit_after_s - 1)));
   SenderOptions so;
   so.target = o.target;
   so.plaintext = true;

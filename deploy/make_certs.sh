@@ -6,7 +6,9 @@
 #
 # SERVER_NAMEs (DNS names or IP addresses the receiver is reached by) default to
 # "localhost 127.0.0.1". Writes ca.pem/ca.key, server.pem/server.key,
-# client.pem/client.key into OUT_DIR (keys readable by the owner only).
+# client.pem/client.key into OUT_DIR (keys readable by the owner only). Run
+# again on the same OUT_DIR (to add a server name, say), it keeps the CA, so
+# whoever trusts it still does, and issues new server and client certificates.
 # Receiver: --tls-cert server.pem --tls-key server.key [--tls-client-ca ca.pem]
 # Sender:   --tls-ca ca.pem [--tls-cert client.pem --tls-key client.key]
 set -euo pipefail
@@ -23,8 +25,12 @@ for n in "${names[@]}"; do
 done
 san=${san%,}
 days=825
-openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days "$days" -subj "/CN=headcast private CA" \
-  -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" 2>/dev/null
+if [ -f ca.pem ] && [ -f ca.key ]; then
+  echo "make_certs: keeping the CA in $out; new server and client certificates" >&2
+else
+  openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days "$days" -subj "/CN=headcast private CA" \
+    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" 2>/dev/null
+fi
 issue() {  # name, subject CN, extended key usage, SAN (optional)
   local name=$1 cn=$2 eku=$3 alt=${4:-}
   openssl req -newkey rsa:2048 -nodes -keyout "$name.key" -out "$name.csr" -subj "/CN=$cn" 2>/dev/null

@@ -105,12 +105,23 @@ bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why
              std::to_string(kCodecVersion);
     return false;
   }
-  CodecLayout l;
-  l.num_expression = static_cast<int>(std::min<uint32_t>(in.num_expression(), 1u << 20));
+  // Values too large for an int are refused as received, not clamped (a
+  // clamped figure in the error would name something the peer never sent).
+  constexpr uint32_t kLargest = 1u << 20;
+  auto too_large = [&](const char* name, uint32_t value) {
+    if (value <= kLargest) return false;
+    if (why) *why = std::string(name) + " " + std::to_string(value) + " is out of range";
+    return true;
+  };
+  if (too_large("num_expression", in.num_expression()) || too_large("key_frame_interval", in.key_frame_interval()))
+    return false;
   for (uint32_t c : in.expression_components())
-    l.expression_components.push_back(static_cast<int>(std::min<uint32_t>(c, 1u << 20)));
+    if (too_large("expression component", c)) return false;
+  CodecLayout l;
+  l.num_expression = static_cast<int>(in.num_expression());
+  l.expression_components.assign(in.expression_components().begin(), in.expression_components().end());
   l.steps.assign(in.steps().begin(), in.steps().end());
-  l.key_frame_interval = static_cast<int>(std::min<uint32_t>(in.key_frame_interval(), 1u << 20));
+  l.key_frame_interval = static_cast<int>(in.key_frame_interval());
   l.head_model_fingerprint = in.head_model_fingerprint();  // Check bounds its length
   try {
     l.Check();

@@ -11,6 +11,7 @@
 
 #include "common/core/log.h"
 #include "common/core/npy.h"
+#include "common/core/program.h"
 #include "common/core/rotation.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
@@ -29,12 +30,18 @@ std::vector<std::pair<int, Eigen::Vector3d>> ReadLandmarks(const std::string& pa
   const std::string s = text.str();
   const auto first = s.find_first_not_of(" \t\r\n");
   if (first != std::string::npos && s[first] == '{') {
-    const auto j = nlohmann::json::parse(s);
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(s);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(path + ": not JSON (" + e.what() + ")");
+    }
+    if (!j.is_object()) throw std::runtime_error(path + ": wants {\"index\": [x, y, z], ...}");
     for (auto it = j.begin(); it != j.end(); ++it) {
       const auto& p = it.value();
-      if (!p.is_array() || p.size() != 3)
+      if (!p.is_array() || p.size() != 3 || !p[0].is_number() || !p[1].is_number() || !p[2].is_number())
         throw std::runtime_error(path + ": landmark " + it.key() + " is not [x, y, z]");
-      out.emplace_back(std::stoi(it.key()),
+      out.emplace_back(ParseNumber<int>(it.key(), path + ": landmark index"),
                        Eigen::Vector3d(p[0].get<double>(), p[1].get<double>(), p[2].get<double>()));
     }
   } else {

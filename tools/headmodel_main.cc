@@ -10,6 +10,7 @@
 
 #include "common/core/image_io.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
@@ -84,16 +85,16 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
     const int idx = model.ExpressionIndex(name);
     if (idx < 0)
       throw std::invalid_argument("model has no expression component '" + name + "' (see: headcast-headmodel summary)");
-    p.expression[idx] = std::stod(e.substr(eq + 1));
+    p.expression[idx] = ParseNumber<float>(e.substr(eq + 1), "--expression " + name);
   }
   for (const auto& e : args.shapes) {
     const auto eq = e.find('=');
     if (eq == std::string::npos) throw std::invalid_argument("--shape wants index=value, got '" + e + "'");
-    const int idx = std::stoi(e.substr(0, eq));
+    const int idx = ParseNumber<int>(e.substr(0, eq), "--shape (an index)");
     if (idx < 0 || idx >= model.num_shape())
       throw std::invalid_argument("--shape: the model has shape components 0.." +
                                   std::to_string(model.num_shape() - 1));
-    p.shape[idx] = std::stod(e.substr(eq + 1));
+    p.shape[idx] = ParseNumber<float>(e.substr(eq + 1), "--shape " + std::to_string(idx));
   }
   return p;
 }

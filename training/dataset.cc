@@ -165,7 +165,11 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   if (o.resume && fs::exists(dir / "track_report.json") && fs::exists(frames_dir) && fs::exists(masks_dir)) {
     spdlog::info("prep: reusing the finished tracking pass in {}", o.out_dir);
     t.fitted = ReadRecording((dir / "params.hcrec").string(), &t.info);
-    t.report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
+    try {
+      t.report = nlohmann::json::parse(std::ifstream(dir / "track_report.json"));
+    } catch (const std::exception& e) {
+      throw std::runtime_error((dir / "track_report.json").string() + ": " + e.what() + " (remove it to track again)");
+    }
     return t;
   }
   fs::remove(dir / "track_report.json");

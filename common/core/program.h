@@ -9,6 +9,9 @@
 #include <csignal>
 #include <exception>
 #include <functional>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
 
 namespace headcast {
 
@@ -26,6 +29,27 @@ inline void StopOnSignals(std::atomic<bool>* stop) {
 inline void AddConfigFile(CLI::App& app) {
   app.set_config("--config", "", "read options from this file (TOML/INI: key = value; unknown keys are errors)");
   app.allow_config_extras(CLI::config_extras_mode::error);
+}
+
+// A number the user typed (a flag's value, a key in a file), whole: "1.5x",
+// "" or "abc" are errors that name `what` and repeat the text, not "stod".
+template <typename T>
+T ParseNumber(const std::string& text, const std::string& what) {
+  static_assert(std::is_arithmetic_v<T>);
+  size_t used = 0;
+  T value{};
+  try {
+    if constexpr (std::is_floating_point_v<T>)
+      value = static_cast<T>(std::stod(text, &used));
+    else
+      value = static_cast<T>(std::stoll(text, &used));
+  } catch (const std::exception&) {
+    used = std::string::npos;
+  }
+  if (used != text.size() || text.empty())
+    throw std::invalid_argument(what + ": '" + text + "' is not " +
+                                (std::is_floating_point_v<T> ? "a number" : "a whole number"));
+  return value;
 }
 
 inline int RunProgram(CLI::App& app, int argc, char** argv, const std::function<int()>& run) {

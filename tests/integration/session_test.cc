@@ -193,6 +193,8 @@ TEST_F(SessionTest, RefusalsSayWhy) {
   bad_layout.mutable_hello()->mutable_layout()->set_steps(0, std::nanf(""));
   v1::Uplink wrong_size = Hello();
   wrong_size.mutable_hello()->mutable_layout()->set_num_expression(53);
+  v1::Uplink huge = Hello();  // reported as sent, not as clamped
+  huge.mutable_hello()->mutable_layout()->set_num_expression(4000000000u);
   v1::Uplink not_hello;
   not_hello.mutable_frames()->set_payload("x");
   // Another model with the same number of expression components, and a sender that names none.
@@ -208,6 +210,7 @@ TEST_F(SessionTest, RefusalsSayWhy) {
       {"secret-token", bad_layout, v1::Reject::BAD_LAYOUT, "step"},
       {"secret-token", wrong_size, v1::Reject::BAD_LAYOUT, "avatar 'demo' has 13"},
       {"secret-token", not_hello, v1::Reject::PROTOCOL, "must start with Hello"},
+      {"secret-token", huge, v1::Reject::BAD_LAYOUT, "num_expression 4000000000 is out of range"},
       {"secret-token", other_model, v1::Reject::BAD_LAYOUT, "fits head model another-model-0123"},
       {"secret-token", no_model, v1::Reject::BAD_LAYOUT, "names no head model"},
   };

@@ -8,6 +8,10 @@ port=$((20000 + RANDOM % 20000))
 cleanup() { [ -n "${rpid:-}" ] && kill "$rpid" 2>/dev/null; wait 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
 "$src/deploy/make_certs.sh" "$tmp/certs" > /dev/null
+cp "$tmp/certs/ca.pem" "$tmp/ca_first.pem"
+"$src/deploy/make_certs.sh" "$tmp/certs" localhost 127.0.0.1 > /dev/null 2>&1
+cmp -s "$tmp/certs/ca.pem" "$tmp/ca_first.pem" && openssl verify -CAfile "$tmp/ca_first.pem" "$tmp/certs/server.pem" > /dev/null &&
+  ok "make_certs.sh run again keeps the CA" || bad "make_certs.sh replaced the CA"
 "$bin/headcast-avatar" create --resolution 128 --out "$tmp/demo.hcavatar" > /dev/null
 token=0123456789abcdef0123
 # Windows line endings, a comment and blank lines: only the token counts.
