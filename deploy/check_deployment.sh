@@ -52,21 +52,22 @@ docker run -d --name headcast-systemd-check --cgroupns=host -v /sys/fs/cgroup:/s
   --network host --tmpfs /run --tmpfs /run/lock headcast:check-systemd > /dev/null
 in_box() { docker exec headcast-systemd-check bash -c "$1"; }
 for _ in $(seq 30); do in_box 'systemctl is-system-running 2>/dev/null | grep -qE "running|degraded"' && break; sleep 1; done
-# The unit file's own install steps, then certificates and a token.
+# The unit file's own install steps, as its comments give them (certificates and a token included).
 in_box 'set -e; cd /opt/headcast
-  useradd --system --home /var/lib/headcast headcast
-  install -d -o headcast /etc/headcast /var/lib/headcast
+  useradd --system --home /var/lib/headcast --shell /usr/sbin/nologin headcast
+  install -d -o headcast -g headcast -m 0750 /etc/headcast /var/lib/headcast
   cp deploy/examples/receiver.toml /etc/headcast/receiver.toml
   deploy/make_certs.sh /etc/headcast/certs localhost 127.0.0.1 > /dev/null
-  chown -R headcast /etc/headcast/certs
-  echo check-token-0123456789 > /etc/headcast/tokens.txt
+  (umask 077; openssl rand -hex 16 > /etc/headcast/tokens.txt)
+  chown -R headcast:headcast /etc/headcast
   cp deploy/systemd/headcast-receiver.service /etc/systemd/system/
   systemctl daemon-reload && systemctl enable --now headcast-receiver' > "$out/systemd.log" 2>&1
 sleep 3
 in_box 'systemctl is-active headcast-receiver' >> "$out/systemd.log" 2>&1 || {
   in_box 'journalctl -u headcast-receiver --no-pager | tail -20' >&2; exit 1; }
 in_box 'cd /opt/headcast && build/bin/headcast-sender --target localhost:50051 --tls-ca /etc/headcast/certs/ca.pem \
-  --token check-token-0123456789 --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
+  --token-file /etc/headcast/tokens.txt --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
+in_box 'systemd-analyze security headcast-receiver | tail -1' >> "$out/systemd.log" 2>&1 || true
 in_box 'systemctl stop headcast-receiver; cat /var/lib/headcast/receiver_stats.json' > "$out/receiver_stats.json"
 in_box 'journalctl -u headcast-receiver --no-pager' > "$out/journal.log" 2>&1 || true
 in_box 'cat /tmp/sender.json' > "$out/sender.json"

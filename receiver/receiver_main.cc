@@ -11,6 +11,7 @@
 #include "common/avatar/avatar_backend.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
+#include "common/core/service_notify.h"
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_model_io.h"
@@ -152,6 +153,11 @@ int Run(ReceiverFlags& f) {
   StreamTaps taps(f, *model, avatars.begin()->second->subject());
   if (taps.active()) server.SetFrameObserver([&](const std::string& id, const FrameParams& p) { taps(id, p); });
   server.Start();
+  // Under systemd (Type=notify): ready once listening; the watchdog hears
+  // from every render tick, so a stuck loop gets the service restarted.
+  const ServiceNotifier service;
+  service.Notify("READY=1");
+  Stopwatch since_ping;
   DisplayOptions display_options;
   display_options.kind = ParseDisplayKind(f.display);
   display_options.video_path = f.video;
@@ -168,6 +174,11 @@ int Run(ReceiverFlags& f) {
     display_log << "shown_s,sequence,glass_to_glass_ms,render_ms\n";
   }
   SessionFrameSource source(server.sessions(), show, &g_stop);
+  loop.on_tick = [&] {
+    if (service.watchdog_interval_s() <= 0 || since_ping.ElapsedSeconds() < service.watchdog_interval_s()) return;
+    service.Notify("WATCHDOG=1");
+    since_ping.Restart();
+  };
   std::map<std::string, int> shown_senders;  // frames shown per sender name (the first 100 names)
   loop.on_shown = [&](const FrameParams& p, double glass_ms, double render_ms) {
     const std::string name = source.shown().sender_name;

@@ -89,6 +89,7 @@ RenderLoopStats RunRenderLoop(const AvatarPicker& pick, FrameParamsSource& sourc
   for (;;) {
     const double now = elapsed();
     if (options.max_seconds > 0 && now >= options.max_seconds) break;
+    if (options.on_tick) options.on_tick();
     bool finished = false;
     const std::optional<FrameParams> params = source.Next(now, &finished);
     if (params) {

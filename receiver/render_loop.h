@@ -63,6 +63,8 @@ struct RenderLoopOptions {
   double max_seconds = 0;  // stop after this long (0: when the source finishes)
   // Called after each frame is shown: its parameters, glass-to-glass ms, render ms.
   std::function<void(const FrameParams&, double, double)> on_shown;
+  // Called at every tick, frames or not (a service watchdog's sign of life).
+  std::function<void()> on_tick;
   void Check() const;
 };
 

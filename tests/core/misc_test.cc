@@ -1,6 +1,12 @@
 // Bounded queue, statistics, options checks, image and video I/O.
 #include <gtest/gtest.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <sys/un.h>
+#include <unistd.h>
 
+#include <cstddef>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -10,6 +16,7 @@
 #include "common/core/check.h"
 #include "common/core/image_io.h"
 #include "common/core/options.h"
+#include "common/core/service_notify.h"
 #include "common/core/timer.h"
 #include "tests/testing/test_data.h"
 
@@ -49,6 +56,51 @@ TEST(BoundedQueue, PopWaitsAndCloseWakes) {
   closer.join();
   EXPECT_FALSE(q.Push(1));
   EXPECT_EQ(q.size(), 0u);
+}
+
+// A socket standing in for systemd's NOTIFY_SOCKET.
+class NotifySocket {
+ public:
+  explicit NotifySocket(const std::string& path) : fd_(socket(AF_UNIX, SOCK_DGRAM, 0)) {
+    sockaddr_un a{};
+    a.sun_family = AF_UNIX;
+    std::memcpy(a.sun_path, path.data(), path.size());
+    if (path[0] == '@') a.sun_path[0] = '\0';
+    EXPECT_EQ(bind(fd_, reinterpret_cast<sockaddr*>(&a), offsetof(sockaddr_un, sun_path) + path.size()), 0);
+    timeval timeout{2, 0};
+    setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  }
+  ~NotifySocket() { close(fd_); }
+  std::string Receive() {
+    char buffer[256];
+    const ssize_t n = recv(fd_, buffer, sizeof buffer, 0);
+    return n > 0 ? std::string(buffer, static_cast<size_t>(n)) : "";
+  }
+
+ private:
+  int fd_;
+};
+
+TEST(ServiceNotifier, SpeaksSystemdsNotifyProtocol) {
+  unsetenv("NOTIFY_SOCKET");
+  EXPECT_FALSE(ServiceNotifier().Notify("READY=1"));  // outside systemd: nothing
+  const std::string path = testing::TempDir("notify") + "/notify.sock";
+  for (const std::string& where : {path, "@headcast-notify-test-" + std::to_string(getpid())}) {
+    NotifySocket socket(where);
+    setenv("NOTIFY_SOCKET", where.c_str(), 1);
+    setenv("WATCHDOG_USEC", "3000000", 1);
+    const ServiceNotifier notifier;
+    EXPECT_DOUBLE_EQ(notifier.watchdog_interval_s(), 1.5);
+    EXPECT_TRUE(notifier.Notify("READY=1"));
+    EXPECT_EQ(socket.Receive(), "READY=1") << where;
+    EXPECT_TRUE(notifier.Notify("WATCHDOG=1"));
+    EXPECT_EQ(socket.Receive(), "WATCHDOG=1") << where;
+  }
+  setenv("WATCHDOG_PID", "1", 1);  // another process's watchdog
+  EXPECT_EQ(ServiceNotifier().watchdog_interval_s(), 0);
+  unsetenv("NOTIFY_SOCKET");
+  unsetenv("WATCHDOG_USEC");
+  unsetenv("WATCHDOG_PID");
 }
 
 TEST(SampleStats, Percentiles) {

@@ -77,6 +77,30 @@ out=$(timeout 30 "$bin/headcast-receiver" --config "$tmp/typo.toml" --listen 127
 printf '[server]\nlisten = "127.0.0.1:0"\n' > "$tmp/section.toml"
 out=$(timeout 30 "$bin/headcast-receiver" --config "$tmp/section.toml" --token "$token" --avatar demo="$tmp/demo.hcavatar" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "server" <<<"$out" && ok "an unknown config section is refused" || bad "section (rc $rc): $out"
+# Under systemd (Type=notify, WatchdogSec): READY=1 once listening, then watchdog pings.
+got=$(python3 - "$bin/headcast-receiver" "$tmp" "$token" <<'PY'
+import os, socket, subprocess, sys, time
+exe, tmp, token = sys.argv[1:4]
+path = os.path.join(tmp, "notify.sock")
+s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+s.bind(path)
+s.settimeout(1)
+env = dict(os.environ, NOTIFY_SOCKET=path, WATCHDOG_USEC="1000000")
+p = subprocess.Popen([exe, "--listen", "127.0.0.1:0", "--plaintext", "--token", token, "--avatar",
+                      "demo=" + os.path.join(tmp, "demo.hcavatar"), "--display", "none", "--duration", "30"],
+                     env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+seen, end = [], time.time() + 20
+while time.time() < end and seen.count("WATCHDOG=1") < 2:
+    try:
+        seen.append(s.recv(256).decode())
+    except socket.timeout:
+        pass
+p.terminate()
+p.wait()
+print(" ".join(seen))
+PY
+)
+[[ $got == READY=1*WATCHDOG=1*WATCHDOG=1* ]] && ok "systemd: ready, then watchdog pings" || bad "notify: '$got'"
 printf 'short\n' > "$tmp/short_tokens.txt"
 out=$("$bin/headcast-receiver" --listen 127.0.0.1:0 --plaintext --token-file "$tmp/short_tokens.txt" --avatar demo="$tmp/demo.hcavatar" \
   --display none --duration 1 2>&1); rc=$?
