@@ -78,6 +78,13 @@ class GrpcUplinkConnector final : public UplinkConnector {
         return nullptr;
       }
     }
+    // A channel in back-off fails new calls at once, and gRPC's own retry
+    // timer and ours can miss each other for seconds after the receiver is
+    // back (a restart). Waiting for the channel (a bounded time, so Stop
+    // stays prompt) lets the call start as soon as the connection is up.
+    if (channel_->GetState(/*try_to_connect=*/true) != GRPC_CHANNEL_READY)
+      channel_->WaitForConnected(std::chrono::system_clock::now() +
+                                 std::chrono::milliseconds(static_cast<int>(1000 * options_.reconnect_max_s)));
     return std::make_unique<GrpcUplinkChannel>(*stub_, options_.token);
   }
   std::string Describe() const override { return options_.target; }
