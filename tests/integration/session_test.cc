@@ -432,6 +432,50 @@ TEST(TokenFile, LineEndingsCommentsAndBlanksAreNotTokens) {
   EXPECT_NE(refusal("spaces.txt", "0123456789 abcdef0123\n").find("printable ASCII without blanks"), std::string::npos);
 }
 
+int ProcessThreads() {
+  std::ifstream in("/proc/self/status");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("Threads:", 0) == 0) return std::stoi(line.substr(8));
+  return -1;
+}
+
+TEST(ReceiverServer, StreamsThatNeverSayHelloHoldBoundedThreadsBriefly) {
+  ReceiverServerOptions o = ServerOptions();
+  o.max_sessions = 4;
+  o.hello_timeout_s = 1;
+  ReceiverServer server(o, Avatars());
+  server.Start();
+  const int before = ProcessThreads();
+  auto stub = v1::Headcast::NewStub(
+      grpc::CreateChannel("127.0.0.1:" + std::to_string(server.port()), grpc::InsecureChannelCredentials()));
+  struct Mute {
+    grpc::ClientContext context;
+    std::unique_ptr<grpc::ClientReaderWriter<v1::Uplink, v1::Downlink>> stream;
+  };
+  std::vector<std::unique_ptr<Mute>> mutes(100);
+  for (auto& m : mutes) {
+    m = std::make_unique<Mute>();
+    m->context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    m->stream = stub->Session(&m->context);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  // gRPC's client side adds a few threads of its own; the server may add at most its quota.
+  EXPECT_LT(ProcessThreads() - before, MaxServerThreads(o) + 8);
+  // Every one is refused (thread quota) or closed at the Hello deadline (the
+  // server cancels it), long before the client's own 20 s deadline.
+  const auto start = std::chrono::steady_clock::now();
+  int closed = 0;
+  for (auto& m : mutes) {
+    v1::Downlink d;
+    while (m->stream->Read(&d)) {
+    }
+    closed += !m->stream->Finish().ok();
+  }
+  EXPECT_EQ(closed, 100);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
+  EXPECT_GT(server.counters().hello_timeouts, 0u);
+}
+
 TEST(ReceiverServer, ABusyPortIsRefused) {
   ReceiverServer first(ServerOptions(), Avatars());
   first.Start();
