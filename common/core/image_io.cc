@@ -73,7 +73,7 @@ void VideoWriter::Write(const cv::Mat& frame) {
   if (frame.channels() == 1) cv::cvtColor(frame, bgr, cv::COLOR_GRAY2BGR);
   if (!writer_.isOpened()) {
     size_ = {bgr.cols & ~1, bgr.rows & ~1};  // encoders want even sizes
-    if (!writer_.open(path_, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps_, size_))
+    if (!writer_.open(path_, cv::VideoWriter::fourcc('a', 'v', 'c', '1'), fps_, size_))
       throw std::runtime_error(path_ + ": cannot open video writer (is OpenCV built with FFmpeg?)");
   }
   if (bgr.size() != size_) cv::resize(bgr, bgr, size_, 0, 0, cv::INTER_AREA);

@@ -152,6 +152,17 @@ TEST(VideoIo, WritesAndReadsAnMp4) {
     for (int i = 0; i < 10; ++i) writer.Write(cv::Mat(64, 80, CV_8UC3, cv::Scalar(i * 20, 100, 200)));
     EXPECT_EQ(writer.frames_written(), 10);
   }
+  // H.264 in yuv420p: what browsers, code hosts and call programs play.
+  FILE* probe = popen(
+      ("ffprobe -v error -select_streams v:0 -show_entries stream=codec_name,pix_fmt -of csv=p=0 " + dir + "/v.mp4")
+          .c_str(),
+      "r");
+  ASSERT_NE(probe, nullptr);
+  char line[128] = {};
+  const bool read = fgets(line, sizeof line, probe) != nullptr;
+  pclose(probe);
+  ASSERT_TRUE(read) << "ffprobe said nothing";
+  EXPECT_EQ(std::string(line), "h264,yuv420p\n");
   VideoReader reader(dir + "/v.mp4");
   EXPECT_EQ(reader.size(), cv::Size(80, 64));
   EXPECT_NEAR(reader.fps(), 25, 0.1);
