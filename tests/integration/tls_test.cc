@@ -2,6 +2,8 @@
 // and refusals for a wrong CA or a missing client certificate.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cstdlib>
 
 #include "common/headmodel/builtin_head.h"
@@ -68,6 +70,12 @@ TEST_F(TlsTest, ServerCertificate) {
   EXPECT_FALSE(wrong_ca.WaitStreaming(2));
   wrong_ca.Stop();
   EXPECT_EQ(wrong_ca.counters().connects, 0u);
+  // The transport's reason, not just "cannot reach the receiver".
+  std::string error = wrong_ca.counters().last_error;
+  std::transform(error.begin(), error.end(), error.begin(), [](unsigned char c) { return std::tolower(c); });
+  EXPECT_TRUE(error.find("ssl") != std::string::npos || error.find("certificate") != std::string::npos ||
+              error.find("handshake") != std::string::npos)
+      << wrong_ca.counters().last_error;
 }
 
 TEST_F(TlsTest, ClientCertificatesWhenRequired) {
