@@ -74,12 +74,15 @@ struct RenderLoopStats {
   int idle_ticks = 0;    // ticks with no new parameters
   int refused = 0;       // parameter sets the renderer refused (NaN, out of range)
   double seconds = 0;    // wall time of the loop
-  SampleStats frame_ms;  // render + show per frame
-  SampleStats render_ms, head_model_ms, sample_ms, mlp_ms, composite_ms, upsample_ms, show_ms;
+  // A receiver runs for days: each keeps a bounded random subset of its samples.
+  static constexpr size_t kKept = 100000;
+  SampleStats frame_ms{kKept};  // render + show per frame
+  SampleStats render_ms{kKept}, head_model_ms{kKept}, sample_ms{kKept}, mlp_ms{kKept}, composite_ms{kKept},
+      upsample_ms{kKept}, show_ms{kKept};
   // Glass to glass: shown minus the capture time of what is shown (the jitter
   // buffer interpolates capture times too). Same-host clocks only: values
   // beyond a minute (other hosts' clocks) are left out.
-  SampleStats glass_to_glass_ms;
+  SampleStats glass_to_glass_ms{kKept};
   double fps() const { return seconds > 0 ? rendered / seconds : 0; }
 };
 

@@ -124,8 +124,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   // and loading the landmark model must not make the first frames late.
   LiveTracker tracker(model, f.live);
   auto source = OpenFrameSource(f.input, f.source);
-  clock.Restart();  // the stream's time starts once the tracker is ready
-  SampleStats landmarks_ms, fit_ms, read_ms;
+  clock.Restart();                  // the stream's time starts once the tracker is ready
+  constexpr size_t kKept = 100000;  // a camera session may run for days
+  SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept);
   int read = 0, fitted = 0, skipped = 0;
   uint64_t sequence = 0;
   while (!g_stop && !client.counters().gave_up && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {

@@ -12,6 +12,19 @@ double SteadyNowSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+void SampleStats::Add(double value) {
+  ++seen_;
+  if (max_kept_ == 0 || values_.size() < max_kept_) {
+    values_.push_back(value);
+    return;
+  }
+  random_ ^= random_ << 13;
+  random_ ^= random_ >> 7;
+  random_ ^= random_ << 17;
+  const uint64_t slot = random_ % seen_;  // keep the new sample with probability max_kept / seen
+  if (slot < max_kept_) values_[slot] = value;
+}
+
 double SampleStats::Mean() const {
   if (values_.empty()) return std::numeric_limits<double>::quiet_NaN();
   return std::accumulate(values_.begin(), values_.end(), 0.0) / values_.size();

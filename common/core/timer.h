@@ -2,6 +2,8 @@
 #pragma once
 
 #include <chrono>
+#include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace headcast {
@@ -26,8 +28,12 @@ double SteadyNowSeconds();
 // Samples (e.g. milliseconds per frame) and their summary statistics.
 class SampleStats {
  public:
-  void Add(double value) { values_.push_back(value); }
-  size_t count() const { return values_.size(); }
+  // `max_kept` > 0: a long-running process keeps at most that many samples, a
+  // uniform random subset of all it saw (reservoir sampling), so statistics
+  // stay unbiased and memory stays bounded. 0: every sample is kept.
+  explicit SampleStats(size_t max_kept = 0) : max_kept_(max_kept) {}
+  void Add(double value);
+  size_t count() const { return seen_; }  // samples added, kept or not
   bool empty() const { return values_.empty(); }
   double Mean() const;
   double Min() const;
@@ -35,9 +41,12 @@ class SampleStats {
   // Linear interpolation between order statistics; p in [0, 100]. NaN if empty.
   double Percentile(double p) const;
   double Median() const { return Percentile(50); }
-  const std::vector<double>& values() const { return values_; }
+  const std::vector<double>& values() const { return values_; }  // the samples kept
 
  private:
+  size_t max_kept_ = 0;
+  size_t seen_ = 0;
+  uint64_t random_ = 0x9E3779B97F4A7C15ull;  // xorshift state: the same subset run after run
   std::vector<double> values_;
 };
 

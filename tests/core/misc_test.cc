@@ -103,6 +103,19 @@ TEST(ServiceNotifier, SpeaksSystemdsNotifyProtocol) {
   unsetenv("WATCHDOG_PID");
 }
 
+TEST(SampleStats, ABoundedOneKeepsAnUnbiasedSubset) {
+  SampleStats bounded(1000), all;
+  for (int i = 0; i < 200000; ++i) {
+    bounded.Add(i % 1000);
+    all.Add(i % 1000);
+  }
+  EXPECT_EQ(bounded.values().size(), 1000u);  // memory stays bounded
+  EXPECT_EQ(bounded.count(), 200000u);
+  EXPECT_NEAR(bounded.Median(), all.Median(), 40);  // a uniform subset: the same distribution
+  EXPECT_NEAR(bounded.Percentile(95), all.Percentile(95), 20);
+  EXPECT_NEAR(bounded.Mean(), all.Mean(), 25);
+}
+
 TEST(SampleStats, Percentiles) {
   SampleStats s;
   EXPECT_TRUE(std::isnan(s.Median()));
