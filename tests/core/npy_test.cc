@@ -134,6 +134,17 @@ void ForgeUncompressedSize(const std::string& path, uint32_t size) {
   std::ofstream(path, std::ios::binary) << bytes;
 }
 
+TEST(Files, AFullDiskIsAnErrorAndLeavesTheOldFile) {
+  const std::string dir = testing::TempDir("full");
+  WriteFileAtomically(dir + "/state.json", "old");
+  // The temporary file lands on /dev/full: every write fails with ENOSPC, which
+  // a buffered stream reports only when it is flushed at close.
+  std::filesystem::create_symlink("/dev/full", dir + "/state.json.tmp");
+  const std::string message = MessageOf([&] { WriteFileAtomically(dir + "/state.json", "new"); });
+  EXPECT_NE(message.find("disk full"), std::string::npos) << message;
+  EXPECT_EQ(ReadFileBytes(dir + "/state.json"), "old");
+}
+
 TEST(Npz, CorruptBitsFailTheCrc) {
   const std::string dir = testing::TempDir("crc");
   std::vector<float> values(1000);
