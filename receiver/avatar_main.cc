@@ -11,13 +11,15 @@
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/recording.h"
+#include "receiver/display/display_flags.h"
 #include "receiver/render_loop.h"
 
 namespace headcast {
 namespace {
 
 struct RenderArgs {
-  std::string avatar, head_model = "builtin", params, transfer, display = "window", video, stats_json;
+  std::string avatar, head_model = "builtin", params, transfer, stats_json;
+  DisplayFlags display;
   int synthetic = 0, frames = 0, threads = 1;
   double orbit_deg = 0, fps = 30;
   bool transfer_pose = false, unpaced = false, no_overlay = false;
@@ -77,14 +79,8 @@ int Render(const RenderArgs& a) {
   AvatarRendererOptions renderer_options;
   renderer_options.threads = a.threads;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
-  DisplayOptions display_options;
-  display_options.kind = ParseDisplayKind(a.display);
-  display_options.video_path = a.video;
-  display_options.video_fps = a.fps;
+  DisplayOptions display_options = MakeDisplayOptions(a.display, a.fps, "headcast — " + a.avatar);
   display_options.draw_overlay = !a.no_overlay;
-  display_options.title = "headcast — " + a.avatar;
-  if (display_options.kind == DisplayKind::kVideo && a.video.empty())
-    throw std::invalid_argument("--display video needs --video OUT.mp4");
   auto display = MakeDisplay(display_options);
   RenderLoopOptions loop;
   loop.target_fps = a.fps;
@@ -107,8 +103,9 @@ int Render(const RenderArgs& a) {
                              {"upsample", s.upsample_ms.Median()},
                              {"show", s.show_ms.Median()}}},
                            {"display", display->name()},
-                           {"video", a.video}};
-  std::cout << report.dump(2) << "\n";
+                           {"video", a.display.video}};
+  // Standard output carries the frames when the display is the pipe.
+  (display->name().rfind("pipe", 0) == 0 ? std::cerr : std::cout) << report.dump(2) << "\n";
   if (!a.stats_json.empty()) std::ofstream(a.stats_json) << report.dump(2) << "\n";
   return s.rendered > 0 ? 0 : 1;
 }
@@ -155,8 +152,7 @@ int main(int argc, char** argv) {
   render->add_option("--transfer", r.transfer, "take the expression from this recording (expression transfer)");
   render->add_flag("--transfer-pose", r.transfer_pose, "with --transfer: also take jaw, neck and eye rotations");
   render->add_option("--orbit", r.orbit_deg, "novel views: swing the camera around the head by +-DEG degrees");
-  render->add_option("--display", r.display, "window, offscreen, video, none")->capture_default_str();
-  render->add_option("--video", r.video, "also write what is shown to this MP4");
+  AddDisplayFlags(*render, r.display);
   render->add_option("--fps", r.fps, "target frame rate")->capture_default_str();
   render->add_flag("--unpaced", r.unpaced, "render every frame as fast as possible (offline export)");
   render->add_flag("--no-overlay", r.no_overlay, "do not draw fps/latency text");

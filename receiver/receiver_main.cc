@@ -17,6 +17,7 @@
 #include "common/headmodel/head_model_io.h"
 #include "proto/protocol.h"
 #include "proto/recording.h"
+#include "receiver/display/display_flags.h"
 #include "receiver/render_loop.h"
 #include "receiver/session_server.h"
 
@@ -26,7 +27,8 @@ namespace {
 std::atomic<bool> g_stop{false};
 
 struct ReceiverFlags {
-  std::string log_level, head_model_spec = "builtin", display = "window", video, record, stats_json, token_file;
+  std::string log_level, head_model_spec = "builtin", record, stats_json, token_file;
+  DisplayFlags display;
   std::string show = "first";
   std::string latency_csv, display_csv;
   std::vector<std::string> avatars, tokens;
@@ -58,11 +60,13 @@ void AddFlags(CLI::App& app, ReceiverFlags& f) {
       ->capture_default_str();
   app.add_option("--idle-timeout", s.idle_timeout_s, "end sessions that sent nothing this long, s (0: never)")
       ->capture_default_str();
+  app.add_option("--evict-silent", s.evict_silent_s,
+                 "when full, a new sender displaces the longest-silent session if silent this long, s (0: never)")
+      ->capture_default_str();
   app.add_option("--head-model", f.head_model_spec, "head model of the avatars: builtin or .npz")
       ->capture_default_str();
   app.add_option("--avatar", f.avatars, "ID=PATH.hcavatar (repeatable); senders name the ID")->required();
-  app.add_option("--display", f.display, "window, offscreen, video, none")->capture_default_str();
-  app.add_option("--video", f.video, "also write what is shown to this MP4");
+  AddDisplayFlags(app, f.display);
   app.add_option("--record", f.record, "record the first session's received parameters (.hcrec)");
   app.add_option("--render-fps", f.render_fps, "display rate")->capture_default_str();
   app.add_option("--threads", f.threads, "libtorch threads")->capture_default_str();
@@ -123,6 +127,7 @@ nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
           {"sessions_rejected", c.sessions_rejected},
           {"hello_timeouts", c.hello_timeouts},
           {"idle_timeouts", c.idle_timeouts},
+          {"evictions", c.evictions},
           {"frames_received", c.frames_received},
           {"frames_bad", c.frames_bad},
           {"payload_bytes_received", c.bytes_received}};
@@ -158,12 +163,7 @@ int Run(ReceiverFlags& f) {
   const ServiceNotifier service;
   service.Notify("READY=1");
   Stopwatch since_ping;
-  DisplayOptions display_options;
-  display_options.kind = ParseDisplayKind(f.display);
-  display_options.video_path = f.video;
-  display_options.video_fps = f.render_fps;
-  display_options.title = "headcast receiver";
-  auto display = MakeDisplay(display_options);
+  auto display = MakeDisplay(MakeDisplayOptions(f.display, f.render_fps, "headcast receiver"));
   RenderLoopOptions loop;
   loop.target_fps = f.render_fps;
   loop.max_seconds = f.duration;
@@ -197,7 +197,8 @@ int Run(ReceiverFlags& f) {
   taps.Close();
   nlohmann::json report = Report(stats, server.counters());
   report["shown_senders"] = shown_senders;
-  std::cout << report.dump(2) << "\n";
+  // Standard output carries the frames when the display is the pipe.
+  (display->name().rfind("pipe", 0) == 0 ? std::cerr : std::cout) << report.dump(2) << "\n";
   if (!f.stats_json.empty()) std::ofstream(f.stats_json) << report.dump(2) << "\n";
   return 0;
 }

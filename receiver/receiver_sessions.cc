@@ -24,6 +24,7 @@ void ReceiverSessionOptions::Check() const {
   c.InRange("target_delay_s", target_delay_s, 0, 10).InRange("stats_interval_s", stats_interval_s, 0.05, 3600);
   c.That(!tokens.empty() || allow_no_token, "bearer tokens are required (or allow_no_token)");
   c.InRange("hello_timeout_s", hello_timeout_s, 0.05, 600).InRange("idle_timeout_s", idle_timeout_s, 0, 86400);
+  c.InRange("evict_silent_s", evict_silent_s, 0, 86400);
   c.ThrowIfErrors();
 }
 
@@ -82,7 +83,8 @@ struct ReceiverSessions::Session {
   std::mutex latency_mutex;
   SampleStats latency_ms;  // capture -> arrival, this stats interval
   std::atomic<double> last_message_s{0};
-  std::atomic<bool> idle_ended{false};  // the watchdog cancelled the stream
+  std::atomic<bool> idle_ended{false};  // the watchdog cancelled the stream, or a new sender displaced it
+  bool displaced = false;               // the latter (under the sessions' mutex)
 
   bool Write(const v1::Downlink& d) {
     std::lock_guard<std::mutex> lock(write_mutex);
@@ -250,6 +252,22 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     busy = static_cast<int>(sessions_.size()) >= options_.max_sessions;
+    if (busy && options_.evict_silent_s > 0) {
+      // The longest-silent session leaves the display and the count now; its
+      // own Serve sees the cancelled stream, says why and cleans up.
+      Session* silent = nullptr;
+      for (auto& [id, s] : live_)
+        if (sessions_.count(id) && !s->idle_ended && (!silent || s->last_message_s < silent->last_message_s))
+          silent = s;
+      if (silent && Now() - silent->last_message_s >= options_.evict_silent_s) {
+        silent->idle_ended = true;
+        silent->displaced = true;
+        silent->channel.Cancel();
+        sessions_.erase(silent->view.id);
+        ++counters_.evictions;
+        busy = false;
+      }
+    }
     if (!busy) {
       view.id = "s" + std::to_string(next_id_++);
       view.avatar_id = hello.avatar_id();
@@ -279,8 +297,14 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
     session.SendError(end.message);
   }
   if (session.idle_ended) {
-    end = {SessionEndCode::kDeadlineExceeded,
-           "nothing received for " + std::to_string(static_cast<int>(options_.idle_timeout_s)) + " s"};
+    bool displaced = false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      displaced = session.displaced;
+    }
+    end = {SessionEndCode::kDeadlineExceeded, "nothing received for " +
+                                                  std::to_string(static_cast<int>(Now() - session.last_message_s)) +
+                                                  " s" + (displaced ? "; the slot went to a new sender" : "")};
     spdlog::info("session {} ended: {}", view.id, end.message);
   }
   {

@@ -35,6 +35,10 @@ struct ReceiverSessionOptions {
   // A session that sends nothing (no frames, no Bye) this long is ended: a
   // stopped or vanished sender must not hold a slot. 0: never.
   double idle_timeout_s = 30;
+  // When every slot is taken, a new sender displaces the session that has
+  // been silent longest, if that one has sent nothing for this long: a
+  // real sender does not wait out the idle timeout behind stopped ones. 0: never.
+  double evict_silent_s = 5;
   void Check() const;
 };
 
@@ -68,7 +72,7 @@ std::vector<SessionView> DisplayOrder(std::vector<SessionView> sessions, const S
 
 struct ServerCounters {
   uint64_t sessions_started = 0, sessions_rejected = 0, frames_received = 0, frames_bad = 0, bytes_received = 0;
-  uint64_t hello_timeouts = 0, idle_timeouts = 0;
+  uint64_t hello_timeouts = 0, idle_timeouts = 0, evictions = 0;
 };
 
 // How a session ended, for the transport to pass on (gRPC: the call's status).

@@ -127,6 +127,7 @@ RenderLoopStats RunRenderLoop(const AvatarPicker& pick, FrameParamsSource& sourc
       }
     } else if (!finished) {
       ++stats.idle_ticks;
+      if (!display.Idle()) break;  // the output is gone (a closed pipe)
     }
     if (finished) break;
     if (!options.paced) continue;

@@ -1,6 +1,8 @@
 // Display factory, overlay, and the video/none displays.
 #include "receiver/display/display.h"
 
+#include <spdlog/spdlog.h>
+
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -9,6 +11,7 @@
 #include "common/core/options.h"
 #include "receiver/display/glfw_display.h"
 #include "receiver/display/osmesa_display.h"
+#include "receiver/display/stream_display.h"
 
 namespace headcast {
 
@@ -37,15 +40,23 @@ void DisplayOptions::Check() const {
   OptionsCheck c("DisplayOptions");
   c.NonNegative("width", width).NonNegative("height", height).Positive("video_fps", video_fps);
   c.That(kind != DisplayKind::kVideo || !video_path.empty(), "the video display needs video_path");
+  c.That(kind != DisplayKind::kV4l2 || !device.empty(), "the v4l2 display needs a device (v4l2:/dev/videoN)");
+  c.InRange("output_width", output_width, 16, 7680).InRange("output_height", output_height, 16, 4320);
   c.ThrowIfErrors();
 }
 
-DisplayKind ParseDisplayKind(const std::string& name) {
+DisplayKind ParseDisplayKind(const std::string& name, std::string* device) {
   if (name == "window") return DisplayKind::kWindow;
   if (name == "offscreen") return DisplayKind::kOffscreen;
   if (name == "video") return DisplayKind::kVideo;
   if (name == "none") return DisplayKind::kNone;
-  throw std::invalid_argument("unknown display '" + name + "' (window, offscreen, video, none)");
+  if (name == "pipe") return DisplayKind::kPipe;
+  if (name.rfind("v4l2:", 0) == 0 && name.size() > 5) {
+    if (device) *device = name.substr(5);
+    return DisplayKind::kV4l2;
+  }
+  throw std::invalid_argument("unknown display '" + name +
+                              "' (window, offscreen, video, none, pipe, v4l2:/dev/videoN)");
 }
 
 namespace {
@@ -70,13 +81,16 @@ class FramedDisplay : public Display {
       shown = &framed_;
     }
     if (video_) video_->Write(*shown);
-    return inner_->Show(*shown, overlay);
+    // A camera or pipe carries the clean picture: it is someone's face in a call.
+    return inner_->Show(streams_ ? image : *shown, overlay);
   }
+  bool Idle() override { return inner_->Idle(); }
   std::string name() const override { return inner_->name() + (video_ ? "+video" : ""); }
 
  private:
   std::unique_ptr<Display> inner_;
   DisplayOptions options_;
+  bool streams_ = options_.kind == DisplayKind::kV4l2 || options_.kind == DisplayKind::kPipe;
   std::unique_ptr<VideoWriter> video_;
   cv::Mat framed_;
 };
@@ -97,6 +111,32 @@ std::unique_ptr<Display> MakeDisplay(const DisplayOptions& options) {
     case DisplayKind::kNone:
       inner = std::make_unique<NoDisplay>();
       break;
+    case DisplayKind::kV4l2: {
+      V4l2OutputRequest request;
+      request.size = {options.output_width, options.output_height};
+      request.pixel_format = options.output_format;
+      request.fps = options.video_fps;
+      auto device = OpenV4l2OutputDevice(options.device);
+      const V4l2OutputFormat format = NegotiateV4l2Output(*device, request);
+      StreamDisplayOptions s;
+      s.size = format.size;
+      s.format = format.format;
+      s.background = options.background;
+      auto sink = std::make_unique<V4l2Sink>(std::move(device), format);
+      spdlog::info("virtual camera: {}", sink->Describe());
+      inner = std::make_unique<StreamDisplay>(std::move(sink), s, "v4l2");
+      break;
+    }
+    case DisplayKind::kPipe: {
+      StreamDisplayOptions s;
+      s.size = {options.output_width, options.output_height};
+      s.format = ParseRawPixelFormat(options.output_format == "auto" ? "bgr24" : options.output_format);
+      s.background = options.background;
+      spdlog::info("raw frames on standard output: {} {}x{} at {} fps", FfmpegPixelFormatName(s.format), s.size.width,
+                   s.size.height, options.video_fps);
+      inner = std::make_unique<StreamDisplay>(std::make_unique<PipeSink>(1), s, "pipe");
+      break;
+    }
   }
   return std::make_unique<FramedDisplay>(std::move(inner), options);
 }

@@ -251,6 +251,58 @@ TEST(SessionProtocol, StreamsWithoutHelloAndSilentSessionsAreClosed) {
   c.client->Stop();
 }
 
+TEST(SessionProtocol, AFullReceiverLetsANewSenderDisplaceASilentSession) {
+  ReceiverSessionOptions o = ReceiverOptions();
+  o.max_sessions = 1;
+  o.idle_timeout_s = 0;  // only the displacement may end the silent session
+  o.evict_silent_s = 0.3;
+  ReceiverSessions receiver(o, Avatars());
+  // An authenticated session that says Hello, then nothing, holds the only slot.
+  InMemoryChannelPair silent = MakeInMemoryChannelPair("secret-token");
+  SessionEnd silent_end;
+  std::thread silent_serve([&] { silent_end = receiver.Serve(*silent.receiver); });
+  v1::Uplink hello;
+  hello.mutable_hello()->set_protocol_version(kProtocolVersion);
+  hello.mutable_hello()->set_avatar_id("demo");
+  ToProto(Layout(), 30, hello.mutable_hello()->mutable_layout());
+  ASSERT_TRUE(silent.sender->Write(hello));
+  ASSERT_TRUE(WaitFor([&] { return receiver.Sessions().size() == 1; }, 5));
+  // A sender arriving before the silence is long enough is refused BUSY...
+  Client early(receiver, "secret-token");
+  early.client->Start();
+  EXPECT_TRUE(WaitFor([&] { return early.client->counters().rejections >= 1; }, 5));
+  early.client->Stop();
+  EXPECT_EQ(receiver.counters().evictions, 0u);
+  // ...one arriving after it takes the slot, and the silent session is told why it ended.
+  std::this_thread::sleep_for(std::chrono::milliseconds(400));
+  Client real(receiver, "secret-token");
+  real.client->Start();
+  ASSERT_TRUE(real.client->WaitStreaming(5));
+  silent_serve.join();
+  EXPECT_EQ(silent_end.code, SessionEndCode::kDeadlineExceeded) << silent_end.message;
+  EXPECT_NE(silent_end.message.find("new sender"), std::string::npos) << silent_end.message;
+  EXPECT_EQ(receiver.counters().evictions, 1u);
+  EXPECT_EQ(receiver.counters().idle_timeouts, 0u);
+  real.client->Submit(SyntheticTalkingHead(Model(), 0));
+  EXPECT_TRUE(WaitFor([&] { return real.client->counters().sent == 1; }, 5));
+  const auto shown = receiver.Sessions();
+  ASSERT_EQ(shown.size(), 1u);
+  EXPECT_NE(shown[0].id, "s1");
+  // A streaming session is never displaced: the next sender is refused.
+  Client late(receiver, "secret-token");
+  late.client->Start();
+  int frame = 1;
+  EXPECT_TRUE(WaitFor(
+      [&] {
+        real.client->Submit(SyntheticTalkingHead(Model(), frame++));  // keeps streaming meanwhile
+        return late.client->counters().rejections >= 1;
+      },
+      5));
+  late.client->Stop();
+  EXPECT_EQ(receiver.counters().evictions, 1u);
+  real.client->Stop();
+}
+
 TEST(SessionProtocol, ABrokenLinkIsReconnected) {
   ReceiverSessions receiver(ReceiverOptions(), Avatars());
   Client c(receiver, "secret-token");

@@ -22,4 +22,18 @@ out=$("$bin" render "$tmp/a.hcavatar" --params "$tmp/g.hcrec" --display none 2>&
 [ $rc -ne 0 ] && grep -q "not a headcast parameter recording" <<<"$out" && ok "foreign recording refused" || bad "foreign rec: $out"
 out=$("$bin" render "$tmp/a.hcavatar" --display hologram 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "unknown display" <<<"$out" && ok "unknown display refused" || bad "display: $out"
+# Raw frames on stdout for ffmpeg: whole frames of the asked size, the report on stderr.
+"$bin" render "$tmp/a.hcavatar" --params "$tmp/p.hcrec" --display pipe --output-size 320x240 --background green \
+  --unpaced > "$tmp/raw.bin" 2> "$tmp/pipe.log"
+[ "$(stat -c %s "$tmp/raw.bin")" -eq $((320 * 240 * 3 * 20)) ] && grep -q '"rendered": 20' "$tmp/pipe.log" &&
+  ok "pipe: 20 bgr24 frames of 320x240 on stdout" || bad "pipe: $(stat -c %s "$tmp/raw.bin") bytes; $(tail -3 "$tmp/pipe.log")"
+if command -v ffmpeg >/dev/null; then
+  ffmpeg -loglevel error -y -f rawvideo -pix_fmt bgr24 -video_size 320x240 -framerate 30 -i "$tmp/raw.bin" \
+    -c:v libx264 -pix_fmt yuv420p "$tmp/pipe.mp4" && [ -s "$tmp/pipe.mp4" ] &&
+    ok "the documented ffmpeg command takes the pipe's frames" || bad "ffmpeg on the pipe's frames"
+fi
+out=$("$bin" render "$tmp/a.hcavatar" --display pipe --output-size 641x480 2>&1 >/dev/null); rc=$?
+[ $rc -ne 0 ] && grep -q "output-size" <<<"$out" && ok "odd output size refused" || bad "output size: $out"
+out=$("$bin" render "$tmp/a.hcavatar" --display v4l2:/dev/headcast-none 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "v4l2loopback" <<<"$out" && ok "missing virtual camera refused with the set-up hint" || bad "v4l2: $out"
 checks_summary "avatar cli"

@@ -32,8 +32,12 @@ class FakeDisplay : public Display {
     if (delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
     return quit_after <= 0 || shown < quit_after;
   }
+  bool Idle() override {
+    ++idled;
+    return idle_quit_after <= 0 || idled < idle_quit_after;
+  }
   std::string name() const override { return "fake"; }
-  int shown = 0, quit_after = 0, delay_ms = 0, size = 128;
+  int shown = 0, quit_after = 0, delay_ms = 0, size = 128, idled = 0, idle_quit_after = 0;
   std::vector<int> first_pixel;  // the blue value at (0, 0) of every frame shown
 };
 
@@ -98,6 +102,27 @@ TEST_F(RenderLoopTest, PacedTakesAboutTheRecordingsDuration) {
   EXPECT_LT(s.seconds, 3.0);  // generous: CI machines are shared
   EXPECT_GT(s.rendered, 10);
   EXPECT_LE(s.rendered, 30);
+}
+
+TEST_F(RenderLoopTest, TicksWithoutNewFramesReachTheDisplayAndItMayEndTheLoop) {
+  // Three frames half a second apart at 30 ticks a second: most ticks have nothing new.
+  std::vector<FrameParams> sparse = {frames_[0], frames_[1], frames_[2]};
+  for (int i = 0; i < 3; ++i) sparse[i].capture_time_s = 0.5 * i;
+  {
+    SequenceSource source(sparse, /*paced=*/true);
+    FakeDisplay display;
+    const RenderLoopStats s = RunRenderLoop(*renderer_, source, display, RenderLoopOptions());
+    EXPECT_EQ(display.shown, 3);
+    EXPECT_GT(s.idle_ticks, 10);
+    EXPECT_EQ(display.idled, s.idle_ticks);  // a virtual camera writes a frame at each of them
+  }
+  SequenceSource source(sparse, /*paced=*/true);
+  FakeDisplay display;
+  display.idle_quit_after = 5;  // the output went away (a closed pipe)
+  const RenderLoopStats s = RunRenderLoop(*renderer_, source, display, RenderLoopOptions());
+  EXPECT_EQ(display.idled, 5);
+  EXPECT_EQ(display.shown, 1);
+  EXPECT_LT(s.seconds, 0.45);
 }
 
 TEST_F(RenderLoopTest, SlowDisplaySkipsTicksInsteadOfLagging) {
