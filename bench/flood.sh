@@ -40,7 +40,7 @@ out, command = sys.argv[1], sys.argv[2]
 f = json.load(open(os.path.join(out, "flood.json")))
 r = json.load(open(os.path.join(out, "receiver.json")))
 f["command"] = command
-f["receiver"] = {k: r.get(k) for k in ("sessions_started", "sessions_rejected", "hello_timeouts", "idle_timeouts",
+f["receiver"] = {k: r.get(k) for k in ("sessions_started", "sessions_rejected", "hello_timeouts", "idle_timeouts", "evictions",
                                       "shown_senders", "rendered")}
 json.dump(f, open(os.path.join(out, "flood_report.json"), "w"), indent=2)
 print(json.dumps(f, indent=2))
