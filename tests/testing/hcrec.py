@@ -1,9 +1,14 @@
 """Python access to headcast's files for test scripts: the generated proto
 module (protoc at run time, python3-protobuf) and .hcrec parameter recordings
 (8-byte magic, then a length-delimited RecordingHeader and FrameParams)."""
+import os
 import subprocess
 import sys
 import tempfile
+
+# The varint reader of the project's own Python module (python/headcast_files.py).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "python"))
+from headcast_files import _varint as read_varint  # noqa: E402
 
 
 def load_proto(proto_dir):
@@ -14,17 +19,6 @@ def load_proto(proto_dir):
     import headcast_pb2  # noqa: E402
 
     return headcast_pb2
-
-
-def read_varint(data, pos):
-    shift = value = 0
-    while True:
-        b = data[pos]
-        pos += 1
-        value |= (b & 0x7F) << shift
-        if not b & 0x80:
-            return value, pos
-        shift += 7
 
 
 def read_recording(path, pb):
