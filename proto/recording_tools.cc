@@ -190,6 +190,109 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
   WriteOrThrow(out, out_path);
 }
 
+namespace {
+
+RecordingInfo HeaderFromJson(const nlohmann::json& h) {
+  RecordingInfo info;
+  info.head_model_name = h.at("head_model_name").get<std::string>();
+  info.head_model_fingerprint = h.at("head_model_fingerprint").get<std::string>();
+  info.num_expression = h.at("num_expression").get<int>();
+  info.fps = h.at("fps").get<double>();
+  info.source = h.at("source").get<std::string>();
+  if (info.num_expression < 0 || info.num_expression > 4096 || !(info.fps > 0 && info.fps < 1e4))
+    throw std::invalid_argument("num_expression or fps out of range");
+  const nlohmann::json& s = h.at("subject");
+  const auto shape = s.at("shape").get<std::vector<float>>(), texture = s.at("texture").get<std::vector<float>>();
+  const auto light = s.at("light").get<std::vector<float>>();
+  if (light.size() != 27) throw std::invalid_argument("subject.light must have 27 values");
+  info.subject.shape = Eigen::Map<const Eigen::VectorXf>(shape.data(), static_cast<Eigen::Index>(shape.size()));
+  info.subject.texture = Eigen::Map<const Eigen::VectorXf>(texture.data(), static_cast<Eigen::Index>(texture.size()));
+  std::copy(light.begin(), light.end(), info.subject.light.begin());
+  info.subject.intrinsics = CameraFromJson(s.at("intrinsics"));
+  return info;
+}
+
+Eigen::Vector3f Vec3From(const nlohmann::json& j, const char* name) {
+  const auto v = j.at(name).get<std::vector<float>>();
+  if (v.size() != 3) throw std::invalid_argument(std::string(name) + " must have 3 values");
+  return {v[0], v[1], v[2]};
+}
+
+template <typename T>
+const T* Column(const NpzArchive& npz, const std::string& name, std::vector<int64_t> shape) {
+  const auto it = npz.find(name);
+  if (it == npz.end()) throw std::invalid_argument("no array '" + name + "'");
+  if (it->second.shape() != shape) throw std::invalid_argument("array '" + name + "' has another shape");
+  return it->second.data<T>();
+}
+
+}  // namespace
+
+LoadedRecording ImportRecording(const std::string& path) {
+  LoadedRecording r;
+  r.path = path;
+  const bool npz = path.size() > 4 && path.compare(path.size() - 4, 4, ".npz") == 0;
+  try {
+    if (npz) {
+      const NpzArchive a = ReadNpz(path);
+      const auto header = a.find("header_json");
+      if (header == a.end()) throw std::invalid_argument("no array 'header_json' (not a headcast-rec export)");
+      const std::vector<std::string> text = NpyToStrings(header->second);
+      if (text.size() != 1) throw std::invalid_argument("header_json must hold one text");
+      r.info = HeaderFromJson(nlohmann::json::parse(text[0]));
+      const auto times_it = a.find("capture_time_s");
+      if (times_it == a.end() || times_it->second.shape().size() != 1)
+        throw std::invalid_argument("no one-dimensional array 'capture_time_s'");
+      const int64_t n = times_it->second.shape()[0], e = r.info.num_expression;
+      const double* times = Column<double>(a, "capture_time_s", {n});
+      const int64_t* sequence = Column<int64_t>(a, "sequence", {n});
+      const float* confidence = Column<float>(a, "confidence", {n});
+      const float* expression = Column<float>(a, "expression", {n, e});
+      r.frames.resize(static_cast<size_t>(n));
+      for (const Group& g : kGroups) {
+        const float* v = Column<float>(a, g.name, {n, 3});
+        for (int64_t k = 0; k < n; ++k) r.frames[k].*g.member = Eigen::Vector3f(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+      }
+      for (int64_t k = 0; k < n; ++k) {
+        FrameParams& f = r.frames[k];
+        f.expression = Eigen::Map<const Eigen::VectorXf>(expression + k * e, e);
+        f.capture_time_s = times[k];
+        if (sequence[k] < 0) throw std::invalid_argument("a negative sequence number");
+        f.sequence = static_cast<uint64_t>(sequence[k]);
+        f.confidence = confidence[k];
+      }
+    } else {
+      std::ifstream in(path);
+      if (!in) throw std::runtime_error("cannot open");
+      const nlohmann::json j = nlohmann::json::parse(in);
+      r.info = HeaderFromJson(j.at("header"));
+      for (const auto& fj : j.at("frames")) {
+        FrameParams f;
+        const auto expr = fj.at("expression").get<std::vector<float>>();
+        if (static_cast<int>(expr.size()) != r.info.num_expression)
+          throw std::invalid_argument("frame " + std::to_string(r.frames.size()) + ": " + std::to_string(expr.size()) +
+                                      " expression values, the header says " + std::to_string(r.info.num_expression));
+        f.expression = Eigen::Map<const Eigen::VectorXf>(expr.data(), static_cast<Eigen::Index>(expr.size()));
+        for (const Group& g : kGroups) f.*g.member = Vec3From(fj, g.name);
+        f.capture_time_s = fj.at("capture_time_s").get<double>();
+        f.sequence = fj.at("sequence").get<uint64_t>();
+        f.confidence = fj.at("confidence").get<float>();
+        r.frames.push_back(std::move(f));
+      }
+    }
+    for (size_t k = 0; k < r.frames.size(); ++k) {
+      const FrameParams& f = r.frames[k];
+      bool finite = std::isfinite(f.capture_time_s) && std::isfinite(f.confidence) && f.expression.allFinite();
+      for (const Group& g : kGroups) finite = finite && (f.*g.member).allFinite();
+      if (!finite) throw std::invalid_argument("frame " + std::to_string(k) + " has a value that is not finite");
+    }
+    if (r.frames.empty()) throw std::invalid_argument("no frames");
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot import: " + e.what());
+  }
+  return r;
+}
+
 std::vector<FrameParams> CutByTime(const std::vector<FrameParams>& frames, double from_s, double to_s) {
   if (!std::isfinite(from_s) || from_s < 0 || !std::isfinite(to_s) || (to_s >= 0 && to_s <= from_s))
     throw std::invalid_argument("the time range must satisfy 0 <= from < to (seconds from the first frame)");

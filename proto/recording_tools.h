@@ -36,6 +36,11 @@ ExportFormat ParseExportFormat(const std::string& name);
 // Throws naming the file.
 void ExportRecording(const LoadedRecording& recording, ExportFormat format, const std::string& out_path);
 
+// The reverse of a json or npz export (by the file's extension): a
+// recording again, value for value. Throws naming the file and the field
+// for anything missing, mis-sized or not finite.
+LoadedRecording ImportRecording(const std::string& path);
+
 // Frames whose time since the first frame lies in [from_s, to_s) (to_s < 0:
 // to the end). Throws std::invalid_argument for an empty or inverted range.
 std::vector<FrameParams> CutByTime(const std::vector<FrameParams>& frames, double from_s, double to_s);

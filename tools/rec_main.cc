@@ -1,5 +1,5 @@
 // headcast-rec: parameter recordings (.hcrec) for other tools — summary,
-// exports to JSON, CSV and npz, cutting and joining.
+// exports to JSON, CSV and npz and back, cutting and joining.
 #include <CLI/CLI.hpp>
 #include <iostream>
 
@@ -22,6 +22,10 @@ int main(int argc, char** argv) {
   exp->add_option("recording", in, ".hcrec file")->required();
   exp->add_option("--format", format, "json, csv or npz")->capture_default_str();
   exp->add_option("--out", out, "output file")->required();
+
+  auto* imp = app.add_subcommand("import", "a json or npz export back to a recording, value for value");
+  imp->add_option("export", in, "file written by export (json or npz)")->required();
+  imp->add_option("--out", out, "output .hcrec")->required();
 
   double from_s = 0, to_s = -1;
   long first = -1, count = -1;
@@ -46,6 +50,10 @@ int main(int argc, char** argv) {
       const LoadedRecording r = LoadRecording(in);
       ExportRecording(r, ParseExportFormat(format), out);
       spdlog::info("wrote {} ({} frames, {})", out, r.frames.size(), format);
+    } else if (imp->parsed()) {
+      const LoadedRecording r = ImportRecording(in);
+      WriteRecording(out, r.info, r.frames);
+      spdlog::info("wrote {} ({} frames)", out, r.frames.size());
     } else if (cut->parsed()) {
       const LoadedRecording r = LoadRecording(in);
       const std::vector<FrameParams> frames =

@@ -16,6 +16,17 @@ py=/usr/bin/python3
 for f in json csv npz; do
   "$rec" export "$tmp/p.hcrec" --format $f --out "$tmp/p.$f" 2>/dev/null && [ -s "$tmp/p.$f" ] && ok "export $f" || bad "export $f"
 done
+# export -> import -> export: the same parameters, value for value.
+for f in json npz; do
+  "$rec" import "$tmp/p.$f" --out "$tmp/back_$f.hcrec" 2>/dev/null &&
+    "$rec" export "$tmp/back_$f.hcrec" --format json --out "$tmp/back_$f.json" 2>/dev/null &&
+    cmp -s "$tmp/p.json" "$tmp/back_$f.json" && ok "round trip through $f: identical parameters" || bad "round trip $f"
+done
+out=$("$rec" import "$tmp/p.csv" --out "$tmp/x.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "cannot import" <<<"$out" && ok "a csv (not an import format) refused" || bad "import csv: $out"
+sed 's/"fps": 30/"fps": -1/' "$tmp/p.json" > "$tmp/bad.json"
+out=$("$rec" import "$tmp/bad.json" --out "$tmp/x.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "bad.json: cannot import" <<<"$out" && ok "a damaged export refused, naming the file" || bad "bad json: $out"
 [ "$(grep -vc '^#' "$tmp/p.csv")" -eq 41 ] && ok "csv: a header row and 40 frames" || bad "csv rows"
 "$rec" cut "$tmp/p.hcrec" --first-frame 10 --frames 15 --out "$tmp/c.hcrec" 2>/dev/null &&
   "$rec" info "$tmp/c.hcrec" | grep -q '"frames": 15' && ok "cut by frames" || bad "cut by frames"
