@@ -6,7 +6,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "common/core/program.h"
+#include "common/core/camera.h"
 
 namespace headcast {
 
@@ -43,10 +43,8 @@ size_t RawFrameBytes(RawPixelFormat format, int width, int height) {
 }
 
 cv::Size ParseOutputSize(const std::string& text) {
-  const size_t x = text.find('x');
-  if (x == std::string::npos) throw std::invalid_argument("--output-size wants WIDTHxHEIGHT (got '" + text + "')");
-  const int w = ParseNumber<int>(text.substr(0, x), "--output-size width");
-  const int h = ParseNumber<int>(text.substr(x + 1), "--output-size height");
+  int w = 0, h = 0;
+  ParseSize(text, "--output-size", &w, &h);
   if (w < 16 || w > 7680 || h < 16 || h > 4320 || w % 2 || h % 2)
     throw std::invalid_argument("--output-size " + text + ": sides must be even, 16..7680 by 16..4320");
   return {w, h};
