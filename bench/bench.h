@@ -19,7 +19,10 @@ struct BenchOptions {
   std::string avatar;                  // codec: measure the PSNR the codec costs with this avatar
   std::string video;                   // track: the video to track
   std::string head_model = "builtin";  // track, train: head model (builtin or .npz)
-  std::string dataset;                 // train: a prepared dataset for the fine-tune figure
+  std::string dataset;                 // train: a prepared dataset for the fine-tune figure; codec: its test split
+  std::string recording;               // codec: a recording instead of the synthetic sequence
+  int key_interval = 30;               // codec: key-frame interval
+  double codec_error_m = 2e-4;         // codec: the quantisation's vertex error per step
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.

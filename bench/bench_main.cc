@@ -67,8 +67,21 @@ int main(int argc, char** argv) {
   train->add_option("--head-model", options.head_model, "builtin or a model .npz");
   train->add_option("--data", options.dataset, "a prepared dataset (headcast-train prep) for the fine-tune figure");
   train->add_option("--json", options.json_path, "write the results to this JSON file");
+  codec->add_option("--recording", options.recording,
+                    "a parameter recording (.hcrec) instead of the synthetic sequence");
+  codec->add_option("--head-model", options.head_model, "builtin or the model .npz the recording was made with");
   codec->add_option("--avatar", options.avatar,
-                    "an .hcavatar for the built-in head: also report the PSNR the codec costs");
+                    "an .hcavatar of that head model: also report the PSNR the codec costs");
+  codec->add_option("--data", options.dataset,
+                    "a prepared dataset (headcast-train prep) of the avatar's person: the cost on its held-out frames");
+  codec->add_option("--resolution", options.resolution, "the dataset's crops to use")
+      ->check(CLI::IsMember({128, 256, 512}));
+  codec->add_option("--key-interval", options.key_interval, "a key frame at least this often, frames")
+      ->check(CLI::Range(1, 100000));
+  codec
+      ->add_option("--quantisation-error", options.codec_error_m,
+                   "quantisation: one step of a value moves no vertex more than this, metres")
+      ->check(CLI::Range(1e-6, 1e-2));
   quality->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   quality->add_option("--iterations", options.repeats, "training steps per variant (batch 4)");
   render->add_option("--resolution", options.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));

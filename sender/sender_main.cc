@@ -74,6 +74,9 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_option("--quantisation-error", f.error_m, "largest vertex error one quantisation step may cause, metres")
       ->capture_default_str();
   app.add_option("--max-batch", o.max_batch, "frames per message at most")->capture_default_str();
+  app.add_flag("--freshest", o.freshest_only,
+               "narrow links: each message carries only the newest frame, the receiver interpolates (lower latency, "
+               "fewer parameter updates)");
   app.add_option("--min-send-interval", o.min_send_interval_s, "seconds between messages at least (narrow links)")
       ->capture_default_str();
   app.add_option("--max-kbps", o.max_kbps, "link budget on the wire, kbit/s (0: none); adapted down on backlog")

@@ -184,11 +184,22 @@ struct SenderClient::Impl {
           std::this_thread::sleep_for(std::chrono::duration<double>(-tokens / (budget * 125.0)));
         }
       }
+      if (options.freshest_only) {
+        uint64_t skipped = 0;
+        while (auto newer = queue.TryPop()) {
+          first = std::move(newer);
+          ++skipped;
+        }
+        if (skipped) {
+          std::lock_guard<std::mutex> lock(mutex);
+          counters.dropped += skipped;
+        }
+      }
       if (!origin) origin = first->capture_time_s;
       const double first_capture = first->capture_time_s;
       std::vector<std::string> packets;
       packets.push_back(encoder.Encode(*first, *origin));
-      while (static_cast<int>(packets.size()) < options.max_batch) {
+      while (!options.freshest_only && static_cast<int>(packets.size()) < options.max_batch) {
         auto more = queue.TryPop();
         if (!more) break;
         packets.push_back(encoder.Encode(*more, *origin));

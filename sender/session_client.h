@@ -28,7 +28,12 @@ struct SenderOptions {
   double fps = 30;                              // capture rate, for the layout
   int queue_frames = 16;                        // frames waiting at most; older ones are dropped
   int max_batch = 16;                           // frames per message at most
-  double min_send_interval_s = 0;               // wait at least this long between messages (narrow links)
+  // Each message carries only the newest frame; those that waited behind it
+  // are dropped (the receiver interpolates between what arrives). On a link
+  // too narrow for every frame this trades parameter rate for latency: a
+  // frame waits for the link, never for a batch to fill.
+  bool freshest_only = false;
+  double min_send_interval_s = 0;  // wait at least this long between messages (narrow links)
   // Link budget in kbit/s on the wire (0: none). Messages are paced to it, so
   // frames batch up (and the oldest are dropped) instead of queueing in the
   // network; it is lowered when the receiver reports a backlog and recovers slowly.

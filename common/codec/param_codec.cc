@@ -5,27 +5,22 @@
 #include <cmath>
 #include <stdexcept>
 
-#include "common/codec/bit_stream.h"
+#include "common/codec/varint.h"
 #include "common/core/options.h"
 
 namespace headcast {
 namespace {
 
-constexpr int kKeyOrder = 6;  // Exp-Golomb order for absolute values in key frames
-constexpr int kMaxOrder = 20;
-constexpr int kMagnitudeShift = 3;  // running mean of |residual| in 1/8 units
-
-// Adaptive Exp-Golomb order from the running mean magnitude (same on both ends).
-int OrderFor(int magnitude) {
-  const int mean = magnitude >> kMagnitudeShift;
-  int k = 0;
-  while (k < kMaxOrder && (1 << (k + 1)) <= mean + 1) ++k;
-  return k;
-}
-void UpdateMagnitude(int64_t residual, int* magnitude) {
-  const int64_t a = std::min<int64_t>(std::llabs(residual), 1 << 20);
-  *magnitude += static_cast<int>(a - (*magnitude >> kMagnitudeShift));  // mean over ~8 frames, scaled by 8
-}
+// The packet's first byte: version (2 bits), key flag, then the low bits of
+// the frame's place in its chain since the key frame (0 in a key frame): a
+// decoder that missed a packet sees the gap instead of decoding garbage.
+constexpr int kChainMask = 0x1f;
+// Capture times stay far inside int64 milliseconds, so a key time plus any
+// chain of deltas cannot overflow (a peer chooses both).
+constexpr int64_t kMaxTimeMs = int64_t{1} << 45;  // about 1100 years
+constexpr int64_t kMaxSequenceStep = int64_t{1} << 40;
+constexpr int64_t kMaxQuantised = int64_t{1} << 40;  // |value / step| the encoder sends at most
+constexpr int kConfidenceLevels = 15;
 
 // The coded values of a frame, in layout order.
 std::vector<double> Values(const CodecLayout& layout, const FrameParams& f) {
@@ -117,55 +112,75 @@ CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vect
   return l;
 }
 
-ParamEncoder::ParamEncoder(CodecLayout layout) : layout_(std::move(layout)) {
-  layout_.Check();
-  previous_.assign(layout_.num_values(), 0);
-  magnitude_.assign(layout_.num_values(), 0);
+CodecState::CodecState(int num_values) : previous(num_values, 0), value_models(num_values) {}
+
+void CodecState::Reset() {
+  std::fill(value_models.begin(), value_models.end(), IntModel{});
+  key_values = sequence_step = time_step = confidence = IntModel{};
+  coded = 0;
+  sequence_delta = time_delta_ms = confidence_level = 0;
 }
+
+ParamEncoder::ParamEncoder(CodecLayout layout)
+    : layout_(std::move(layout)), state_((layout_.Check(), layout_.num_values())) {}
 
 std::string ParamEncoder::Encode(const FrameParams& f, double origin) {
   const bool key = force_key_ || since_key_ >= layout_.key_frame_interval - 1;
   const std::vector<double> values = Values(layout_, f);
-  const int64_t time_ms = static_cast<int64_t>(std::llround((f.capture_time_s - origin) * 1000));
-  std::string packet;
-  packet.push_back(static_cast<char>((kCodecVersion << 6) | (key ? 0x20 : 0)));
-  PutVarint(key ? 0 : coded_ + 1, &packet);  // 0 marks a key frame's fresh chain
+  const double t = std::round((f.capture_time_s - origin) * 1000);
+  const int64_t time_ms = std::isfinite(t) ? static_cast<int64_t>(std::clamp(t, 0.0, 0x1p62)) : 0;
+  const int64_t level =
+      std::lround(std::clamp(std::isfinite(f.confidence) ? f.confidence : 0.f, 0.f, 1.f) * kConfidenceLevels);
+  CodecState& s = state_;
+  const uint64_t chain = key ? 0 : s.coded + 1;
+  std::string packet(1, static_cast<char>((kCodecVersion << 6) | (key ? 0x20 : 0) | (chain & kChainMask)));
+  RangeEncoder rc;
   if (key) {
+    s.Reset();
     PutVarint(f.sequence, &packet);
-    PutVarint(static_cast<uint64_t>(std::max<int64_t>(0, time_ms)), &packet);
+    PutVarint(static_cast<uint64_t>(time_ms), &packet);
+    s.confidence.Encode(level, &rc);
+    s.previous_sequence = f.sequence;
+    s.previous_time_ms = time_ms;
   } else {
-    // Sequence and time only move forward (drops make gaps), so deltas are >= 0.
-    PutVarint(f.sequence - previous_sequence_, &packet);
-    PutVarint(static_cast<uint64_t>(std::max<int64_t>(0, time_ms - previous_time_ms_)), &packet);
+    // Sequence and time only move forward (drops make gaps); each step is
+    // predicted by the last one (a camera's steady rate costs next to nothing).
+    const int64_t sequence_step =
+        f.sequence >= s.previous_sequence
+            ? static_cast<int64_t>(std::min<uint64_t>(f.sequence - s.previous_sequence, kMaxSequenceStep))
+            : 0;
+    const int64_t time_step = std::clamp<int64_t>(time_ms - s.previous_time_ms, 0, kMaxTimeMs);
+    s.sequence_step.Encode(sequence_step - s.sequence_delta, &rc);
+    s.time_step.Encode(time_step - s.time_delta_ms, &rc);
+    s.confidence.Encode(level - s.confidence_level, &rc);
+    s.sequence_delta = sequence_step;
+    s.time_delta_ms = time_step;
+    // What the decoder will reconstruct, even where the input went backwards.
+    s.previous_sequence += static_cast<uint64_t>(sequence_step);
+    s.previous_time_ms += time_step;
   }
-  BitWriter bits;
-  bits.Bits(static_cast<uint64_t>(std::lround(std::clamp(f.confidence, 0.f, 1.f) * 15)), 4);
+  s.confidence_level = level;
   for (int i = 0; i < layout_.num_values(); ++i) {
-    const int64_t q = static_cast<int64_t>(std::llround(values[i] / layout_.steps[i]));
-    if (key) {
-      bits.SignedExpGolomb(q, kKeyOrder);
-      magnitude_[i] = 0;
-    } else {
-      const int64_t residual = q - previous_[i];
-      bits.SignedExpGolomb(residual, OrderFor(magnitude_[i]));
-      UpdateMagnitude(residual, &magnitude_[i]);
-    }
-    previous_[i] = q;
+    const double x = values[i] / layout_.steps[i];
+    const int64_t q =
+        std::isfinite(x)
+            ? static_cast<int64_t>(std::llround(std::clamp(x, -double(kMaxQuantised), double(kMaxQuantised))))
+            : 0;
+    if (key)
+      s.key_values.Encode(q, &rc);
+    else
+      s.value_models[i].Encode(q - s.previous[i], &rc);
+    s.previous[i] = q;
   }
-  packet += bits.Finish();
-  coded_ = key ? 0 : coded_ + 1;
-  previous_sequence_ = f.sequence;
-  previous_time_ms_ = time_ms;
+  packet += rc.Finish();
+  s.coded = chain;
   since_key_ = key ? 0 : since_key_ + 1;
   force_key_ = false;
   return packet;
 }
 
-ParamDecoder::ParamDecoder(CodecLayout layout) : layout_(std::move(layout)) {
-  layout_.Check();
-  previous_.assign(layout_.num_values(), 0);
-  magnitude_.assign(layout_.num_values(), 0);
-}
+ParamDecoder::ParamDecoder(CodecLayout layout)
+    : layout_(std::move(layout)), state_((layout_.Check(), layout_.num_values())) {}
 
 bool ParamDecoder::Decode(const std::string& packet, FrameParams* out, std::string* why, double origin) {
   auto fail = [&](const std::string& w) {
@@ -176,61 +191,59 @@ bool ParamDecoder::Decode(const std::string& packet, FrameParams* out, std::stri
   const uint8_t head = static_cast<uint8_t>(packet[0]);
   if ((head >> 6) != kCodecVersion)
     return fail("codec version " + std::to_string(head >> 6) + ", expected " + std::to_string(kCodecVersion));
-  if (head & 0x1f) return fail("reserved header bits set (not a headcast packet?)");
   const bool key = head & 0x20;
+  const uint64_t chain_bits = head & kChainMask;
+  CodecState next = state_;  // committed only when the whole packet is valid
   size_t pos = 1;
-  uint64_t chain = 0, seq = 0, time = 0;
-  if (!GetVarint(packet, &pos, &chain) || !GetVarint(packet, &pos, &seq) || !GetVarint(packet, &pos, &time))
-    return fail("truncated packet header");
-  if (key != (chain == 0)) return fail("inconsistent key-frame marker");
-  // Times stay far inside int64 milliseconds, so a key time plus any chain of
-  // deltas cannot overflow (a peer chooses both).
-  constexpr uint64_t kMaxTimeMs = uint64_t{1} << 45;  // about 1100 years
-  if (time > kMaxTimeMs || (!key && previous_time_ms_ > static_cast<int64_t>(kMaxTimeMs - time)))
-    return fail("capture time out of range");
-  if (!key) {
+  if (key) {
+    if (chain_bits != 0) return fail("reserved header bits set (not a headcast packet?)");
+    uint64_t sequence = 0, time = 0;
+    if (!GetVarint(packet, &pos, &sequence) || !GetVarint(packet, &pos, &time)) return fail("truncated packet header");
+    if (time > static_cast<uint64_t>(kMaxTimeMs)) return fail("capture time out of range");
+    next.Reset();
+    next.previous_sequence = sequence;
+    next.previous_time_ms = static_cast<int64_t>(time);
+  } else {
     if (!have_reference_) return fail("delta frame without a reference; waiting for a key frame");
-    if (chain != coded_ + 1) {
+    if (chain_bits != ((next.coded + 1) & kChainMask)) {
       have_reference_ = false;
       return fail("frame chain broken (missing packet); waiting for a key frame");
     }
   }
-  BitReader bits(reinterpret_cast<const uint8_t*>(packet.data()) + pos, packet.size() - pos);
-  uint64_t confidence = 0;
-  if (!bits.Bits(4, &confidence)) return fail("truncated packet");
-  std::vector<int64_t> q(layout_.num_values());
-  std::vector<int> magnitude = magnitude_;
+  RangeDecoder rc(reinterpret_cast<const uint8_t*>(packet.data()) + pos, packet.size() - pos);
+  int64_t level = 0;
+  if (key) {
+    level = next.confidence.Decode(&rc);
+  } else {
+    const int64_t sequence_step = next.sequence_delta + next.sequence_step.Decode(&rc);
+    const int64_t time_step = next.time_delta_ms + next.time_step.Decode(&rc);
+    level = next.confidence_level + next.confidence.Decode(&rc);
+    if (sequence_step < 0 || sequence_step > kMaxSequenceStep) return fail("sequence step out of range");
+    if (time_step < 0 || time_step > kMaxTimeMs - next.previous_time_ms) return fail("capture time out of range");
+    next.sequence_delta = sequence_step;
+    next.time_delta_ms = time_step;
+    next.previous_sequence += static_cast<uint64_t>(sequence_step);
+    next.previous_time_ms += time_step;
+  }
+  if (level < 0 || level > kConfidenceLevels) return fail("confidence out of range");
+  next.confidence_level = level;
   std::vector<double> values(layout_.num_values());
   for (int i = 0; i < layout_.num_values(); ++i) {
-    int64_t coded = 0;
-    if (!bits.SignedExpGolomb(key ? kKeyOrder : OrderFor(magnitude[i]), &coded))
-      return fail("truncated or corrupt packet");
-    if (key) {
-      q[i] = coded;
-      magnitude[i] = 0;
-    } else {
-      if (std::llabs(coded) > (int64_t{1} << 40)) return fail("residual out of range");
-      q[i] = previous_[i] + coded;
-      UpdateMagnitude(coded, &magnitude[i]);
-    }
-    values[i] = static_cast<double>(q[i]) * layout_.steps[i];
+    const int64_t q = key ? next.key_values.Decode(&rc) : next.previous[i] + next.value_models[i].Decode(&rc);
+    values[i] = static_cast<double>(q) * layout_.steps[i];
     if (!(std::abs(values[i]) <= Limit(layout_, i))) return fail("value " + std::to_string(i) + " out of range");
+    next.previous[i] = q;
   }
-  if ((packet.size() - pos) * 8 - bits.bits_read() >= 8) return fail("trailing bytes after the frame");
-  // Commit only a fully valid packet.
-  previous_ = q;
-  magnitude_ = magnitude;
-  coded_ = chain;
+  if (packet.size() - pos > rc.consumed()) return fail("trailing bytes after the frame");
+  next.coded = key ? 0 : next.coded + 1;
+  state_ = std::move(next);
   have_reference_ = true;
   FrameParams f;
   SetValues(layout_, values, &f);
-  f.sequence = key ? seq : previous_sequence_ + seq;
-  const int64_t time_ms = key ? static_cast<int64_t>(time) : previous_time_ms_ + static_cast<int64_t>(time);
-  f.capture_time_s = origin + time_ms / 1000.0;
-  f.confidence = static_cast<float>(confidence) / 15.f;
-  previous_sequence_ = f.sequence;
-  previous_time_ms_ = time_ms;
-  *out = f;
+  f.sequence = state_.previous_sequence;
+  f.capture_time_s = origin + state_.previous_time_ms / 1000.0;
+  f.confidence = static_cast<float>(level) / kConfidenceLevels;
+  if (out) *out = f;
   return true;
 }
 

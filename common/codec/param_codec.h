@@ -1,18 +1,21 @@
 // The parameter codec: per-component quantisation (steps from each component's
-// measured effect on the mesh), prediction from the previous frame, adaptive
-// Exp-Golomb coding of the residuals, periodic key frames. Wire-independent.
+// measured effect on the mesh), prediction from the previous frame, the
+// residuals under adaptive binary models with a range coder (one set of models
+// per value, learnt from the frames since the last key frame), periodic key
+// frames. Wire-independent.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "common/codec/range_coder.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 
 namespace headcast {
 
-constexpr int kCodecVersion = 1;
+constexpr int kCodecVersion = 2;
 constexpr size_t kMaxFingerprintBytes = 128;
 
 // What both ends agree on when a session starts (sent in Hello).
@@ -38,6 +41,19 @@ struct CodecLayout {
                                std::vector<int> components = {}, int key_frame_interval = 30);
 };
 
+// What encoder and decoder keep in step between packets: the last frame's
+// quantised values and header, and the adaptive models (reset by a key frame,
+// so a decoder can start there).
+struct CodecState {
+  explicit CodecState(int num_values);
+  void Reset();  // as after a key frame's header: fresh models
+  std::vector<int64_t> previous;
+  std::vector<IntModel> value_models;
+  IntModel key_values, sequence_step, time_step, confidence;
+  uint64_t coded = 0, previous_sequence = 0;
+  int64_t previous_time_ms = 0, sequence_delta = 0, time_delta_ms = 0, confidence_level = 0;
+};
+
 class ParamEncoder {
  public:
   explicit ParamEncoder(CodecLayout layout);
@@ -49,10 +65,7 @@ class ParamEncoder {
 
  private:
   CodecLayout layout_;
-  std::vector<int64_t> previous_;
-  std::vector<int> magnitude_;  // adaptive Exp-Golomb order state, one per value
-  uint64_t coded_ = 0, previous_sequence_ = 0;
-  int64_t previous_time_ms_ = 0;
+  CodecState state_;
   int since_key_ = 0;
   bool force_key_ = true;
 };
@@ -63,16 +76,15 @@ class ParamDecoder {
   // Decodes one packet. Returns false with `why` for garbage, a truncated or
   // foreign packet, values out of range, or a delta frame whose reference is
   // missing (it then waits for the next key frame). Never reads out of bounds.
+  // An entropy-coded packet has no redundancy to catch every flipped bit:
+  // what decodes is kept within each value's range.
   bool Decode(const std::string& packet, FrameParams* out, std::string* why, double time_origin_s = 0);
   const CodecLayout& layout() const { return layout_; }
   bool waiting_for_key_frame() const { return !have_reference_; }
 
  private:
   CodecLayout layout_;
-  std::vector<int64_t> previous_;
-  std::vector<int> magnitude_;
-  uint64_t coded_ = 0, previous_sequence_ = 0;
-  int64_t previous_time_ms_ = 0;
+  CodecState state_;
   bool have_reference_ = false;
 };
 

@@ -2,8 +2,13 @@
 # headcast bandwidth measurement runs.
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
-#                           [--recording REC] [--out DIR] [--min-send-interval S] [--max-batch N] [--max-kbps K]
-#                           [--pcap FILE]
+#                           [--recording REC [--head-model M]] [--out DIR] [--min-send-interval S] [--max-batch N]
+#                           [--max-kbps K] [--pcap FILE]
+#
+# --recording replays a parameter recording (e.g. a real person tracked with
+# ICT-FaceKit by headcast-track); --head-model is the model .npz it was made
+# with (the receiver's avatar is made for that model). Default: the built-in
+# head's synthetic talking sequence.
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -18,7 +23,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" out="" pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -26,12 +31,13 @@ while [ $# -gt 0 ]; do
     --duration) duration=$2; shift 2 ;;
     --fps) fps=$2; shift 2 ;;
     --recording) recording=$2; shift 2 ;;
+    --head-model) head_model=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --min-send-interval) min_interval=$2; shift 2 ;;
     --max-batch) max_batch=$2; shift 2 ;;
     --max-kbps) max_kbps=$2; shift 2 ;;
     --pcap) pcap=$2; shift 2 ;;
-    -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^set -euo/{/^#/p}' "$0"; exit 0 ;;
     *) echo "netlab: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -58,8 +64,12 @@ cleanup() {
 }
 trap cleanup EXIT
 
-"$bin/headcast-avatar" create --resolution 128 --out "$work/avatar.hcavatar" > /dev/null
+[ "$head_model" = builtin ] || [ -f "$head_model" ] || { echo "netlab: no head model $head_model" >&2; exit 2; }
+[ -z "$recording" ] || [ -f "$recording" ] || { echo "netlab: no recording $recording" >&2; exit 2; }
+# The receiver's avatar (untrained: the link is measured, not the picture), of the recording's head model.
+"$bin/headcast-avatar" create --head-model "$head_model" --resolution 128 --out "$work/avatar.hcavatar" > /dev/null
 if [ -z "$recording" ]; then
+  [ "$head_model" = builtin ] || { echo "netlab: --head-model needs the --recording made with it" >&2; exit 2; }
   recording=$work/talk.hcrec
   "$bin/headcast-avatar" synth-params --frames "$(awk "BEGIN{print int($fps*60)}")" --fps "$fps" --out "$recording" > /dev/null
 fi
@@ -118,7 +128,7 @@ if [ -n "$pcap" ]; then
   sleep 0.5
 fi
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
-  --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
+  --head-model "$head_model" --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
   --max-kbps "$max_kbps" \
   --stats-json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
 spid=$!

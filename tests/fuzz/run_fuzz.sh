@@ -17,7 +17,7 @@ cd "$root"
 # The messages' code, generated here so the fuzzers need no CMake build.
 [ "$out/gen/proto/headcast.pb.cc" -nt proto/headcast.proto ] ||
   { mkdir -p "$out/gen/proto" && protoc --cpp_out="$out/gen/proto" -I proto headcast.proto; }
-codec=(common/codec/param_codec.cc common/codec/bit_stream.cc common/core/options.cc common/core/rotation.cc
+codec=(common/codec/param_codec.cc common/codec/range_coder.cc common/codec/varint.cc common/core/options.cc common/core/rotation.cc
        common/core/camera.cc common/headmodel/head_model.cc common/headmodel/params.cc)
 proto=("$out/gen/proto/headcast.pb.cc" proto/convert.cc)
 declare -A sources libs

@@ -6,11 +6,13 @@ project's proto/headcast.proto only (code generated here with protoc).
         --avatar-id demo --recording talk.hcrec [--fps 30]
 
 Reads a parameter recording, opens a session, and streams every frame as a
-ParamCodec key frame (the simplest valid packet; see common/codec/param_codec.h):
-  byte 0: version (1) << 6 | key flag 0x20
-  varint 0 (key frame), varint sequence, varint capture time in ms
-  bits: 4-bit confidence, then every value as signed Exp-Golomb of order 6
-        of round(value / step), most significant bit first.
+ParamCodec key frame (the simplest valid packet; see common/codec/param_codec.h
+and range_coder.h):
+  byte 0: version (2) << 6 | key flag 0x20 (chain bits 0)
+  varint sequence, varint capture time in ms
+  range-coded: the confidence level (0..15), then round(value / step) of every
+        value, each an integer under adaptive binary models (a fresh set for
+        the confidence, one shared set for the values).
 Prints a JSON summary; exits non-zero if the receiver refused the session.
 """
 import argparse
@@ -32,25 +34,88 @@ def varint(v):
     return bytes(out)
 
 
-class Bits:
+class RangeEncoder:
+    """The binary range coder of common/codec/range_coder.cc, bit for bit."""
+
     def __init__(self):
-        self.bits = []
+        self.out = bytearray()
+        self.low = 0
+        self.range = 0xFFFFFFFF
 
-    def put(self, value, count):
-        self.bits.extend((value >> i) & 1 for i in range(count - 1, -1, -1))
+    def _carry(self):
+        for i in range(len(self.out) - 1, -1, -1):
+            if self.out[i] != 0xFF:
+                self.out[i] += 1
+                return
+            self.out[i] = 0
 
-    def exp_golomb(self, v, k):
-        x = v + (1 << k)
-        n = x.bit_length() - 1
-        self.bits.extend([0] * (n - k))
-        self.put(x, n + 1)
+    def _normalise(self):
+        if self.low > 0xFFFFFFFF:
+            self._carry()
+            self.low &= 0xFFFFFFFF
+        while self.range < (1 << 24):
+            self.out.append(self.low >> 24)
+            self.low = (self.low << 8) & 0xFFFFFFFF
+            self.range = (self.range << 8) & 0xFFFFFFFF
 
-    def signed(self, v, k):
-        self.exp_golomb(2 * v if v >= 0 else -2 * v - 1, k)
+    def _split(self, bit, bound):
+        if bit:
+            self.low += bound
+            self.range -= bound
+        else:
+            self.range = bound
+        self._normalise()
 
-    def bytes(self):
-        padded = self.bits + [0] * (-len(self.bits) % 8)
-        return bytes(int("".join(map(str, padded[i:i + 8])), 2) for i in range(0, len(padded), 8))
+    def encode(self, bit, model):  # model: [p0], the probability of 0 in 1/4096
+        bound = (self.range >> 12) * model[0]
+        model[0] = model[0] - (model[0] >> 4) if bit else model[0] + ((4096 - model[0]) >> 4)
+        self._split(bit, bound)
+
+    def bypass(self, bit):
+        self._split(bit, self.range >> 1)
+
+    def finish(self):
+        end = self.low + self.range
+        for zero_bits in (32, 24, 16, 8, 0):
+            mask = (1 << zero_bits) - 1
+            value = (self.low + mask) & ~mask
+            if value < end:
+                break
+        if value > 0xFFFFFFFF:
+            self._carry()
+            value &= 0xFFFFFFFF
+        self.out += value.to_bytes(4, "big")
+        return bytes(self.out).rstrip(b"\0")
+
+
+class IntModel:
+    MAX_BITS, LENGTH_MODELS = 42, 12
+
+    def __init__(self):
+        self.zero = [[2048] for _ in range(3)]
+        self.sign = [[2048] for _ in range(3)]
+        self.length = [[2048] for _ in range(self.LENGTH_MODELS)]
+        self.second = [[2048] for _ in range(self.LENGTH_MODELS)]
+        self.previous = 0
+
+    def encode(self, v, rc):
+        context = 0 if self.previous < 0 else 1 if self.previous == 0 else 2
+        self.previous = v
+        rc.encode(v != 0, self.zero[context])
+        if v == 0:
+            return
+        rc.encode(v < 0, self.sign[context])
+        m = min(abs(v), (1 << self.MAX_BITS) - 1)
+        n = m.bit_length()
+        last = self.LENGTH_MODELS - 1
+        for j in range(1, n):
+            rc.encode(1, self.length[min(j - 1, last)])
+        if n < self.MAX_BITS:
+            rc.encode(0, self.length[min(n - 1, last)])
+        if n >= 2:
+            rc.encode((m >> (n - 2)) & 1, self.second[min(n - 2, last)])
+        for b in range(n - 3, -1, -1):
+            rc.bypass((m >> b) & 1)
 
 
 def key_frame(frame, layout_steps, components, t0):
@@ -58,13 +123,14 @@ def key_frame(frame, layout_steps, components, t0):
     for field in ("jaw", "neck", "left_eye", "right_eye", "cam_rotation", "cam_translation"):
         vec = list(getattr(frame, field)) or [0.0, 0.0, 0.0]
         values.extend(vec)
-    packet = bytes([(1 << 6) | 0x20]) + varint(0) + varint(frame.sequence)
+    packet = bytes([(2 << 6) | 0x20]) + varint(frame.sequence)
     packet += varint(max(0, int(round((frame.capture_time_s - t0) * 1000))))
-    bits = Bits()
-    bits.put(int(round(min(max(frame.confidence, 0.0), 1.0) * 15)), 4)
+    rc = RangeEncoder()
+    IntModel().encode(int(round(min(max(frame.confidence, 0.0), 1.0) * 15)), rc)
+    values_model = IntModel()
     for value, step in zip(values, layout_steps):
-        bits.signed(int(round(value / step)), 6)
-    return packet + bits.bytes()
+        values_model.encode(int(round(value / step)), rc)
+    return packet + rc.finish()
 
 
 def main():
@@ -87,7 +153,7 @@ def main():
     hello = pb.Uplink(hello=pb.Hello(
         protocol_version=1, avatar_id=args.avatar_id, sender_name="python third-party client",
         layout=pb.ParameterLayout(num_expression=header.num_expression, expression_components=components,
-                                  steps=steps, key_frame_interval=1, fps=args.fps, codec_version=1,
+                                  steps=steps, key_frame_interval=1, fps=args.fps, codec_version=2,
                                   head_model_fingerprint=header.head_model_fingerprint)))
 
     def uplink():

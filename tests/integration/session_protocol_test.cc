@@ -342,6 +342,32 @@ TEST(SessionProtocol, ANarrowLinkBatchesFramesWithinTheBudget) {
   EXPECT_GT(n.sent, 45u) << "the budget carries 30 fps in batches";
 }
 
+TEST(SessionProtocol, FreshestOnlySendsOneNewFramePerMessageAndDropsTheRest) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  SenderOptions o = Options();
+  o.max_kbps = 4;
+  o.stats_interval_s = 5;
+  o.freshest_only = true;
+  Client c(receiver, "secret-token", o);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  const auto start = std::chrono::steady_clock::now();
+  for (int i = 0; i < 90; ++i) {
+    c.client->Submit(SyntheticTalkingHead(Model(), i));
+    std::this_thread::sleep_until(start + std::chrono::milliseconds(33 * (i + 1)));
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const SenderCounters n = c.client->counters();
+  c.client->Stop();
+  ASSERT_GT(n.messages, 2u);
+  EXPECT_EQ(n.sent, n.messages) << "one frame per message";
+  EXPECT_GT(n.dropped, 45u) << "the frames the budget cannot carry are skipped, not queued";
+  const double wire_kbps = 8e-3 * (n.payload_bytes + n.messages * o.wire_overhead_bytes) / seconds;
+  EXPECT_LT(wire_kbps, 1.3 * o.max_kbps) << "paced to the budget";
+  // Every frame sent arrives (none is lost for being alone in its message).
+  ASSERT_TRUE(WaitFor([&] { return receiver.counters().frames_received >= n.sent; }, 5));
+}
+
 // A hand-driven session: Hello, then whatever the test writes; the receiver
 // serves it on its own thread.
 struct RawSession {
