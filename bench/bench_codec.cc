@@ -66,15 +66,22 @@ nlohmann::json CostOnDataset(const BenchOptions& options, const HeadModel& model
   const std::vector<FrameParams> decoded = RoundTrip(layout, tracked);
   SampleStats original, coded, cost, between;
   size_t k = 0;
-  EvaluateOnDataset(avatar, model, data, test, [&](int, const cv::Mat& truth, const cv::Mat& bgr) {
+  std::vector<std::pair<double, int>> worst;  // (cost, source frame)
+  EvaluateOnDataset(avatar, model, data, test, [&](int position, const cv::Mat& truth, const cv::Mat& bgr) {
     const cv::Mat from_decoded = RenderAvatarBgr(avatar, model, data.subject(), decoded[k++]);
     const double a = cv::PSNR(bgr, truth), b = cv::PSNR(from_decoded, truth);
     original.Add(a);
     coded.Add(b);
     cost.Add(a - b);
+    worst.emplace_back(a - b, data.At(position).frame);
     between.Add(cv::PSNR(bgr, from_decoded));
   });
+  std::sort(worst.rbegin(), worst.rend());
+  worst.resize(std::min<size_t>(worst.size(), 3));
+  nlohmann::json worst_frames = nlohmann::json::array();
+  for (auto [c, frame] : worst) worst_frames.push_back({{"frame", frame}, {"cost_db", c}});
   return {{"dataset_test_frames", test.size()},
+          {"costliest_frames", worst_frames},
           {"avatar_psnr_db_original_params", original.Mean()},
           {"avatar_psnr_db_decoded_params", coded.Mean()},
           {"codec_psnr_cost_db_mean", cost.Mean()},

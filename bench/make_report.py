@@ -81,6 +81,14 @@ def main():
             L.append(f"| {label} | not run (tbf links need root) | | | | |")
     L.append("")
 
+    # Real people's tracks beside the synthetic sequence (bench/codec_real.sh,
+    # bench/narrow_links.sh): their tables as those scripts wrote them.
+    for name, title in (("codec_real.md", "Parameter codec on real tracks"),
+                        ("narrow_links.md", "Narrow links: synthetic and real tracks side by side")):
+        p = os.path.join(r, name)
+        if os.path.exists(p):
+            L += [f"## {title}", "", open(p).read().strip(), ""]
+
     d = load(os.path.join(r, "demo"), "report.json")
     if d:
         g, st = d["glass_to_glass_ms"], d["stages_ms_median"]

@@ -26,6 +26,7 @@ struct LiveTrackerOptions {
 
 struct LiveTrackResult {
   bool fitted = false;
+  bool with_depth = false;  // fitted (or tried) by the RGB-D fit
   FaceStatus status = FaceStatus::kNoFace;
   double landmarks_ms = 0;  // detection/tracking + landmarks
   double fit_ms = 0;        // head-model fit

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "common/capture/capture_flags.h"
 #include "common/capture/frame_source.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
@@ -37,6 +38,7 @@ struct SenderFlags {
   LiveTrackerOptions live;
   CLI::Option* stats_interval = nullptr;
   CLI::Option* key_interval_flag = nullptr;
+  CLI::Option* error_flag = nullptr;
 };
 
 void AddFlags(CLI::App& app, SenderFlags& f) {
@@ -54,7 +56,10 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_option("--tls-key", o.tls_client_key, "PEM client key");
   app.add_option("--tls-server-name", o.tls_server_name, "name to check in the receiver's certificate");
   app.add_option("--head-model", f.head_model, "head model: builtin or .npz")->capture_default_str();
-  app.add_option("--input", f.input, "track this camera (/dev/videoN), video or image folder live");
+  app.add_option(
+      "--input", f.input,
+      "track this live: a camera (/dev/videoN), video, image folder, RGB-D folder (with associations.txt: the "
+      "RGB-D fit) or zed:SOURCE (side-by-side stereo; needs --stereo-calibration)");
   app.add_option("--identity-from", f.identity_from,
                  "--input: the person's shape: the avatar's own (.hcavatar) or a PARAMS.json (headcast-fit-mesh)");
   app.add_option("--intrinsics", f.intrinsics, "--input: camera fx,fy,cx,cy in pixels");
@@ -64,15 +69,20 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       ->capture_default_str();
   app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
                "--input: do not locate the irises (the eyes look straight ahead)");
-  app.add_option("--camera-size", f.camera_size, "--input cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
+  AddCameraFlags(app, f.source, f.camera_size);
+  AddDepthFlags(app, f.source);
+  app.add_option("--calibration-frames", f.live.tracker.rgbd_identity_frames,
+                 "--input with depth: frames whose fitted shapes give the identity (median), then frozen")
+      ->capture_default_str();
   app.add_flag("!--as-fast-as-possible", f.source.realtime, "--input files: do not pace to their frame rate");
   app.add_option("--params", f.params, "replay this parameter recording (.hcrec)");
   app.add_option("--synthetic", f.synthetic, "send this many frames of the synthetic talking head (default source)");
   app.add_flag("--loop", f.loop, "replay the source forever");
   app.add_option("--fps", o.fps, "frame rate of the synthetic source")->capture_default_str();
   app.add_option("--expression-components", f.components, "comma-separated expression indices to send (default all)");
-  app.add_option("--quantisation-error", f.error_m, "largest vertex error one quantisation step may cause, metres")
-      ->capture_default_str();
+  f.error_flag = app.add_option("--quantisation-error", f.error_m,
+                                "largest vertex error one quantisation step may cause, metres (default 0.0002; "
+                                "0.0005 under a 32 kbit/s budget)");
   app.add_option("--max-batch", o.max_batch, "frames per message at most")->capture_default_str();
   app.add_flag("--freshest", o.freshest_only,
                "narrow links: each message carries only the newest frame, the receiver interpolates (lower latency, "
@@ -130,7 +140,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   clock.Restart();                  // the stream's time starts once the tracker is ready
   constexpr size_t kKept = 100000;  // a camera session may run for days
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept);
-  int read = 0, fitted = 0, skipped = 0;
+  int read = 0, fitted = 0, skipped = 0, with_depth = 0;
   uint64_t sequence = 0;
   while (!g_stop && !client.counters().gave_up && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {
     CapturedFrame frame;
@@ -148,6 +158,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     FrameParams p;
     const LiveTrackResult r = tracker.Process(frame, &p);
     landmarks_ms.Add(r.landmarks_ms);
+    with_depth += r.with_depth;
     if (!r.fitted) continue;  // no face this frame: the receiver holds the last one
     fit_ms.Add(r.fit_ms);
     ++fitted;
@@ -162,6 +173,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"frames_read", read},
           {"frames_fitted", fitted},
           {"frames_unreadable", skipped},
+          {"frames_with_depth", with_depth},
           {"read_wait_ms_median", median(read_ms)},
           {"landmarks_ms_median", median(landmarks_ms)},
           {"landmarks_ms_p95", p95(landmarks_ms)},
@@ -232,6 +244,7 @@ int Run(SenderFlags& f) {
     if (f.stats_interval->count() == 0) o.stats_interval_s = kNarrowLinkStatsInterval;
     if (f.key_interval_flag->count() == 0)
       f.key_interval = static_cast<int>(std::lround(kNarrowLinkKeySeconds * o.fps));
+    if (f.error_flag->count() == 0) f.error_m = kNarrowLinkQuantisationError;
   }
   if (f.key_interval < 1) throw std::invalid_argument("--key-interval must be at least 1");
   const CodecLayout layout = CodecLayout::FromModel(model, f.error_m, ParseComponents(f.components), f.key_interval);

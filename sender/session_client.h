@@ -61,6 +61,10 @@ struct SenderOptions {
 constexpr double kNarrowLinkKbps = 32;
 constexpr double kNarrowLinkStatsInterval = 5;
 constexpr double kNarrowLinkKeySeconds = 10;
+// ... and quantises more coarsely: one step moves no vertex more than 0.5 mm
+// (against 0.2 mm): real tracks then fit a narrow link, at a cost through the
+// avatar measured in bench/results/narrow_links.md.
+constexpr double kNarrowLinkQuantisationError = 5e-4;
 
 struct SenderCounters {
   uint64_t submitted = 0, sent = 0, dropped = 0, invalid = 0, messages = 0, payload_bytes = 0, connects = 0,

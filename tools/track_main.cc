@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iostream>
 
+#include "common/capture/capture_flags.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
@@ -40,15 +41,7 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
       ->capture_default_str();
   app.add_flag("!--no-gaze", t.tracker.face.locate_irises, "do not locate the irises: the eyes look straight ahead");
   SourceOptions& s = t.source;
-  app.add_option("--depth-input", s.depth_input,
-                 "RGB-D: association file (TUM style: t colour.png t depth.png) of 16-bit depth PNGs");
-  app.add_option("--depth-units", s.depth_units_per_metre,
-                 "depth PNG units per metre (1000: millimetres; TUM datasets use 5000)")
-      ->capture_default_str();
-  app.add_option("--stereo-calibration", s.stereo_calibration,
-                 "for zed:SOURCE inputs: OpenCV YAML or the camera's factory SN<serial>.conf");
-  app.add_option("--stereo-resolution", s.stereo_resolution, "section of a ZED .conf: 2K, FHD, HD, VGA")
-      ->capture_default_str();
+  AddDepthFlags(app, s);
   app.add_flag("--realtime", s.realtime, "pace recorded inputs to their frame rate");
   app.add_option("--intrinsics", f.intrinsics,
                  "camera intrinsics fx,fy,cx,cy in pixels (else calibration, the stereo calibration, or --fov)");
@@ -65,10 +58,7 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_flag("--calibrate", t.calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
                "head's yaw in a first pass, then track with them (METHOD §2)");
-  app.add_option("--camera-size", f.camera_size, "cameras: WIDTHxHEIGHT to ask for")->capture_default_str();
-  app.add_option("--camera-fps", s.fps, "cameras: frame rate to ask for; image folders: their rate")
-      ->capture_default_str();
-  app.add_option("--pixel-format", s.pixel_format, "cameras: auto, yuyv or mjpeg")->capture_default_str();
+  AddCameraFlags(app, s, f.camera_size);
   app.add_option("--identity-from", f.identity_from,
                  "take the identity (shape) from an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json");
   app.add_option("--log", f.log_level, "log level");

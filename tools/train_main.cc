@@ -8,6 +8,7 @@
 #include <iostream>
 #include <memory>
 
+#include "common/capture/capture_flags.h"
 #include "common/core/local_ranks.h"
 #include "common/core/log.h"
 #include "training/run_report.h"
@@ -141,12 +142,7 @@ int main(int argc, char** argv) {
                    "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();
   prep->add_flag("--resume", p.resume, "reuse a finished tracking pass in --out (after an interrupted prep)");
-  prep->add_option("--stereo-calibration", p.source.stereo_calibration,
-                   "for zed:SOURCE inputs: OpenCV YAML or the camera's factory SN<serial>.conf");
-  prep->add_option("--stereo-resolution", p.source.stereo_resolution, "section of a ZED .conf: 2K, FHD, HD, VGA")
-      ->capture_default_str();
-  prep->add_option("--depth-input", p.source.depth_input, "RGB-D: association file (TUM style) of 16-bit depth PNGs");
-  prep->add_option("--depth-units", p.source.depth_units_per_metre, "depth PNG units per metre")->capture_default_str();
+  AddDepthFlags(*prep, p.source);
 
   int processes = 1;
   auto* pretrain = app.add_subcommand("pretrain", "train the general model on synthetic head-model renders");

@@ -47,7 +47,7 @@ struct RgbdFitOptions {
   double contour_weight = 0.25;        // of a contour landmark against an inner one
   bool reject_background_contour = true;
   double shape_prior = 1e-9,
-         expression_prior = 1e-9;  // m^2 per unit^2 per point: only keeps unobserved components at zero
+         expression_prior = 1e-8;  // m^2 per unit^2 per point: keeps unobserved components at zero
   int max_iterations = 30;         // per solve
   int warm_max_iterations = 8;     // per solve when warm-started
   void Check() const;

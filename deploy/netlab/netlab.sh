@@ -3,12 +3,13 @@
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
 #                           [--recording REC [--head-model M]] [--out DIR] [--min-send-interval S] [--max-batch N]
-#                           [--max-kbps K] [--pcap FILE]
+#                           [--max-kbps K] [--freshest] [--pcap FILE]
 #
 # --recording replays a parameter recording (e.g. a real person tracked with
 # ICT-FaceKit by headcast-track); --head-model is the model .npz it was made
 # with (the receiver's avatar is made for that model). Default: the built-in
-# head's synthetic talking sequence.
+# head's synthetic talking sequence. --freshest: the sender's newest-frame-only
+# mode (one frame per message, the receiver interpolates).
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -23,7 +24,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" freshest=() pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -32,6 +33,7 @@ while [ $# -gt 0 ]; do
     --fps) fps=$2; shift 2 ;;
     --recording) recording=$2; shift 2 ;;
     --head-model) head_model=$2; shift 2 ;;
+    --freshest) freshest=(--freshest); shift ;;
     --out) out=$2; shift 2 ;;
     --min-send-interval) min_interval=$2; shift 2 ;;
     --max-batch) max_batch=$2; shift 2 ;;
@@ -113,7 +115,7 @@ else
   }
 fi
 
-"${run_rx[@]}" "$bin/headcast-receiver" --listen "$listen" "${rx_tls[@]}" --token "$token" --avatar demo="$work/avatar.hcavatar" \
+"${run_rx[@]}" "$bin/headcast-receiver" --listen "$listen" "${rx_tls[@]}" --token "$token" --head-model "$head_model" --avatar demo="$work/avatar.hcavatar" \
   --display none --render-fps "$fps" --duration "$(awk "BEGIN{print $duration + 15}")" --latency-csv "$out/latency.csv" \
   --stats-json "$out/receiver.json" > /dev/null 2> "$work/receiver.log" &
 rpid=$!
@@ -129,7 +131,7 @@ if [ -n "$pcap" ]; then
 fi
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
   --head-model "$head_model" --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
-  --max-kbps "$max_kbps" \
+  --max-kbps "$max_kbps" "${freshest[@]}" \
   --stats-json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
 spid=$!
 echo "t,up_bytes,down_bytes,up_packets,down_packets" > "$out/timeline.csv"

@@ -6,7 +6,7 @@
 set -u
 bin=$1 src=$2 python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
-trap 'rm -rf "$tmp"' EXIT
+trap 'kill "${rx:-}" 2>/dev/null; rm -rf "$tmp"' EXIT
 
 "$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 12 --shape 0=0.8 --depth-noise 0.5 > /dev/null &&
   [ -s "$tmp/seq/associations.txt" ] && ok "render-rgbd writes a sequence" || bad "render-rgbd"
@@ -20,6 +20,31 @@ awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || ba
   --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/cmp.json" &&
   "$python" -c "import json,sys; j=json.load(open('$tmp/cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
   ok "head position within 10 mm, depth within 2 mm of the truth" || bad "truth: $(cat "$tmp/cmp.json")"
+# Live: the sender tracks the RGB-D folder with the same tracker (identity from
+# the first frames, then frozen) and streams to a receiver on loopback.
+"$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null 2>&1
+port=$((20000 + $$ % 20000))
+"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
+  --display none --stats-json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+rx=$!
+wait_for "$tmp/rx.log" listening || bad "receiver never listened"
+"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq" \
+  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --record "$tmp/live.hcrec" --stats-json "$tmp/tx.json" \
+  > /dev/null 2> "$tmp/tx.log"
+sleep 0.5
+kill -INT "$rx"; wait "$rx"; rx=
+"$python" -c "
+import json, sys
+t = json.load(open('$tmp/tx.json')); r = json.load(open('$tmp/rx.json'))
+k = t['tracking']
+sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and t['frames_sent'] == 12
+         and r['frames_received'] == 12 else 1)" &&
+  ok "live RGB-D session: 12 frames fitted with depth, sent and received" ||
+  bad "live RGB-D: $(cat "$tmp/tx.json" 2>/dev/null | head -30) $(tail -3 "$tmp/tx.log")"
+"$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/live.hcrec" \
+  --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/live_cmp.json" &&
+  "$python" -c "import json,sys; j=json.load(open('$tmp/live_cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
+  ok "live: head position within 10 mm, depth within 2 mm of the truth" || bad "live truth: $(cat "$tmp/live_cmp.json")"
 # Prep takes every input the tracker takes: the RGB-D folder, tracked in-process.
 "$bin/headcast-train" prep --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --no-calibrate --resolutions 128 \
   --test-frames 2 --out "$tmp/ds" > /dev/null 2> "$tmp/prep.log" &&
