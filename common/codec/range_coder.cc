@@ -27,15 +27,13 @@ void RangeEncoder::Shift() {
   range_ <<= 8;
 }
 
-void RangeEncoder::Encode(bool bit, BitModel* model) {
-  const uint32_t bound = (range_ >> kProbabilityBits) * model->p0;
+void RangeEncoder::Split(bool bit, uint32_t bound) {
   if (bit) {
     low_ += bound;
     range_ -= bound;
   } else {
     range_ = bound;
   }
-  model->Update(bit);
   if (low_ > 0xFFFFFFFFu) {
     Carry();
     low_ &= 0xFFFFFFFFu;
@@ -43,20 +41,13 @@ void RangeEncoder::Encode(bool bit, BitModel* model) {
   while (range_ < kTop) Shift();
 }
 
-void RangeEncoder::EncodeBypass(bool bit) {
-  const uint32_t bound = range_ >> 1;
-  if (bit) {
-    low_ += bound;
-    range_ -= bound;
-  } else {
-    range_ = bound;
-  }
-  if (low_ > 0xFFFFFFFFu) {
-    Carry();
-    low_ &= 0xFFFFFFFFu;
-  }
-  while (range_ < kTop) Shift();
+void RangeEncoder::Encode(bool bit, BitModel* model) {
+  const uint32_t bound = (range_ >> kProbabilityBits) * model->p0;
+  model->Update(bit);
+  Split(bit, bound);
 }
+
+void RangeEncoder::EncodeBypass(bool bit) { Split(bit, range_ >> 1); }
 
 std::string RangeEncoder::Finish() {
   // The value in [low, low + range) with the most trailing zero bytes: the
@@ -93,38 +84,27 @@ void RangeDecoder::Shift() {
   range_ <<= 8;
 }
 
-bool RangeDecoder::Decode(BitModel* model) {
+bool RangeDecoder::Split(uint32_t bound) {
   // Garbage can leave code >= range; the arithmetic stays unsigned and
   // bounded, so it decodes to some symbols, never out of bounds.
-  const uint32_t bound = (range_ >> kProbabilityBits) * model->p0;
-  bool bit;
-  if (code_ < bound) {
-    range_ = bound;
-    bit = false;
-  } else {
+  const bool bit = code_ >= bound;
+  if (bit) {
     code_ -= bound;
     range_ -= bound;
-    bit = true;
+  } else {
+    range_ = bound;
   }
-  model->Update(bit);
   while (range_ < kTop) Shift();
   return bit;
 }
 
-bool RangeDecoder::DecodeBypass() {
-  const uint32_t bound = range_ >> 1;
-  bool bit;
-  if (code_ < bound) {
-    range_ = bound;
-    bit = false;
-  } else {
-    code_ -= bound;
-    range_ -= bound;
-    bit = true;
-  }
-  while (range_ < kTop) Shift();
+bool RangeDecoder::Decode(BitModel* model) {
+  const bool bit = Split((range_ >> kProbabilityBits) * model->p0);
+  model->Update(bit);
   return bit;
 }
+
+bool RangeDecoder::DecodeBypass() { return Split(range_ >> 1); }
 
 void IntModel::Encode(int64_t v, RangeEncoder* enc) {
   const int context = Context();

@@ -36,6 +36,7 @@ class RangeEncoder {
   std::string Finish();
 
  private:
+  void Split(bool bit, uint32_t bound);  // the symbol's part of the range, then renormalise
   void Shift();
   void Carry();
   std::string out_;
@@ -53,6 +54,7 @@ class RangeDecoder {
   size_t consumed() const { return pos_; }
 
  private:
+  bool Split(uint32_t bound);
   void Shift();
   const uint8_t* data_;
   size_t size_;
