@@ -12,6 +12,7 @@
 
 #include "common/capture/capture_flags.h"
 #include "common/capture/frame_source.h"
+#include "common/capture/newest_frame_source.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
 #include "common/core/timer.h"
@@ -136,7 +137,16 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   // The tracker first: a camera's clock (and a paced file's) starts at open,
   // and loading the landmark model must not make the first frames late.
   LiveTracker tracker(model, f.live);
-  auto source = OpenFrameSource(f.input, f.source);
+  // Live (and paced) sources hand the tracker their newest frame: when it is
+  // slower than the camera, frames are skipped rather than aged in a queue.
+  std::unique_ptr<FrameSource> opened = OpenFrameSource(f.input, f.source);
+  NewestFrameSource* newest = nullptr;
+  if (f.source.realtime) {
+    auto wrapped = std::make_unique<NewestFrameSource>(std::move(opened));
+    newest = wrapped.get();
+    opened = std::move(wrapped);
+  }
+  FrameSource* source = opened.get();
   clock.Restart();                  // the stream's time starts once the tracker is ready
   constexpr size_t kKept = 100000;  // a camera session may run for days
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept);
@@ -147,7 +157,10 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     std::string problem;
     Stopwatch read_watch;
     const ReadStatus st = source->Read(&frame, &problem);
-    if (st == ReadStatus::kEnd) break;
+    if (st == ReadStatus::kEnd) {
+      if (!problem.empty()) throw std::runtime_error(f.input + ": " + problem);
+      break;
+    }
     if (st == ReadStatus::kSkipped) {
       ++skipped;
       spdlog::warn("{}", problem);
@@ -174,6 +187,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"frames_fitted", fitted},
           {"frames_unreadable", skipped},
           {"frames_with_depth", with_depth},
+          {"frames_skipped_behind_tracker", newest ? newest->dropped() : 0},
           {"read_wait_ms_median", median(read_ms)},
           {"landmarks_ms_median", median(landmarks_ms)},
           {"landmarks_ms_p95", p95(landmarks_ms)},

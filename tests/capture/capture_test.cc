@@ -10,8 +10,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <thread>
 
 #include "common/capture/frame_source.h"
+#include "common/capture/newest_frame_source.h"
 #include "common/capture/recorded_sources.h"
 #include "common/capture/stereo_depth.h"
 #include "common/capture/v4l2_source.h"
@@ -29,6 +31,70 @@ std::vector<V4l2Mode> Webcam() {
   return {{V4L2_PIX_FMT_YUYV, 640, 480, {30, 15}}, {V4L2_PIX_FMT_YUYV, 1280, 720, {10, 5}},
           {V4L2_PIX_FMT_MJPEG, 640, 480, {30}},    {V4L2_PIX_FMT_MJPEG, 1280, 720, {30, 15}},
           {V4L2_PIX_FMT_MJPEG, 1920, 1080, {30}},  {v4l2_fourcc('H', '2', '6', '4'), 1920, 1080, {30}}};
+}
+
+// A camera stand-in: `count` frames, one every `interval`; frame 3 unreadable;
+// optionally failing for good after the last.
+class TimedSource : public FrameSource {
+ public:
+  TimedSource(int count, std::chrono::milliseconds interval, bool fail_at_end)
+      : count_(count), interval_(interval), fail_at_end_(fail_at_end) {}
+  ReadStatus Read(CapturedFrame* frame, std::string* problem) override {
+    std::this_thread::sleep_for(interval_);
+    if (next_ == count_) {
+      if (fail_at_end_) throw std::runtime_error("camera unplugged");
+      return ReadStatus::kEnd;
+    }
+    const int i = next_++;
+    if (i == 3) {
+      *problem = "frame 3 unreadable";
+      return ReadStatus::kSkipped;
+    }
+    frame->bgr = cv::Mat(2, 2, CV_8UC3, cv::Scalar::all(i));
+    frame->index = i;
+    return ReadStatus::kFrame;
+  }
+  std::string Describe() const override { return "timed"; }
+  double fps() const override { return 1000.0 / interval_.count(); }
+
+ private:
+  int count_, next_ = 0;
+  std::chrono::milliseconds interval_;
+  bool fail_at_end_;
+};
+
+TEST(NewestFrameSource, ASlowReaderGetsTheNewestFramesAndTheRestAreCountedDropped) {
+  NewestFrameSource source(std::make_unique<TimedSource>(40, std::chrono::milliseconds(5), false));
+  std::vector<uint64_t> got;
+  CapturedFrame f;
+  std::string problem;
+  for (ReadStatus st; (st = source.Read(&f, &problem)) != ReadStatus::kEnd;) {
+    if (st != ReadStatus::kFrame) continue;
+    got.push_back(f.index);
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));  // a tracker eight times slower than the camera
+  }
+  ASSERT_GE(got.size(), 3u);
+  EXPECT_LT(got.size(), 20u) << "a slow reader must not see every frame";
+  for (size_t i = 1; i < got.size(); ++i) EXPECT_GT(got[i], got[i - 1]);
+  EXPECT_EQ(got.back(), 39u) << "the last frame the camera gave is the last read";
+  EXPECT_EQ(got.size() + source.dropped(), 39u) << "every good frame was read or counted dropped";
+}
+
+TEST(NewestFrameSource, ProblemsAndAFailingSourceAreSaid) {
+  NewestFrameSource source(std::make_unique<TimedSource>(5, std::chrono::milliseconds(20), true));
+  CapturedFrame f;
+  std::string problem;
+  std::vector<std::string> problems;
+  int frames = 0;
+  for (ReadStatus st; (st = source.Read(&f, &problem)) != ReadStatus::kEnd;) {
+    if (st == ReadStatus::kSkipped) problems.push_back(problem);
+    if (st == ReadStatus::kFrame) ++frames;
+  }
+  EXPECT_EQ(frames, 4);  // a fast reader misses nothing
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_EQ(problems[0], "frame 3 unreadable");
+  EXPECT_EQ(problem, "camera unplugged") << "the end says why";
+  EXPECT_EQ(source.dropped(), 0u);
 }
 
 TEST(V4l2Negotiation, PicksTheClosestModeAFrameRateCanKeepUpWith) {

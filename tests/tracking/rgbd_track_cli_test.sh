@@ -29,7 +29,8 @@ port=$((20000 + $$ % 20000))
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq" \
-  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --record "$tmp/live.hcrec" --stats-json "$tmp/tx.json" \
+  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --as-fast-as-possible --record "$tmp/live.hcrec" \
+  --stats-json "$tmp/tx.json" \
   > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx"; rx=
