@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# A live RGB-D session on loopback (issue #25): a rendered RGB-D sequence of
+# the built-in head with known parameters (headcast-headmodel render-rgbd,
+# depth noise in mm) through headcast-sender --input (the RGB-D fit, identity
+# from the first frames then frozen; the sender pinned to one core, frames read
+# as fast as it tracks them) to headcast-receiver; ms per stage from the
+# sender's report, head position and rotation error against the truth.
+#   bench/live_rgbd.sh OUT [--frames N] [--noise MM]
+# Writes OUT/live_rgbd.json and prints it.
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+python=${HEADCAST_PYTHON:-/usr/bin/python3}
+bin=${HEADCAST_BIN:-$root/build/bin}
+[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
+out=$1; shift
+command="bench/live_rgbd.sh OUT $*"
+frames=60 noise=1
+while [ $# -gt 0 ]; do
+  case $1 in
+    --frames) frames=$2; shift 2 ;;
+    --noise) noise=$2; shift 2 ;;
+    *) echo "live_rgbd: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+"$bin/headcast-headmodel" render-rgbd builtin --out "$out/seq" --frames "$frames" --shape 0=0.8 \
+  --depth-noise "$noise" > "$out/render.log" 2>&1
+fx=$("$python" -c "import json; print(json.load(open('$out/seq/truth.json'))['camera']['fx'])")
+"$bin/headcast-avatar" create --resolution 128 --out "$out/a.hcavatar" > /dev/null 2>&1
+port=$((20000 + $$ % 20000))
+"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$out/a.hcavatar" \
+  --display none --stats-json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
+rx=$!
+trap 'kill "$rx" 2>/dev/null || true' EXIT
+for _ in $(seq 100); do grep -q listening "$out/receiver.log" && break; sleep 0.1; done
+taskset -c 0 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$out/seq" \
+  --intrinsics "$fx,$fx,319.5,239.5" --as-fast-as-possible --record "$out/live.hcrec" \
+  --stats-json "$out/sender.json" > /dev/null 2> "$out/sender.log"
+sleep 0.5
+kill -INT "$rx"; wait "$rx" || true
+"$python" "$root/tests/tracking/compare_track_truth.py" --proto-dir "$root/proto" --recording "$out/live.hcrec" \
+  --truth "$out/seq/truth.json" --max-translation-mm 1000 > "$out/truth.json"
+"$python" - "$out" "$command" "$noise" <<'PY'
+import json, os, sys
+out, command, noise = sys.argv[1], sys.argv[2], float(sys.argv[3])
+s = json.load(open(os.path.join(out, "sender.json")))
+r = json.load(open(os.path.join(out, "receiver.json")))
+t = json.load(open(os.path.join(out, "truth.json")))
+k = s["tracking"]
+stage = {x: k[x] for x in ("read_wait_ms_median", "landmarks_ms_median", "landmarks_ms_p95", "fit_ms_median", "fit_ms_p95")}
+per_frame = k["landmarks_ms_median"] + k["fit_ms_median"]
+result = {"command": command, "depth_noise_mm": noise, "frames_read": k["frames_read"],
+          "frames_with_depth": k["frames_with_depth"], "frames_fitted": k["frames_fitted"],
+          "frames_sent": s["frames_sent"], "frames_received": r["frames_received"], "stages_ms": stage,
+          "track_ms_median_one_core": per_frame,
+          "truth": {x: v for x, v in t.items() if "error" in x and "shape" not in x}}
+json.dump(result, open(os.path.join(out, "live_rgbd.json"), "w"), indent=2)
+print(json.dumps(result, indent=2))
+PY
