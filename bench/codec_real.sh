@@ -8,7 +8,8 @@
 #   bench/codec_real.sh OUT [--ict DIR] [--clips "d9 d10 d14 d3"] [--errors "2e-4 3e-4"]
 #       [--avatars DIR]   a bench/four_clips.sh output (ict.npz, ds_CLIP/, avatar_CLIP.hcavatar;
 #                         a clip without its avatar there gets no PSNR cost)
-# Writes OUT/codec_real.{json,md} and prints the table.
+# Writes OUT/codec_real.{json,md} and prints the table. Tracks and PSNR costs
+# already in OUT are reused (a later run can add clips or avatars).
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 python=${HEADCAST_PYTHON:-/usr/bin/python3}
@@ -50,7 +51,7 @@ for clip in $clips; do
       step "$clip: no avatar in $avatars, no PSNR cost"
     elif [ -n "$avatars" ]; then
       step "$clip: PSNR cost through the avatar, error $e m"
-      run "cost_${clip}_$e.log" "$bin/headcast-bench" codec --recording "$out/$clip.hcrec" --head-model "$model" \
+      [ -f "$out/cost_${clip}_$e.json" ] || run "cost_${clip}_$e.log" "$bin/headcast-bench" codec --recording "$out/$clip.hcrec" --head-model "$model" \
         --quantisation-error "$e" --key-interval 300 --avatar "$avatars/avatar_$clip.hcavatar" \
         --data "$avatars/ds_$clip" --json "$out/cost_${clip}_$e.json"
     fi
