@@ -1,21 +1,48 @@
 #!/usr/bin/env bash
-# Trains the shipped defaults with the project's own pipeline, from nothing but
-# the built-in head model:
-#   1. the general model for the built-in head (headcast-train pretrain);
-#   2. a synthetic demo subject: a talking head with its own identity rendered
-#      by headcast-headmodel, as a video; its first frames train the avatar
-#      (prep -> subject), its last frames are the demo's input (never trained on);
-#   3. their reports, logs and plots.
-# Usage: deploy/make_default_models.sh [OUT_DIR]   (default: models/; ~40 min on 2 cores)
-# Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 deploy/make_default_models.sh /tmp/m
+# Makes the shipped models with the project's own pipeline:
+#   builtin (from nothing but the built-in head model, ~40 min on 2 cores):
+#     1. the general model for the built-in head (headcast-train pretrain);
+#     2. a synthetic demo subject: a talking head with its own identity rendered
+#        by headcast-headmodel, as a video; its first frames train the avatar
+#        (prep -> subject), its last frames are the demo's input (never trained on);
+#     3. their reports, logs and plots.
+#   ict (from the ICT-FaceKit folder, ~12 min on 2 cores): what `headcast-train
+#     create` starts from, so a real person's avatar needs no download:
+#     1. ICT-FaceKit converted compactly (int16 bases, 5 µm a step; MIT, its
+#        licence beside it as ict_facekit.LICENSE);
+#     2. its general model (pretrain on synthetic renders of it, 128 px).
+# Usage: deploy/make_default_models.sh [OUT_DIR] [builtin|ict|all]   (default: models/ all)
+#   ICT=DIR  the ICT-FaceKit folder (default ../shared/data/head-models/ict-facekit)
+# Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 ICT_ITERATIONS=300 deploy/make_default_models.sh /tmp/m
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bin=${HEADCAST_BIN:-$here/build/bin}
 out=${1:-$here/models}
+which=${2:-all}
 general_iterations=${GENERAL_ITERATIONS:-6000}
 subject_iterations=${SUBJECT_ITERATIONS:-1500}
+ict_iterations=${ICT_ITERATIONS:-4000}
+ict=${ICT:-$here/../shared/data/head-models/ict-facekit}
+case $which in builtin | ict | all) ;; *) echo "make_default_models: builtin, ict or all, not $which" >&2; exit 2 ;; esac
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
+mkdir -p "$out"
+
+if [ "$which" != builtin ]; then
+  [ -d "$ict/FaceXModel" ] || { echo "make_default_models: no ICT-FaceKit folder at $ict (set ICT=DIR)" >&2; exit 2; }
+  echo "== ICT-FaceKit, compact (int16 bases, 5 µm a step)"
+  "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --out "$out/ict_facekit.npz" > /dev/null
+  cp "$ict/LICENSE" "$out/ict_facekit.LICENSE"
+  echo "== general model for ICT-FaceKit (128 px, $ict_iterations steps, 2 processes)"
+  mkdir -p "$out/ict_general"
+  "$bin/headcast-train" pretrain --head-model "$out/ict_facekit.npz" --resolution 128 --iterations "$ict_iterations" \
+    --processes 2 --eval 40 --eval-every 500 --log-csv "$out/ict_general/loss.csv" \
+    --eval-csv "$out/ict_general/eval.csv" --plots "$out/ict_general" --preview "$out/ict_general/preview.png" \
+    --report "$out/ict_general/report.json" --checkpoint-dir "$work/ckpt_ict" --out "$out/ict_general.hcavatar" \
+    > /dev/null
+  /usr/bin/python3 "$here/bench/strip_machine_paths.py" --root "$here" "$out/ict_general"
+  [ "$which" = ict ] && { du -sh "$out"; exit 0; }
+fi
 mkdir -p "$out/general" "$out/demo"
 
 echo "== 1. general model (built-in head, 128 px, $general_iterations steps)"

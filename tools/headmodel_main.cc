@@ -312,9 +312,14 @@ int main(int argc, char** argv) {
       "--parts", ict_parts,
       "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories (default all)");
   ict->add_option("--out", out, "output .npz")->required();
+  HeadModelSaveOptions save;
+  const char* step_help =
+      "store the bases as int16 steps of this many metres (compact, e.g. 5e-6: what models/ ships; 0: float32)";
+  ict->add_option("--basis-step", save.basis_step, step_help)->check(CLI::Range(0.0, 1e-3))->capture_default_str();
   // Built-in
   auto* builtin = convert->add_subcommand("builtin", "write the built-in procedural head as .npz");
   builtin->add_option("--out", out, "output .npz")->required();
+  builtin->add_option("--basis-step", save.basis_step, step_help)->check(CLI::Range(0.0, 1e-3))->capture_default_str();
 
   auto* summary = app.add_subcommand("summary", "print a model's sizes, joints, landmarks and component names");
   std::string summary_model;
@@ -379,12 +384,12 @@ int main(int argc, char** argv) {
       for (std::string part; std::getline(ss, part, ',');)
         if (!part.empty()) ict_options.parts.push_back(part);
       const HeadModel model = ConvertIctFaceKit(ict_options);
-      SaveHeadModel(model, out);
-      std::cout << model.Summary() << "wrote " << out << "\n";
+      SaveHeadModel(model, out, save);
+      std::cout << LoadHeadModel(out).Summary() << "wrote " << out << "\n";  // as read back
     } else if (builtin->parsed()) {
       const HeadModel model = MakeBuiltinHead();
-      SaveHeadModel(model, out);
-      std::cout << model.Summary() << "wrote " << out << "\n";
+      SaveHeadModel(model, out, save);
+      std::cout << LoadHeadModel(out).Summary() << "wrote " << out << "\n";  // as read back
     } else if (summary->parsed()) {
       std::cout << LoadHeadModelSpec(summary_model).Summary();
     } else if (render->parsed()) {

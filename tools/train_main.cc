@@ -4,13 +4,18 @@
 //   subject   a person's avatar, fine-tuned from the general model
 //   eval      PSNR/SSIM on the test split, side-by-side, orbit and transfer videos
 //   plot      CSV logs of several runs in one picture
+//   create    all of it in one command: video, image folder or camera -> avatar
 #include <CLI/CLI.hpp>
+#include <cstdlib>
 #include <iostream>
 #include <memory>
 
 #include "common/capture/capture_flags.h"
+#include "common/core/camera.h"
 #include "common/core/local_ranks.h"
 #include "common/core/log.h"
+#include "receiver/display/display.h"
+#include "training/create.h"
 #include "training/run_report.h"
 #include "training/runs.h"
 
@@ -213,6 +218,51 @@ int main(int argc, char** argv) {
   plot->add_option("--y-label", y_label, "y axis");
   plot->add_flag("--log-y", log_y, "logarithmic y axis");
 
+  auto* create = app.add_subcommand(
+      "create", "one command to your avatar: a video, image folder or camera -> tracking, dataset, fine-tune, eval");
+  CreateOptions c;
+  std::string preview = std::getenv("DISPLAY") != nullptr ? "window" : "none";
+  create->add_option("--input", c.input, "a video file, an image folder, or a camera (/dev/videoN: recorded first)")
+      ->required();
+  create->add_option("--out", c.out, "the avatar to write (.hcavatar)")->required();
+  create->add_option("--work", c.work_dir, "the stages' outputs (default: OUT's name + .create beside it)");
+  create->add_option("--head-model", c.head_model,
+                     "builtin or a model .npz (default: the shipped ICT-FaceKit, models/ict_facekit.npz)");
+  create->add_option("--general", c.general,
+                     "the general model to fine-tune (default: the shipped one for the head model)");
+  create->add_option("--iterations", c.iterations, "fine-tune steps")->capture_default_str();
+  create->add_option("--resolution", c.resolution, "the avatar's output size")
+      ->check(CLI::IsMember({128, 256, 512}))
+      ->capture_default_str();
+  create->add_option("--max-frames", c.max_frames, "use at most this many frames (0: all)")->capture_default_str();
+  create
+      ->add_option("--test-frames", c.test_frames,
+                   "the last N fitted frames are held out for the figures (at most a sixth of them)")
+      ->capture_default_str();
+  create->add_option("--intrinsics", c.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
+  create->add_flag("--resume", c.resume, "continue an interrupted create in --work");
+  create->add_option("--stop-after", c.stop_after, "end after this stage (record, prep, fine-tune); --resume goes on")
+      ->check(CLI::IsMember({"record", "prep", "fine-tune"}));
+  create->add_option("--record", c.record_s,
+                     "seconds to record first (cameras: 60 unless given; a video given this plays as a camera)");
+  create->add_flag("--accept-recording", c.accept_recording, "train even when the recording's quality check fails");
+  create->add_option("--preview", preview, "while recording, show the camera with its prompts: window or none")
+      ->check(CLI::IsMember({"window", "none"}))
+      ->capture_default_str();
+  create->add_flag("!--no-landmarks", c.landmarks, "skip eval's dlib landmark figures");
+  create->add_option("--processes", c.processes, "fine-tune ranks (2 on two cores)")
+      ->check(CLI::Range(1, 64))
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast)
+      ->capture_default_str();
+  create->add_option("--threads", c.threads, "libtorch threads of this process (0: libtorch's choice)")
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+  create->add_option("--rank", c.distributed.rank, "(set by --processes for its copies)")->group("");
+  create->add_option("--world-size", c.distributed.world_size, "")->group("");
+  create->add_option("--master-addr", c.distributed.master_addr, "")->group("");
+  create->add_option("--master-port", c.distributed.master_port, "")->group("");
+  std::string camera_size = "640x480";
+  AddCameraFlags(*create, c.source, camera_size);
+
   EndWithParentRank();
   CLI11_PARSE(app, argc, argv);
   try {
@@ -241,6 +291,32 @@ int main(int argc, char** argv) {
       if (ranks) ranks->Wait();
     } else if (eval->parsed()) {
       report = RunEval(e);
+    } else if (create->parsed()) {
+      ParseSize(camera_size, "--camera-size", &c.source.width, &c.source.height);
+      std::unique_ptr<LocalRanks> ranks;
+      std::unique_ptr<Display> display;
+      CreateHooks hooks;
+      hooks.start_ranks = [&](FitOptions* fit) -> std::function<void()> {
+        if (fit->threads == 0) fit->threads = 1;
+        ranks = std::make_unique<LocalRanks>(c.processes, std::vector<std::string>(argv + 1, argv + argc));
+        fit->distributed.world_size = c.processes;
+        fit->distributed.master_addr = "127.0.0.1";
+        fit->distributed.master_port = ranks->port();
+        return [&] { ranks->Wait(); };
+      };
+      if (preview == "window")
+        hooks.show = [&](const cv::Mat& frame) {
+          if (!display) {
+            DisplayOptions d;
+            d.title = "headcast: recording for your avatar";
+            d.draw_overlay = false;
+            display = MakeDisplay(d);
+          }
+          return display->Show(frame, {});
+        };
+      report = RunCreate(c, hooks);
+      if (c.distributed.rank > 0) return 0;
+      std::cerr << CreateSummaryText(report);
     } else if (plot->parsed()) {
       std::vector<PlotSeries> lines;
       for (const std::string& spec : series) {

@@ -30,6 +30,7 @@ void PrepOptions::Check() const {
   c.That(!resolutions.empty(), "at least one resolution");
   for (int r : resolutions) c.That(r == 128 || r == 256 || r == 512, "resolutions are 128, 256 or 512");
   c.InRange("test_frames", test_frames, 0, 1000000).NonNegative("max_frames", max_frames);
+  c.InRange("test_share", test_share, 0.0, 0.9);
   c.InRange("interpolate", interpolate, 0, 8)
       .InRange("crop_scale", crop_scale, 1.0, 6.0)
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
@@ -218,9 +219,12 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   const nlohmann::json& track_report = tracked.report;
   if (fitted.empty()) throw std::runtime_error(o.input + ": no face was found and fitted in any frame");
   const int min_train = 8;
-  if (static_cast<int>(fitted.size()) < o.test_frames + min_train)
+  // A short video keeps most of its frames for training (test_share).
+  const int test_frames =
+      o.test_share > 0 ? std::min(o.test_frames, static_cast<int>(fitted.size() * o.test_share)) : o.test_frames;
+  if (static_cast<int>(fitted.size()) < test_frames + min_train)
     throw std::runtime_error(o.input + ": " + std::to_string(fitted.size()) + " fitted frames; the split needs " +
-                             std::to_string(o.test_frames) + " test frames and at least " + std::to_string(min_train) +
+                             std::to_string(test_frames) + " test frames and at least " + std::to_string(min_train) +
                              " training frames (lower --test-frames?)");
 
   // 2. One crop box for the whole video, so the camera stays one pinhole:
@@ -295,7 +299,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       fs::create_directories(dir / std::to_string(r) / "interp" / "images");
       fs::create_directories(dir / std::to_string(r) / "interp" / "masks");
     }
-    for (int i = 0; i + 1 < n - o.test_frames; ++i) {
+    for (int i = 0; i + 1 < n - test_frames; ++i) {
       const FrameParams &a = fitted[static_cast<size_t>(i)], &b = fitted[static_cast<size_t>(i + 1)];
       if (b.sequence != a.sequence + 1) continue;  // a gap (lost face): nothing to interpolate
       for (int r : o.resolutions) {
@@ -344,7 +348,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"frames_read", track_report.value("frames", 0)},
       {"frames_fitted", n},
       {"frame_numbers", frame_numbers},
-      {"split", {{"train", n - o.test_frames}, {"test", o.test_frames}, {"rule", "test = the last N fitted frames"}}},
+      {"split", {{"train", n - test_frames}, {"test", test_frames}, {"rule", "test = the last N fitted frames"}}},
       {"interpolated",
        {{"per_pair", o.interpolate},
         {"frames", interpolated},

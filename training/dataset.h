@@ -37,6 +37,7 @@ struct PrepOptions {
   std::string out_dir;
   std::vector<int> resolutions = {128, 256};
   int test_frames = 150;      // the last N fitted frames are the test split
+  double test_share = 0;      // > 0: at most this share of the fitted frames (short videos); 0: no cap
   int max_frames = 0;         // 0: all
   bool calibrate = true;      // identity calibration over key frames (shape, focal)
   std::string identity_from;  // or: beta from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json

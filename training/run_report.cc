@@ -1,6 +1,8 @@
 // Progress, logs and plots.
 #include "training/run_report.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,14 +14,34 @@
 
 namespace headcast {
 
+std::string HumanDuration(double seconds) {
+  char text[32];
+  if (!(seconds < 90))
+    std::snprintf(text, sizeof(text), seconds < 600 ? "%.1f min" : "%.0f min", seconds / 60);
+  else
+    std::snprintf(text, sizeof(text), "%.0f s", std::max(0.0, seconds));
+  return text;
+}
+
+ProgressLine::ProgressLine(int first_step, int last_step, double file_every_s)
+    : first_(first_step), last_(last_step), terminal_(isatty(fileno(stderr)) != 0), file_every_s_(file_every_s) {}
+
 void ProgressLine::Show(int step, const std::string& figures) {
   const double done = (step + 1.0 - first_) / std::max(1, last_ - first_);
   const double elapsed = watch_.ElapsedSeconds();
-  std::fprintf(stderr, "\rstep %d/%d  %s  %.0f s, ETA %.0f s   ", step + 1, last_, figures.c_str(), elapsed,
-               elapsed * (1 - done) / std::max(done, 1e-9));
+  const std::string times =
+      HumanDuration(elapsed) + ", ETA " + HumanDuration(elapsed * (1 - done) / std::max(done, 1e-9));
+  if (terminal_) {
+    std::fprintf(stderr, "\rstep %d/%d  %s  %s   ", step + 1, last_, figures.c_str(), times.c_str());
+  } else if (step + 1 >= last_ || elapsed - last_line_s_ >= file_every_s_) {
+    std::fprintf(stderr, "step %d/%d  %s  %s\n", step + 1, last_, figures.c_str(), times.c_str());
+    last_line_s_ = elapsed;
+  }
 }
 
-void ProgressLine::Finish() { std::fprintf(stderr, "\n"); }
+void ProgressLine::Finish() {
+  if (terminal_) std::fprintf(stderr, "\n");
+}
 
 CsvLog::CsvLog(const std::string& path, const std::string& header, bool resume, int first_step) : path_(path) {
   std::string kept = header + "\n";

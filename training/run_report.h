@@ -11,15 +11,22 @@
 
 namespace headcast {
 
-// "step 120/1000  loss 0.0123  35 s, ETA 256 s" on stderr, redrawn in place.
+// "35 s", "4.3 min", "25 min": what a person reads in a progress line.
+std::string HumanDuration(double seconds);
+
+// "step 120/1000  loss 0.0123  35 s, ETA 4.3 min" on stderr: redrawn in place
+// on a terminal; in a file (a log), a whole line every `file_every_s` and at
+// the last step, so logs hold lines rather than carriage returns.
 class ProgressLine {
  public:
-  ProgressLine(int first_step, int last_step) : first_(first_step), last_(last_step) {}
+  ProgressLine(int first_step, int last_step, double file_every_s = 30);
   void Show(int step, const std::string& figures);
   void Finish();
 
  private:
   int first_, last_;
+  bool terminal_;
+  double file_every_s_, last_line_s_ = -1e9;
   Stopwatch watch_;
 };
 

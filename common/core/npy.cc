@@ -22,8 +22,9 @@ struct DTypeInfo {
 };
 
 constexpr DTypeInfo kDTypes[] = {
-    {DType::kFloat32, "<f4", 4, "float32"}, {DType::kFloat64, "<f8", 8, "float64"}, {DType::kInt32, "<i4", 4, "int32"},
-    {DType::kInt64, "<i8", 8, "int64"},     {DType::kUInt8, "|u1", 1, "uint8"},     {DType::kBool, "|b1", 1, "bool"},
+    {DType::kFloat32, "<f4", 4, "float32"}, {DType::kFloat64, "<f8", 8, "float64"}, {DType::kInt16, "<i2", 2, "int16"},
+    {DType::kInt32, "<i4", 4, "int32"},     {DType::kInt64, "<i8", 8, "int64"},     {DType::kUInt8, "|u1", 1, "uint8"},
+    {DType::kBool, "|b1", 1, "bool"},
 };
 
 const DTypeInfo& Info(DType dtype) {
@@ -115,6 +116,12 @@ static std::vector<Out> ConvertAll(const NpyArray& a) {
         out[i] = static_cast<Out>(v);
         break;
       }
+      case DType::kInt16: {
+        int16_t v;
+        std::memcpy(&v, p + 2 * i, 2);
+        out[i] = static_cast<Out>(v);
+        break;
+      }
       case DType::kInt32: {
         int32_t v;
         std::memcpy(&v, p + 4 * i, 4);
@@ -172,7 +179,8 @@ NpyArray ParseNpy(const std::string& bytes, const std::string& what) {
   for (const auto& i : kDTypes)
     if (descr == i.descr) info = &i;
   if (!info)
-    Fail(what, "unsupported dtype '" + descr + "' (expected little-endian float32/float64/int32/int64/uint8/bool)");
+    Fail(what,
+         "unsupported dtype '" + descr + "' (expected little-endian float32/float64/int16/int32/int64/uint8/bool)");
   if (HeaderField(header, "fortran_order", what) != "False")
     Fail(what, "Fortran-ordered arrays are not supported; save with C order");
 

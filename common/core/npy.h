@@ -11,7 +11,7 @@
 namespace headcast {
 
 // The element types we accept: little-endian, C order. Anything else is refused.
-enum class DType { kFloat32, kFloat64, kInt32, kInt64, kUInt8, kBool };
+enum class DType { kFloat32, kFloat64, kInt16, kInt32, kInt64, kUInt8, kBool };
 
 const char* DTypeName(DType dtype);
 int DTypeSize(DType dtype);
@@ -67,6 +67,10 @@ struct DTypeOf<float> {
 template <>
 struct DTypeOf<double> {
   static constexpr DType value = DType::kFloat64;
+};
+template <>
+struct DTypeOf<int16_t> {
+  static constexpr DType value = DType::kInt16;
 };
 template <>
 struct DTypeOf<int32_t> {

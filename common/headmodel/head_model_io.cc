@@ -46,6 +46,25 @@ class Reader {
   std::vector<float> Floats(const std::string& key, const std::vector<int64_t>& dims) const {
     return Get(key, dims, false).ToFloats();
   }
+  // A basis stored as floats, or compactly as int16 steps with `KEY_step`
+  // (metres a step) beside it (SaveOptions::basis_step).
+  const NpyArray& Basis(const std::string& key, const std::vector<int64_t>& dims, std::vector<float>* values) const {
+    auto it = archive_.find(key);
+    if (it == archive_.end() || it->second.dtype() != DType::kInt16) {
+      const NpyArray& a = Get(key, dims, false);
+      *values = a.ToFloats();
+      return a;
+    }
+    const std::vector<float> step = Floats(key + "_step", {1});
+    if (!(step[0] > 0) || !std::isfinite(step[0])) Fail(key + "_step", "must be a positive step");
+    const NpyArray& a = it->second;
+    bool shape_ok = a.ndim() == static_cast<int>(dims.size());
+    for (size_t i = 0; shape_ok && i < dims.size(); ++i) shape_ok = dims[i] < 0 || a.dim(i) == dims[i];
+    if (!shape_ok) Fail(key, "shape " + a.ShapeString() + " does not fit the model");
+    *values = a.ToFloats();
+    for (float& v : *values) v *= step[0];
+    return a;
+  }
   std::vector<int64_t> Ints(const std::string& key, const std::vector<int64_t>& dims) const {
     return Get(key, dims, true).ToInt64s();
   }
@@ -108,10 +127,11 @@ HeadModel LoadHeadModel(const std::string& path) {
   const auto& vt = in.Get("v_template", {-1, 3}, false);
   const int64_t n = vt.dim(0);
   d.v_template = RowMajorFrom<RowMatrixX3f>(vt.ToFloats(), n, 3);
-  const auto& sd = in.Get("shapedirs", {n, 3, -1}, false);
-  d.shapedirs = BasisFromNK3(sd.ToFloats(), n, sd.dim(2));
-  const auto& ed = in.Get("expressiondirs", {n, 3, -1}, false);
-  d.expressiondirs = BasisFromNK3(ed.ToFloats(), n, ed.dim(2));
+  std::vector<float> values;
+  const auto& sd = in.Basis("shapedirs", {n, 3, -1}, &values);
+  d.shapedirs = BasisFromNK3(values, n, sd.dim(2));
+  const auto& ed = in.Basis("expressiondirs", {n, 3, -1}, &values);
+  d.expressiondirs = BasisFromNK3(values, n, ed.dim(2));
   if (in.Has("posedirs"))
     d.posedirs = BasisFromNK3(in.Floats("posedirs", {n, 3, kNumPoseFeatures}), n, kNumPoseFeatures);
   d.j_regressor = RowMajorFrom<Eigen::MatrixXf>(in.Floats("J_regressor", {kNumHeadJoints, n}), kNumHeadJoints, n);
@@ -166,15 +186,43 @@ HeadModel LoadHeadModel(const std::string& path) {
   }
 }
 
-void SaveHeadModel(const HeadModel& model, const std::string& path) {
+namespace {
+
+// The basis as int16 multiples of `step` plus KEY_step; refuses a step too
+// fine for int16 rather than wrapping.
+void PutCompactBasis(NpzArchive* a, const std::string& key, const Eigen::MatrixXf& basis, int64_t n, double step) {
+  const std::vector<float> values = BasisToNK3(basis);
+  std::vector<int16_t> steps(values.size());
+  for (size_t i = 0; i < values.size(); ++i) {
+    const double q = std::round(values[i] / step);
+    if (std::abs(q) > 32767)
+      throw std::invalid_argument(key + ": a value of " + std::to_string(values[i]) + " m needs a step of at least " +
+                                  std::to_string(std::abs(values[i]) / 32767) + " m for int16");
+    steps[i] = static_cast<int16_t>(q);
+  }
+  (*a)[key] = NpyArray::From<int16_t>({n, 3, basis.cols()}, steps.data());
+  const float step_value = static_cast<float>(step);
+  (*a)[key + "_step"] = NpyArray::From<float>({1}, &step_value);
+}
+
+}  // namespace
+
+void SaveHeadModel(const HeadModel& model, const std::string& path, const HeadModelSaveOptions& options) {
+  if (!(options.basis_step >= 0) || !std::isfinite(options.basis_step))
+    throw std::invalid_argument("basis step must be 0 (float32) or a positive number of metres");
   const HeadModelData& d = model.data();
   const int64_t n = model.num_vertices();
   NpzArchive a;
   const int32_t version = kHeadModelFormatVersion;
   a["headcast_format"] = NpyArray::From<int32_t>({1}, &version);
   a["v_template"] = NpyArray::From<float>({n, 3}, RowMajorValues<float>(d.v_template).data());
-  a["shapedirs"] = NpyArray::From<float>({n, 3, model.num_shape()}, BasisToNK3(d.shapedirs).data());
-  a["expressiondirs"] = NpyArray::From<float>({n, 3, model.num_expression()}, BasisToNK3(d.expressiondirs).data());
+  if (options.basis_step > 0) {
+    PutCompactBasis(&a, "shapedirs", d.shapedirs, n, options.basis_step);
+    PutCompactBasis(&a, "expressiondirs", d.expressiondirs, n, options.basis_step);
+  } else {
+    a["shapedirs"] = NpyArray::From<float>({n, 3, model.num_shape()}, BasisToNK3(d.shapedirs).data());
+    a["expressiondirs"] = NpyArray::From<float>({n, 3, model.num_expression()}, BasisToNK3(d.expressiondirs).data());
+  }
   if (d.posedirs.size() > 0)
     a["posedirs"] = NpyArray::From<float>({n, 3, kNumPoseFeatures}, BasisToNK3(d.posedirs).data());
   a["J_regressor"] = NpyArray::From<float>({kNumHeadJoints, n}, RowMajorValues<float>(d.j_regressor).data());

@@ -5,6 +5,8 @@
 //   v_template        float (N,3)       metres, y up, z out of the face
 //   shapedirs         float (N,3,S)     identity basis
 //   expressiondirs    float (N,3,E)     expression basis
+//     either basis may instead be int16 (N,3,K) with KEY_step float (1,): metres a step
+//     (the compact form shipped models use; written with HeadModelSaveOptions::basis_step)
 //   posedirs          float (N,3,36)    pose correctives (optional; FLAME layout)
 //   J_regressor       float (5,N)       root, neck, jaw, left eye, right eye
 //   weights           float (N,5)       skinning weights, rows sum to 1
@@ -32,7 +34,12 @@ constexpr int kHeadModelFormatVersion = 1;
 // Throws std::runtime_error naming the file and the key on any problem
 // (missing key, wrong shape or dtype, NaN, bad indices, unreadable file).
 HeadModel LoadHeadModel(const std::string& path);
-void SaveHeadModel(const HeadModel& model, const std::string& path);
+struct HeadModelSaveOptions {
+  // 0: the bases as float32. > 0: as int16 multiples of this many metres
+  // (a few MB instead of tens for ICT-FaceKit; throws when a value does not fit).
+  double basis_step = 0;
+};
+void SaveHeadModel(const HeadModel& model, const std::string& path, const HeadModelSaveOptions& options = {});
 
 // "builtin" for the procedural head, otherwise a path to a model .npz.
 HeadModel LoadHeadModelSpec(const std::string& spec);

@@ -78,6 +78,12 @@ TEST(Npy, RefusesWhatItCannotRead) {
             std::string::npos);
   EXPECT_EQ(message(Header("{'descr': '<f4', 'fortran_order': False, 'shape': (2,), }") + std::string(8, '\0')),
             "no error");
+  // int16 (the compact bases of shipped head models): two values, -2 and 300.
+  const NpyArray i16 =
+      ParseNpy(Header("{'descr': '<i2', 'fortran_order': False, 'shape': (2,), }") + std::string("\xfe\xff\x2c\x01", 4),
+               "i16.npy");
+  EXPECT_EQ(i16.dtype(), DType::kInt16);
+  EXPECT_EQ(i16.ToFloats(), (std::vector<float>{-2.f, 300.f}));
   EXPECT_NE(message("x.npy").find("x.npy"), std::string::npos);  // errors name the source
 }
 

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "common/core/npy.h"
 #include "tests/headmodel/test_models.h"
@@ -126,4 +127,50 @@ TEST_F(HeadModelIo, TruncatedAndMissingFiles) {
 }
 
 }  // namespace
+}  // namespace headcast
+
+namespace headcast {
+
+// The compact form shipped models use: bases as int16 steps plus KEY_step.
+TEST_F(HeadModelIo, CompactBasesRoundTripWithinHalfAStep) {
+  const double step = 5e-6;
+  const std::string compact = dir_ + "/compact.npz";
+  SaveHeadModel(Builtin(), compact, {step});
+  const NpzArchive a = ReadNpz(compact);
+  EXPECT_EQ(a.at("shapedirs").dtype(), DType::kInt16);
+  EXPECT_EQ(a.at("expressiondirs").dtype(), DType::kInt16);
+  EXPECT_LT(std::filesystem::file_size(compact), std::filesystem::file_size(path_));
+  const HeadModel back = LoadHeadModel(compact);
+  const HeadModelData &d = Builtin().data(), &b = back.data();
+  EXPECT_LE((d.shapedirs - b.shapedirs).cwiseAbs().maxCoeff(), step / 2 * 1.0001);
+  EXPECT_LE((d.expressiondirs - b.expressiondirs).cwiseAbs().maxCoeff(), step / 2 * 1.0001);
+  EXPECT_GT((d.expressiondirs - b.expressiondirs).cwiseAbs().maxCoeff(), 0.0);  // it did quantise
+  EXPECT_EQ(back.fingerprint(), Builtin().fingerprint());
+  EXPECT_EQ(b.v_template, d.v_template);  // only the bases are compact
+}
+
+TEST_F(HeadModelIo, CompactBasesRefuseWhatDoesNotFit) {
+  try {
+    SaveHeadModel(Builtin(), dir_ + "/fine.npz", {1e-9});  // centimetres in int16 steps of a nanometre
+    FAIL() << "a step too fine for int16 was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a step of at least"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(SaveHeadModel(Builtin(), dir_ + "/neg.npz", {-1e-6}), std::invalid_argument);
+  const std::string compact = dir_ + "/compact.npz";
+  SaveHeadModel(Builtin(), compact, {5e-6});
+  NpzArchive a = ReadNpz(compact);
+  // An int16 basis without its step, and a step that is not a positive number, are refused by name.
+  NpzArchive no_step = a;
+  no_step.erase("expressiondirs_step");
+  WriteNpz(dir_ + "/no_step.npz", no_step);
+  EXPECT_NE(LoadError(dir_ + "/no_step.npz").find("expressiondirs_step"), std::string::npos);
+  for (const float bad : {0.f, -1e-6f, std::numeric_limits<float>::quiet_NaN()}) {
+    NpzArchive b = a;
+    b["shapedirs_step"] = NpyArray::From<float>({1}, &bad);
+    WriteNpz(dir_ + "/bad_step.npz", b);
+    EXPECT_NE(LoadError(dir_ + "/bad_step.npz").find("shapedirs_step"), std::string::npos) << bad;
+  }
+}
+
 }  // namespace headcast

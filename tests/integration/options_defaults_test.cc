@@ -27,8 +27,10 @@
 #include "receiver/render_loop.h"
 #include "receiver/session_server.h"
 #include "sender/session_client.h"
+#include "training/create.h"
 #include "training/data_parallel.h"
 #include "training/dataset.h"
+#include "training/guided_recording.h"
 #include "training/runs.h"
 #include "training/synthetic_data.h"
 
@@ -115,6 +117,13 @@ std::vector<Case> Cases() {
                            o->out_dir = "eval";
                          }),
       Plain<SyntheticDataOptions>("SyntheticDataOptions"),
+      Needs<CreateOptions>("CreateOptions", "input",
+                           [](CreateOptions* o) {
+                             o->input = "me.mp4";
+                             o->out = "me.hcavatar";
+                           }),
+      Needs<GuidedRecordingOptions>("GuidedRecordingOptions", "out_dir",
+                                    [](GuidedRecordingOptions* o) { o->out_dir = "recording"; }),
   };
 }
 

@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# headcast-train create as a user runs it, on tiny settings: a rendered talking
+# head (image folder) -> stop after prep -> a second call refused without
+# --resume -> --resume finishes (fine-tune with two ranks, eval) -> the summary
+# (held-out figures, an H.264 side-by-side, the commands to use the avatar);
+# resuming with other options is refused; a video recorded as from a camera
+# goes through the quality check; a head model without a general model is refused.
+set -u
+bin=$1 src=$2 python=${3:-/usr/bin/python3}
+source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
+trap 'rm -rf "$tmp"' EXIT
+json() { "$python" -c "import json,sys; j=json.load(open('$1')); print($2)" 2>/dev/null; }
+
+"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 48 --size 320 --shape 0=0.8 > /dev/null 2>&1
+tiny=(--head-model builtin --resolution 128 --iterations 6 --test-frames 8 --no-landmarks)
+
+"$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" "${tiny[@]}" --stop-after prep \
+  > "$tmp/a.json" 2> "$tmp/a.err"
+[ $? -eq 0 ] && [ "$(json "$tmp/me.create/create.json" "sorted(j['stages'])")" = "['prep']" ] &&
+  [ ! -e "$tmp/me.hcavatar" ] && [ "$(json "$tmp/a.json" "j['frames']['fitted'] >= 40")" = True ] &&
+  grep -q "stopped after prep" "$tmp/a.err" && grep -q "about .* in all" "$tmp/a.err" &&
+  ok "create --stop-after prep: the dataset, no avatar yet, the plan's time said" ||
+  bad "stop after prep: $(tail -3 "$tmp/a.err")"
+
+out=$("$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" "${tiny[@]}" 2>&1)
+[ $? -ne 0 ] && grep -q "holds an earlier create: --resume" <<<"$out" && ok "a second create without --resume refused" ||
+  bad "no --resume: $out"
+
+"$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" "${tiny[@]}" --processes 2 --resume \
+  > "$tmp/b.json" 2> "$tmp/b.err"
+status=$?
+codec=$(ffprobe -v error -select_streams v:0 -show_entries stream=codec_name -of csv=p=0 \
+  "$tmp/me.create/eval/side_by_side.mp4" 2>/dev/null)
+[ $status -eq 0 ] && [ -s "$tmp/me.hcavatar" ] && [ "$codec" = h264 ] &&
+  [ "$(json "$tmp/b.json" "10 < j['held_out']['psnr_db'] < 60 and j['held_out']['frames'] == 8")" = True ] &&
+  [ "$(json "$tmp/b.json" "'--avatar me=$tmp/me.hcavatar' in j['use']['receiver'] and '--identity-from $tmp/me.hcavatar' in j['use']['sender']")" = True ] &&
+  [ "$(json "$tmp/me.create/fine_tune.json" "j['fit']['processes']")" = 2 ] &&
+  grep -q "prep: done in an earlier run" "$tmp/b.err" && grep -q "held-out frames: PSNR" "$tmp/b.err" &&
+  ! pgrep -f "$tmp/me.hcavatar" > /dev/null &&
+  ok "create --resume: fine-tune on two ranks, eval; PSNR, an H.264 side-by-side and the commands reported" ||
+  bad "resume: status $status codec '$codec' $(tail -5 "$tmp/b.err")"
+
+out=$("$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" --head-model builtin \
+  --resolution 128 --iterations 7 --test-frames 8 --resume 2>&1)
+[ $? -ne 0 ] && grep -q "iterations = 6, not 7" <<<"$out" && ok "resuming with other options refused, naming them" ||
+  bad "other options: $out"
+
+# A video played as a camera: recorded with guidance, then judged. The rendered
+# head hardly turns in 2 s, so the check fails and says so; --accept-recording goes on.
+ffmpeg -loglevel error -y -framerate 30 -i "$tmp/seq/rgb/%05d.png" -c:v libx264 -pix_fmt yuv420p "$tmp/cam.mp4"
+out=$("$bin/headcast-train" create --input "$tmp/cam.mp4" --record 1 --out "$tmp/cam.hcavatar" "${tiny[@]}" 2>&1)
+[ $? -ne 0 ] && grep -q "poor avatar (.*turn further" <<<"$out" && grep -q "record again" <<<"$out" &&
+  ok "a recording whose head does not turn is refused before training, saying what to do" ||
+  bad "quality check: $out"
+rm -rf "$tmp/cam.create"
+"$bin/headcast-train" create --input "$tmp/cam.mp4" --record 1 --accept-recording --out "$tmp/cam.hcavatar" \
+  "${tiny[@]}" --stop-after prep > "$tmp/c.json" 2> "$tmp/c.err"
+frames=$(ls "$tmp/cam.create/recording" 2>/dev/null | wc -l)
+[ $? -eq 0 ] && [ "$frames" -ge 10 ] && [ "$(json "$tmp/c.json" "j['recording']['checked_frames'] > 0 and j['frames']['fitted'] >= 8")" = True ] &&
+  ok "--accept-recording: $frames frames recorded and prepared" || bad "accept recording: $frames $(tail -3 "$tmp/c.err")"
+
+"$bin/headcast-headmodel" convert builtin --out "$tmp/other.npz" > /dev/null 2>&1
+out=$("$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/x.hcavatar" --head-model "$tmp/other.npz" 2>&1)
+[ $? -ne 0 ] && grep -q "needs --general" <<<"$out" && ok "a head model without --general refused" || bad "general: $out"
+out=$("$bin/headcast-train" create --input "$tmp/nothing" --out "$tmp/y.hcavatar" "${tiny[@]}" 2>&1)
+[ $? -ne 0 ] && grep -q "nothing" <<<"$out" && ok "a missing input refused, named" || bad "missing input: $out"
+
+checks_summary create_cli_test
