@@ -54,13 +54,13 @@ in_box() { docker exec headcast-systemd-check bash -c "$1"; }
 for _ in $(seq 30); do in_box 'systemctl is-system-running 2>/dev/null | grep -qE "running|degraded"' && break; sleep 1; done
 # The unit file's own install steps, as its comments give them (certificates and a token included).
 in_box 'set -e; cd /opt/headcast
+  cmake --install build --prefix /usr > /dev/null
   useradd --system --home /var/lib/headcast --shell /usr/sbin/nologin headcast
   install -d -o headcast -g headcast -m 0750 /etc/headcast /var/lib/headcast
-  cp deploy/examples/receiver.toml /etc/headcast/receiver.toml
+  cp /usr/share/headcast/examples/receiver.toml /etc/headcast/receiver.toml
   deploy/make_certs.sh /etc/headcast/certs localhost 127.0.0.1 > /dev/null
   (umask 077; openssl rand -hex 16 > /etc/headcast/tokens.txt)
   chown -R headcast:headcast /etc/headcast
-  cp deploy/systemd/headcast-receiver.service /etc/systemd/system/
   systemctl daemon-reload && systemctl enable --now headcast-receiver' > "$out/systemd.log" 2>&1
 sleep 3
 in_box 'systemctl is-active headcast-receiver' >> "$out/systemd.log" 2>&1 || {

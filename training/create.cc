@@ -186,6 +186,8 @@ nlohmann::json RunCreate(const CreateOptions& options, const CreateHooks& hooks)
   }
 
   const bool camera = IsCameraInput(options.input);
+  if (!camera && !fs::exists(options.input))
+    throw std::runtime_error(options.input + ": no such video file or image folder");
   const double record_s = options.record_s > 0 ? options.record_s : (camera ? 60.0 : 0.0);
   CreateState state(work, {{"input", options.input},
                            {"head_model", models.head_model},
