@@ -6,6 +6,7 @@
 
 #include "bench/bench.h"
 #include "common/core/log.h"
+#include "common/core/version.h"
 
 namespace headcast::bench {
 
@@ -32,6 +33,7 @@ void AddStats(nlohmann::json* out, const std::string& prefix, const SampleStats&
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-bench: benchmark suites; each prints JSON with its figures"};
+  headcast::AddVersionFlag(app);
   app.require_subcommand(1);
   bench::BenchOptions options;
   auto add_common = [&](CLI::App* sub) {
@@ -114,7 +116,7 @@ int main(int argc, char** argv) {
       if (!out) throw std::runtime_error(options.json_path + ": cannot write");
       out << text << "\n";
     }
-    std::cout << "reproduce: " << cmd << "\n";
+    std::cerr << "reproduce: " << cmd << "\n";  // stdout is the JSON alone
   } catch (const std::exception& e) {
     std::cerr << "headcast-bench: " << e.what() << "\n";
     return 1;

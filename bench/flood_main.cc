@@ -27,6 +27,7 @@
 #include "common/core/options.h"
 #include "common/core/program.h"
 #include "common/core/timer.h"
+#include "common/core/version.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
@@ -206,6 +207,7 @@ int Run(const FloodOptions& o) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-flood: a bounded stream flood against a loopback receiver"};
+  headcast::AddVersionFlag(app);
   headcast::FloodOptions o;
   app.add_option("--target", o.target, "the receiver, host:port (loopback)")->required();
   app.add_option("--token", o.token, "a token the receiver accepts")->required();

@@ -8,6 +8,7 @@
 
 #include "common/avatar/avatar_renderer.h"
 #include "common/core/log.h"
+#include "common/core/version.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/recording.h"
@@ -116,6 +117,7 @@ int Render(const RenderArgs& a) {
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-avatar: avatar files, parameter recordings, and rendering (novel views, expression transfer)"};
+  headcast::AddVersionFlag(app);
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");

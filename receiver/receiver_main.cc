@@ -13,6 +13,7 @@
 #include "common/core/program.h"
 #include "common/core/service_notify.h"
 #include "common/core/timer.h"
+#include "common/core/version.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_model_io.h"
 #include "proto/protocol.h"
@@ -208,6 +209,7 @@ int Run(ReceiverFlags& f) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-receiver: receive head-model parameters over gRPC and show the avatar"};
+  headcast::AddVersionFlag(app);
   headcast::ReceiverFlags flags;
   headcast::AddFlags(app, flags);
   return headcast::RunProgram(app, argc, argv, [&] { return headcast::Run(flags); });

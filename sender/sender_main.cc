@@ -16,6 +16,7 @@
 #include "common/core/log.h"
 #include "common/core/program.h"
 #include "common/core/timer.h"
+#include "common/core/version.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/protocol.h"
@@ -301,6 +302,7 @@ int Run(SenderFlags& f) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-sender: stream head-model parameters to a headcast receiver"};
+  headcast::AddVersionFlag(app);
   headcast::SenderFlags flags;
   headcast::AddFlags(app, flags);
   return headcast::RunProgram(app, argc, argv, [&] { return headcast::Run(flags); });

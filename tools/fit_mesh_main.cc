@@ -14,6 +14,7 @@
 #include "common/core/program.h"
 #include "common/core/rotation.h"
 #include "common/core/timer.h"
+#include "common/core/version.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/mesh_fitter.h"
 
@@ -72,6 +73,7 @@ Eigen::VectorXf ReadImportance(const std::string& path) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-fit-mesh: fit the head model to a polygonal head mesh (weighted residual, METHOD §8)"};
+  headcast::AddVersionFlag(app);
   std::string mesh_path, head_model_spec = "builtin", out, fit = "shape,expression,pose", unit = "m", topology = "auto",
                          weights = "importance-count", loss = "norm", importance, landmarks, fitted_mesh, log_level;
   bool black_box = false;

@@ -11,6 +11,7 @@
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
+#include "common/core/version.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
@@ -281,6 +282,7 @@ std::string Quote(const std::string& s) {
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-headmodel: convert, inspect and render head models (FLAME layout)"};
+  headcast::AddVersionFlag(app);
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");

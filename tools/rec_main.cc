@@ -5,11 +5,13 @@
 
 #include "common/core/log.h"
 #include "common/core/program.h"
+#include "common/core/version.h"
 #include "proto/recording_tools.h"
 
 int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-rec: inspect, export, cut and join parameter recordings (.hcrec)"};
+  headcast::AddVersionFlag(app);
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");

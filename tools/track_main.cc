@@ -10,6 +10,7 @@
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
+#include "common/core/version.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/offline_tracker.h"
 #include "proto/recording.h"
@@ -89,6 +90,7 @@ int Run(TrackFlags& f) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
+  headcast::AddVersionFlag(app);
   TrackFlags flags;
   AddFlags(app, flags);
   return headcast::RunProgram(app, argc, argv, [&] { return Run(flags); });

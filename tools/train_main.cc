@@ -14,6 +14,7 @@
 #include "common/core/camera.h"
 #include "common/core/local_ranks.h"
 #include "common/core/log.h"
+#include "common/core/version.h"
 #include "receiver/display/display.h"
 #include "training/create.h"
 #include "training/run_report.h"
@@ -116,6 +117,7 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
 
 int main(int argc, char** argv) {
   CLI::App app{"headcast-train: build avatars"};
+  headcast::AddVersionFlag(app);
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level");

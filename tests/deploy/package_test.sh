@@ -43,6 +43,14 @@ grep -q "^ExecStart=/usr/bin/headcast-receiver " "$tmp/root/usr/lib/systemd/syst
   ok "the unit runs the installed receiver; the example config names the installed demo avatar" ||
   bad "unit or example config do not point at the installation"
 
+version=$(dpkg-deb -f "$deb" Version)
+wrong=""
+for program in "$tmp"/root/usr/bin/headcast-*; do
+  [ "$("$program" --version 2>&1)" = "headcast $version" ] || wrong="$wrong $(basename "$program")"
+done
+[ -z "$wrong" ] && ok "every installed program answers --version with the package's version ($version)" ||
+  bad "--version wrong for:$wrong"
+
 port=$((20000 + $$ % 20000))
 "$tmp/root/usr/bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --display none \
   --avatar "demo=$tmp/root/usr/share/headcast/models/demo_avatar.hcavatar" --stats-json "$tmp/rx.json" \
