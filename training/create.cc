@@ -27,6 +27,7 @@ void CreateOptions::Check() const {
   c.InRange("processes", processes, 1, 64).InRange("record_s", record_s, 0.0, 3600.0);
   c.That(stop_after.empty() || stop_after == "record" || stop_after == "prep" || stop_after == "fine-tune",
          "stop_after is record, prep or fine-tune");
+  c.ThrowIfErrors();
   source.Check();
 }
 
@@ -108,6 +109,18 @@ int EstimateFrames(const CreateOptions& o, const std::string& input) {
   }
   if (frames <= 0) frames = 600;
   return o.max_frames > 0 ? std::min(frames, o.max_frames) : frames;
+}
+
+// Fine-tune steps an interrupted run already made (its latest checkpoint).
+int CheckpointedSteps(const fs::path& work) {
+  std::ifstream latest(work / "checkpoints" / "LATEST");
+  std::string name;
+  if (!std::getline(latest, name) || name.rfind("step-", 0) != 0) return 0;
+  try {
+    return std::stoi(name.substr(5));
+  } catch (const std::exception&) {
+    return 0;  // a damaged name: the fine-tune itself will say so
+  }
 }
 
 struct Models {
@@ -214,7 +227,7 @@ nlohmann::json RunCreate(const CreateOptions& options, const CreateHooks& hooks)
   std::vector<Plan> plan;
   if (record_s > 0) plan.push_back({"record", record_s});
   plan.push_back({"prep", used * kPrepSecondsPerFrame});
-  plan.push_back({"fine-tune", options.iterations * step_s});
+  plan.push_back({"fine-tune", std::max(0, options.iterations - CheckpointedSteps(work)) * step_s});
   plan.push_back({"eval", std::min(options.test_frames, used / 6) * kEvalSecondsPerFrame});
 
   nlohmann::json minutes = nlohmann::json::object();
@@ -328,11 +341,13 @@ nlohmann::json RunCreate(const CreateOptions& options, const CreateHooks& hooks)
   minutes["total"] = total;
   summary["minutes"] = minutes;
   const std::string avatar = Quoted(options.out), model = Quoted(models.head_model);
-  summary["use"] = {{"receiver", "headcast-receiver --head-model " + model + " --avatar me=" + avatar},
-                    {"sender", "headcast-sender --plaintext --head-model " + model +
+  const std::string receiver = Quoted(SiblingProgram("headcast-receiver")) + " --head-model " + model +
+                               " --avatar me=" + avatar + " --plaintext --allow-no-token";
+  summary["use"] = {{"receiver", receiver},
+                    {"sender", Quoted(SiblingProgram("headcast-sender")) + " --plaintext --head-model " + model +
                                    " --input /dev/video0 --identity-from " + avatar + " --avatar-id me"},
-                    {"virtual_camera", "headcast-receiver --head-model " + model + " --avatar me=" + avatar +
-                                           " --display v4l2:/dev/video10   (docs/calls.md sets up the device)"}};
+                    // docs/calls.md sets the virtual camera device up.
+                    {"virtual_camera", receiver + " --display v4l2:/dev/video10"}};
   return summary;
 }
 

@@ -22,6 +22,7 @@ void GuidedRecordingOptions::Check() const {
   c.InRange("min_brightness", min_brightness, 0.0, 255.0).InRange("max_brightness", max_brightness, 0.0, 255.0);
   c.That(min_brightness < max_brightness, "min_brightness < max_brightness");
   c.InRange("min_turn_deg", min_turn_deg, 0.0, 60.0);
+  c.ThrowIfErrors();
 }
 
 std::string GuidePrompt(double t, double total) {

@@ -14,15 +14,6 @@
 
 namespace headcast {
 
-std::string HumanDuration(double seconds) {
-  char text[32];
-  if (!(seconds < 90))
-    std::snprintf(text, sizeof(text), seconds < 600 ? "%.1f min" : "%.0f min", seconds / 60);
-  else
-    std::snprintf(text, sizeof(text), "%.0f s", std::max(0.0, seconds));
-  return text;
-}
-
 ProgressLine::ProgressLine(int first_step, int last_step, double file_every_s)
     : first_(first_step), last_(last_step), terminal_(isatty(fileno(stderr)) != 0), file_every_s_(file_every_s) {}
 

@@ -11,9 +11,6 @@
 
 namespace headcast {
 
-// "35 s", "4.3 min", "25 min": what a person reads in a progress line.
-std::string HumanDuration(double seconds);
-
 // "step 120/1000  loss 0.0123  35 s, ETA 4.3 min" on stderr: redrawn in place
 // on a terminal; in a file (a log), a whole line every `file_every_s` and at
 // the last step, so logs hold lines rather than carriage returns.

@@ -318,8 +318,11 @@ nlohmann::json RunEval(const EvalOptions& o) {
     fidelity = "not computed: no dlib shape predictor at " + o.landmark_predictor;
   {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
+    ProgressLine progress(0, static_cast<int>(positions.size()), 10);
+    int done = 0;
     const EvalResult e =
         EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
+          progress.Show(done++, "evaluating");
           cv::Mat row;
           cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
           side.Write(row);
@@ -331,6 +334,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
             WriteImage((dir / "frames" / ("avatar" + std::string(name))).string(), rendered);
           }
         });
+    progress.Finish();
     for (int k = 0; k < e.count; ++k)
       csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";
     nlohmann::json report = {

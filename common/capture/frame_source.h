@@ -37,6 +37,8 @@ class FrameSource {
   virtual std::string Describe() const = 0;
   virtual double fps() const = 0;
   virtual bool has_depth() const { return false; }
+  // Recorded sources: frames in one pass, when known (for progress); 0 otherwise.
+  virtual int64_t frame_count() const { return 0; }
 };
 
 struct SourceOptions {

@@ -29,6 +29,7 @@ class VideoFileSource final : public FrameSource {
   ReadStatus Read(CapturedFrame* frame, std::string* problem) override;
   std::string Describe() const override { return "video " + path_; }
   double fps() const override { return fps_; }
+  int64_t frame_count() const override { return options_.loop ? 0 : reader_->frame_count(); }
 
  private:
   std::string path_;
@@ -45,6 +46,7 @@ class ImageFolderSource final : public FrameSource {
   ReadStatus Read(CapturedFrame* frame, std::string* problem) override;
   std::string Describe() const override { return "images in " + folder_; }
   double fps() const override { return options_.fps; }
+  int64_t frame_count() const override { return options_.loop ? 0 : static_cast<int64_t>(files_.size()); }
   size_t size() const { return files_.size(); }
 
  private:

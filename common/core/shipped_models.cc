@@ -35,4 +35,11 @@ std::string ShippedModelPath(const std::string& name) {
                            "deploy/make_default_models.sh)");
 }
 
+std::string SiblingProgram(const std::string& name) {
+  std::error_code error;
+  const fs::path bin = fs::read_symlink("/proc/self/exe", error).parent_path();
+  if (error || bin == "/usr/bin" || bin == "/usr/local/bin" || bin == "/bin") return name;
+  return (bin / name).string();
+}
+
 }  // namespace headcast

@@ -18,4 +18,9 @@ std::vector<std::string> ShippedModelFolders();
 // Throws std::runtime_error listing where it looked, and how to make it.
 std::string ShippedModelPath(const std::string& name);
 
+// How to call another headcast program in a command printed for the user:
+// its bare name when it sits in a folder on the usual PATH (an installation),
+// else its full path beside this program (a build folder).
+std::string SiblingProgram(const std::string& name);
+
 }  // namespace headcast

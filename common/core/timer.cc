@@ -3,10 +3,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numeric>
 
 namespace headcast {
+
+std::string HumanDuration(double seconds) {
+  char text[32];
+  if (!(seconds < 90))
+    std::snprintf(text, sizeof(text), seconds < 600 ? "%.1f min" : "%.0f min", seconds / 60);
+  else
+    std::snprintf(text, sizeof(text), "%.0f s", std::max(0.0, seconds));
+  return text;
+}
 
 double SteadyNowSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();

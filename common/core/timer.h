@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace headcast {
@@ -20,6 +21,9 @@ class Stopwatch {
   using Clock = std::chrono::steady_clock;
   Clock::time_point start_;
 };
+
+// "35 s", "4.3 min", "25 min": what a person reads in a progress line.
+std::string HumanDuration(double seconds);
 
 // Seconds on the steady clock since an arbitrary epoch; equal across processes
 // of one machine (capture timestamps, same-host latency).

@@ -216,6 +216,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   SampleStats ms, accuracy_mm;
   int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0, gaze_frames = 0;
   std::map<std::string, int> statuses;
+  Stopwatch watch;
   for (;;) {
     if (o.max_frames > 0 && frames >= o.max_frames) break;
     CapturedFrame captured;
@@ -235,7 +236,18 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     with_depth += !captured.depth_m.empty();
     if (index == 0)
       camera = FirstFrameCamera(o, calibration ? std::optional(calibration->camera) : std::nullopt, captured);
-    if (index > 0 && index % 100 == 0) spdlog::info("tracking: {} frames, {} fitted", index, fitted);
+    if (index > 0 && index % 100 == 0) {
+      const double elapsed = watch.ElapsedSeconds();
+      const int64_t total = o.max_frames > 0 && source->frame_count() > 0
+                                ? std::min<int64_t>(o.max_frames, source->frame_count())
+                            : o.max_frames > 0 ? o.max_frames
+                                               : source->frame_count();
+      if (total > index)
+        spdlog::info("tracking: {} of {} frames, {} fitted; {}, ETA {}", index, total, fitted, HumanDuration(elapsed),
+                     HumanDuration(elapsed * (total - index) / index));
+      else
+        spdlog::info("tracking: {} frames, {} fitted; {}", index, fitted, HumanDuration(elapsed));
+    }
     FrameParams params;
     const TrackedFrame t = tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params);
     ms.Add(t.landmarks_ms + t.fit_ms);

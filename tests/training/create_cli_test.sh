@@ -8,7 +8,7 @@
 set -u
 bin=$1 src=$2 python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
-trap 'rm -rf "$tmp"' EXIT
+trap 'kill "${rx:-}" 2>/dev/null; rm -rf "$tmp"' EXIT
 json() { "$python" -c "import json,sys; j=json.load(open('$1')); print($2)" 2>/dev/null; }
 
 "$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 48 --size 320 --shape 0=0.8 > /dev/null 2>&1
@@ -39,6 +39,21 @@ codec=$(ffprobe -v error -select_streams v:0 -show_entries stream=codec_name -of
   ! pgrep -f "$tmp/me.hcavatar" > /dev/null &&
   ok "create --resume: fine-tune on two ranks, eval; PSNR, an H.264 side-by-side and the commands reported" ||
   bad "resume: status $status codec '$codec' $(tail -5 "$tmp/b.err")"
+
+# The printed commands work as printed: the receiver holds the new avatar; the
+# sender (a video for /dev/video0) drives it.
+port=$((20000 + $$ % 20000))
+receiver=$(json "$tmp/b.json" "j['use']['receiver']")
+sender=$(json "$tmp/b.json" "j['use']['sender'].replace('/dev/video0', '$tmp/seq/rgb')")
+eval "exec $receiver --listen 127.0.0.1:$port --display none --stats-json $tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+rx=$!
+wait_for "$tmp/rx.log" listening || bad "the printed receiver never listened"
+eval "$sender --target 127.0.0.1:$port" > /dev/null 2> "$tmp/tx.log"
+sleep 0.5
+kill -TERM "$rx"; wait "$rx"; rx=
+[ "$(json "$tmp/rx.json" "j['frames_received'] >= 30 and j['rendered'] > 0")" = True ] &&
+  ok "the printed receiver and sender commands run a session with the new avatar" ||
+  bad "printed commands: $(cat "$tmp/rx.json" 2>&1 | head -c 600) $(tail -2 "$tmp/rx.log")"
 
 out=$("$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" --head-model builtin \
   --resolution 128 --iterations 7 --test-frames 8 --resume 2>&1)
