@@ -43,7 +43,7 @@ for which in before after; do
   bin=${!which}
   step "$which: tracking (one core)"
   run "track_$which.log" taskset -c 0 "$bin/headcast-track" --input "$video" --head-model "$model" --calibrate \
-    --out "$out/track_$which.hcrec" --report "$out/track_$which.json"
+    --out "$out/track_$which.hcrec" --json "$out/track_$which.json"
   step "$which: codec"
   run "codec_$which.log" "$bin/headcast-bench" codec --json "$out/codec_$which.json"
   step "$which: render 256²"

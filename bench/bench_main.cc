@@ -6,6 +6,7 @@
 
 #include "bench/bench.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/core/version.h"
 
 namespace headcast::bench {
@@ -34,6 +35,8 @@ int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-bench: benchmark suites; each prints JSON with its figures"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   app.require_subcommand(1);
   bench::BenchOptions options;
   auto add_common = [&](CLI::App* sub) {

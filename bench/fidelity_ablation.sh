@@ -48,7 +48,7 @@ for variant in "${variants[@]}"; do
     # shellcheck disable=SC2086  # the variant's flags are words
     run "subject_$vname.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
       --data "$dataset" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
-      --report "$out/subject_$vname.json" --out "$out/avatar_$vname.hcavatar" $flags
+      --json "$out/subject_$vname.json" --out "$out/avatar_$vname.hcavatar" $flags
   fi
   step "$vname: eval"
   run "eval_$vname.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$vname.hcavatar" \

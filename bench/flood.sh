@@ -26,7 +26,7 @@ token=flood-token-0123456789
 port=$((20000 + RANDOM % 20000))
 "$bin/headcast-avatar" create --resolution 128 --out "$out/demo.hcavatar" > /dev/null
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --token "$token" --avatar demo="$out/demo.hcavatar" \
-  --display none --duration $((duration + 5)) --stats-json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
+  --display none --duration $((duration + 5)) --json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
 rpid=$!
 trap 'kill $rpid 2>/dev/null || true' EXIT
 for _ in $(seq 100); do grep -q listening "$out/receiver.log" && break; sleep 0.1; done

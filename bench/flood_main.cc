@@ -208,6 +208,8 @@ int Run(const FloodOptions& o) {
 int main(int argc, char** argv) {
   CLI::App app{"headcast-flood: a bounded stream flood against a loopback receiver"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   headcast::FloodOptions o;
   app.add_option("--target", o.target, "the receiver, host:port (loopback)")->required();
   app.add_option("--token", o.token, "a token the receiver accepts")->required();

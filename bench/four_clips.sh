@@ -51,7 +51,7 @@ for clip in $clips; do
   # shellcheck disable=SC2086  # the extra flags are words
   run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
     --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
-    --report "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
+    --json "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
   t2=$(date +%s.%N)
   "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
   step "$clip: eval"

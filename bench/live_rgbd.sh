@@ -30,13 +30,13 @@ fx=$("$python" -c "import json; print(json.load(open('$out/seq/truth.json'))['ca
 "$bin/headcast-avatar" create --resolution 128 --out "$out/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$out/a.hcavatar" \
-  --display none --stats-json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
+  --display none --json "$out/receiver.json" > /dev/null 2> "$out/receiver.log" &
 rx=$!
 trap 'kill "$rx" 2>/dev/null || true' EXIT
 for _ in $(seq 100); do grep -q listening "$out/receiver.log" && break; sleep 0.1; done
 taskset -c 0 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$out/seq" \
-  --intrinsics "$fx,$fx,319.5,239.5" --as-fast-as-possible --record "$out/live.hcrec" \
-  --stats-json "$out/sender.json" > /dev/null 2> "$out/sender.log"
+  --intrinsics "$fx,$fx,319.5,239.5" --pacing none --record "$out/live.hcrec" \
+  --json "$out/sender.json" > /dev/null 2> "$out/sender.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx" || true
 "$python" "$root/tests/tracking/compare_track_truth.py" --proto-dir "$root/proto" --recording "$out/live.hcrec" \

@@ -40,7 +40,7 @@ if [ -z "$general" ]; then
   step "pretrain the general model (128², synthetic renders)"
   general=$out/general128.hcavatar
   timed pretrain "$bin/headcast-train" pretrain --head-model "$model" --resolution 128 --iterations 4000 \
-    --processes 2 --out "$general" --report "$out/pretrain.json"
+    --processes 2 --out "$general" --json "$out/pretrain.json"
 fi
 step "prep (tracking, identity, crops, masks)"
 rm -rf "$out/ds"
@@ -50,7 +50,7 @@ for r in 128 256; do
   step "fine-tune at ${r}² ($iterations steps, 2 processes)"
   timed "subject_$r" "$bin/headcast-train" subject --head-model "$model" --general "$general" --data "$out/ds" \
     --resolution $r --processes 2 --iterations "$iterations" --z-augmentation 0 --eval-every 1000 --eval 30 \
-    --out "$out/avatar_$r.hcavatar" --eval-csv "$out/subject_${r}_eval.csv" --report "$out/subject_$r.json"
+    --out "$out/avatar_$r.hcavatar" --eval-csv "$out/subject_${r}_eval.csv" --json "$out/subject_$r.json"
   step "eval at ${r}²"
   "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$r.hcavatar" --data "$out/ds" \
     --out "$out/eval_$r" --orbit-frames 0 > "$out/eval_$r.log" 2>&1

@@ -37,7 +37,7 @@ elapsed() { python3 -c "import time; print(f'{time.time() - $start:.1f}')"; }
 echo "t_s,run,rss_mb,threads" > "$out/rss.csv"
 receiver() {  # run N, seconds
   "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --token "$token" --avatar demo="$out/demo.hcavatar" \
-    --display none --duration "$2" --stats-json "$out/receiver_$1.json" > /dev/null 2> "$out/receiver_$1.log" &
+    --display none --duration "$2" --json "$out/receiver_$1.json" > /dev/null 2> "$out/receiver_$1.log" &
   rpid=$!
 }
 run=0
@@ -45,7 +45,7 @@ receiver $run "$restart"
 sleep 2
 for i in $(seq "$sessions"); do
   "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --token "$token" --avatar-id demo --synthetic 300 --loop \
-    --duration "$total" --stats-json "$out/sender_$i.json" > /dev/null 2> "$out/sender_$i.log" &
+    --duration "$total" --json "$out/sender_$i.json" > /dev/null 2> "$out/sender_$i.log" &
   pids+=($!)
 done
 tick=0

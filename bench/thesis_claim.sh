@@ -13,9 +13,9 @@ mkdir -p "$out"
 common=(subject --head-model "$head_model" --data "$data" --resolution "$resolution" --iterations "$iterations"
         --batch 4 --eval 30 --eval-every "$every" --seed 1)
 "$bin/headcast-train" "${common[@]}" --general "$general" --eval-csv "$out/from_general.csv" \
-  --report "$out/from_general.json" --out "$out/from_general.hcavatar" > /dev/null
+  --json "$out/from_general.json" --out "$out/from_general.hcavatar" > /dev/null
 "$bin/headcast-train" "${common[@]}" --from-scratch --eval-csv "$out/from_scratch.csv" \
-  --report "$out/from_scratch.json" --out "$out/from_scratch.hcavatar" > /dev/null
+  --json "$out/from_scratch.json" --out "$out/from_scratch.hcavatar" > /dev/null
 "$bin/headcast-train" plot --series "$out/from_general.csv:psnr:from the general model" \
   --series "$out/from_scratch.csv:psnr:from scratch" --title "test PSNR, $(basename "$data"), ${resolution} px" \
   --y-label dB --out "$out/curves.png" > /dev/null

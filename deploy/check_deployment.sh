@@ -66,7 +66,7 @@ sleep 3
 in_box 'systemctl is-active headcast-receiver' >> "$out/systemd.log" 2>&1 || {
   in_box 'journalctl -u headcast-receiver --no-pager | tail -20' >&2; exit 1; }
 in_box 'cd /opt/headcast && build/bin/headcast-sender --target localhost:50051 --tls-ca /etc/headcast/certs/ca.pem \
-  --token-file /etc/headcast/tokens.txt --avatar-id demo --synthetic 90 --stats-json /tmp/sender.json' >> "$out/systemd.log" 2>&1
+  --token-file /etc/headcast/tokens.txt --avatar-id demo --synthetic 90 --json /tmp/sender.json' >> "$out/systemd.log" 2>&1
 in_box 'systemd-analyze security headcast-receiver | tail -1' >> "$out/systemd.log" 2>&1 || true
 in_box 'systemctl stop headcast-receiver; cat /var/lib/headcast/receiver_stats.json' > "$out/receiver_stats.json"
 in_box 'journalctl -u headcast-receiver --no-pager' > "$out/journal.log" 2>&1 || true

@@ -4,8 +4,10 @@
 # through the real sender (file source, the tracker, the codec, gRPC over
 # 127.0.0.1) to the real receiver holding the demo avatar, which shows it in a
 # window when there is a display and renders offscreen otherwise. It writes an
-# MP4 (input | avatar), a JSON report (frames, fps, glass-to-glass latency,
-# uplink kbit/s) and a PNG plot, and prints where they are.
+# MP4 (input | head-model fit | avatar, labelled, with the session's
+# figures), a JSON report (frames, fps, glass-to-glass latency, uplink kbit/s,
+# the avatar's PSNR against the input frames) and a PNG plot, and prints
+# where they are.
 #
 #   deploy/demo.sh                                     # the bundled subject and avatar
 #   deploy/demo.sh --input /dev/video0 --avatar me.hcavatar --head-model ict.npz   # your camera, your avatar
@@ -29,7 +31,7 @@ while [ $# -gt 0 ]; do
     --display) display=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --no-setup) setup=0; shift ;;
-    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
     *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -38,7 +40,7 @@ bin=$root/build/bin
 python=${HEADCAST_PYTHON:-/usr/bin/python3}
 [ -e "$avatar" ] || { echo "demo: no avatar at $avatar (deploy/make_default_models.sh makes the default)" >&2; exit 1; }
 mkdir -p "$out"
-rm -f "$out"/{shown.csv,arrival.csv,receiver.json,sender.json,wire.txt}
+rm -f "$out"/{shown.csv,arrival.csv,receiver.json,sender.json,wire.txt,received.hcrec,sent_frames.csv}
 
 # The bundled subject's camera is the one its avatar was prepared with.
 if [ -z "$intrinsics$fov" ] && [ "$input" = "$root/models/demo/demo_sequence.mp4" ]; then
@@ -60,8 +62,8 @@ fi
 port=$((20000 + RANDOM % 20000))
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$avatar" \
   --head-model "$head_model" --display "$display" --video "$out/avatar.mp4" --target-delay 0.05 \
-  --display-csv "$out/shown.csv" --latency-csv "$out/arrival.csv" --stats-json "$out/receiver.json" \
-  > /dev/null 2> "$out/receiver.log" &
+  --display-csv "$out/shown.csv" --latency-csv "$out/arrival.csv" --json "$out/receiver.json" \
+  --record "$out/received.hcrec" > /dev/null 2> "$out/receiver.log" &
 rx=$!
 trap 'kill "$rx" 2>/dev/null || true' EXIT
 for _ in $(seq 200); do grep -q listening "$out/receiver.log" && break; sleep 0.05; done
@@ -80,7 +82,8 @@ grep -q listening "$out/receiver.log" || { cat "$out/receiver.log" >&2; exit 1; 
 sampler=$!
 echo "demo: streaming $input -> receiver on 127.0.0.1:$port ($display)"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --head-model "$head_model" \
-  --input "$input" --identity-from "$avatar" "${camera[@]}" --duration "$duration" --stats-json "$out/sender.json" \
+  --input "$input" --identity-from "$avatar" "${camera[@]}" --duration "$duration" --json "$out/sender.json" \
+  --frames-csv "$out/sent_frames.csv" \
   > /dev/null 2> "$out/sender.log" || { tail -5 "$out/sender.log" >&2; exit 1; }
 sleep 1  # the jitter buffer and the last frames
 kill -INT "$rx"
@@ -88,16 +91,8 @@ wait "$rx" || true
 kill "$sampler" 2>/dev/null || true
 trap - EXIT
 
-# Input | avatar, side by side at the avatar's height.
 h=$("$python" -c "import json; print(json.load(open('$out/receiver.json')).get('rendered', 0))")
 [ "$h" -gt 0 ] || { echo "demo: the receiver showed nothing; see $out/receiver.log" >&2; exit 1; }
-if [ -f "$input" ]; then
-  ffmpeg -loglevel error -y -i "$input" -i "$out/avatar.mp4" -filter_complex \
-    "[1]scale=-2:256[a];[0]scale=-2:256[i];[i][a]hstack=inputs=2:shortest=1" -c:v libx264 -pix_fmt yuv420p \
-    "$out/side_by_side.mp4"
-else
-  cp "$out/avatar.mp4" "$out/side_by_side.mp4"  # a camera: only the avatar was recorded
-fi
 
 "$python" - "$out" "$input" <<'PY'
 import csv, json, statistics, sys
@@ -136,6 +131,39 @@ with open(f"{out}/latency.csv", "w") as f:
 PY
 "$bin/headcast-train" plot --series "$out/latency.csv:glass_to_glass_ms:glass to glass" --title "headcast demo" \
   --x-label "shown frame" --y-label ms --out "$out/latency.png" > /dev/null
+# What the receiver showed against what the camera saw: input | head-model fit | avatar, with the figures.
+caption=$("$python" - "$out" <<'PY'
+import json, sys
+r = json.load(open(f"{sys.argv[1]}/report.json"))
+f = lambda v, d=1: "?" if v is None else f"{v:.{d}f}"
+k = r["uplink_kbps"]
+print(f"headcast demo: {f(r['fps_shown'])} fps shown, glass to glass {f(r['glass_to_glass_ms']['p50'], 0)} ms (p50), "
+      f"{f(k['on_wire'])} kbit/s on the wire ({f(k['payload'])} payload)")
+PY
+)
+if [ -f "$input" ] || [ -d "$input" ]; then
+  rm -rf "$out/compare"
+  if "$bin/headcast-train" compare --head-model "$head_model" --avatar "$avatar" --recording "$out/received.hcrec" \
+      --truth "$input" --frame-map "$out/sent_frames.csv" --out "$out/compare" --caption "$caption" \
+      > "$out/compare.json" 2> "$out/compare.log"; then
+    cp "$out/compare/side_by_side.mp4" "$out/side_by_side.mp4"
+    "$python" - "$out" <<'PY'
+import json, sys
+out = sys.argv[1]
+r = json.load(open(f"{out}/report.json"))
+c = json.load(open(f"{out}/compare.json"))
+r["avatar_vs_truth"] = {k: c[k] for k in ("frames", "psnr_db", "ssim", "psnr_db_worst_5_percent")}
+r["avatar_vs_truth"]["what"] = c["how"]
+json.dump(r, open(f"{out}/report.json", "w"), indent=2)
+PY
+  else
+    echo "demo: the comparison with the input failed (see $out/compare.log); side_by_side.mp4 is the avatar alone" >&2
+    cp "$out/avatar.mp4" "$out/side_by_side.mp4"
+  fi
+else
+  cp "$out/avatar.mp4" "$out/side_by_side.mp4"  # a camera: only the avatar was recorded
+fi
+
 "$python" - "$out" <<'PY'
 import json, sys
 r = json.load(open(f"{sys.argv[1]}/report.json"))
@@ -144,7 +172,16 @@ f = lambda v, d=1: "?" if v is None else f"{v:.{d}f}"
 print(f"\nheadcast demo: {r['frames']['shown']} frames shown at {f(r['fps_shown'])} fps; glass to glass "
       f"p50 {f(g['p50'])} ms, p95 {f(g['p95'])} ms; uplink {f(k['payload'], 2)} kbit/s payload, "
       f"{f(k['on_wire'], 2)} kbit/s on the wire")
+v = r.get("avatar_vs_truth")
+if v:
+    print(f"the avatar against the true frames: {f(v['psnr_db'])} dB PSNR, SSIM {f(v['ssim'], 3)} "
+          f"over {v['frames']} frames (worst 5 %: {f(v['psnr_db_worst_5_percent'])} dB)")
 PY
-echo "  $out/side_by_side.mp4   input | avatar"
+echo "  $out/side_by_side.mp4   input | head-model fit | avatar"
 echo "  $out/report.json        what was measured"
 echo "  $out/latency.png        glass-to-glass latency per shown frame"
+echo
+echo "next:"
+echo "  your own avatar:    build/bin/headcast-train create --input me.mp4 --out me.hcavatar   (docs/own_avatar.md)"
+echo "  with a camera:      deploy/demo.sh --no-setup --input /dev/video0 --avatar me.hcavatar --head-model models/ict_facekit.npz"
+echo "  in a call:          the receiver's --display v4l2:/dev/videoN, a virtual camera (docs/calls.md)"

@@ -5,13 +5,15 @@
 #     2. a synthetic demo subject: a talking head with its own identity rendered
 #        by headcast-headmodel, as a video; its first frames train the avatar
 #        (prep -> subject), its last frames are the demo's input (never trained on);
-#     3. their reports, logs and plots.
+#     3. their reports, logs and plots; the avatar is made by `headcast-train create`.
 #   ict (from the ICT-FaceKit folder, ~12 min on 2 cores): what `headcast-train
 #     create` starts from, so a real person's avatar needs no download:
 #     1. ICT-FaceKit converted compactly (int16 bases, 5 µm a step; MIT, its
 #        licence beside it as ict_facekit.LICENSE);
 #     2. its general model (pretrain on synthetic renders of it, 128 px).
-# Usage: deploy/make_default_models.sh [OUT_DIR] [builtin|ict|all]   (default: models/ all)
+#   demo (steps 2-3 of builtin, with the general model already in OUT_DIR, ~30 min).
+# Usage: deploy/make_default_models.sh [OUT_DIR] [builtin|ict|demo|all]   (default: models/ all)
+#   WORK=DIR  keep the intermediate files (dataset, checkpoints, eval videos) there
 #   ICT=DIR  the ICT-FaceKit folder (default ../shared/data/head-models/ict-facekit)
 # Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 ICT_ITERATIONS=300 deploy/make_default_models.sh /tmp/m
 set -euo pipefail
@@ -20,15 +22,21 @@ bin=${HEADCAST_BIN:-$here/build/bin}
 out=${1:-$here/models}
 which=${2:-all}
 general_iterations=${GENERAL_ITERATIONS:-6000}
-subject_iterations=${SUBJECT_ITERATIONS:-1500}
+subject_iterations=${SUBJECT_ITERATIONS:-3000}
+demo_train=${DEMO_TRAIN_FRAMES:-900}
 ict_iterations=${ICT_ITERATIONS:-4000}
 ict=${ICT:-$here/../shared/data/head-models/ict-facekit}
-case $which in builtin | ict | all) ;; *) echo "make_default_models: builtin, ict or all, not $which" >&2; exit 2 ;; esac
-work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+case $which in builtin | ict | all | demo) ;; *) echo "make_default_models: builtin, ict, demo or all, not $which" >&2; exit 2 ;; esac
+if [ -n "${WORK:-}" ]; then
+  work=$WORK  # kept: the intermediate dataset, checkpoints and eval videos
+  mkdir -p "$work"
+else
+  work=$(mktemp -d)
+  trap 'rm -rf "$work"' EXIT
+fi
 mkdir -p "$out"
 
-if [ "$which" != builtin ]; then
+if [ "$which" = ict ] || [ "$which" = all ]; then
   [ -d "$ict/FaceXModel" ] || { echo "make_default_models: no ICT-FaceKit folder at $ict (set ICT=DIR)" >&2; exit 2; }
   echo "== ICT-FaceKit, compact (int16 bases, 5 µm a step)"
   "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --out "$out/ict_facekit.npz" > /dev/null
@@ -38,38 +46,44 @@ if [ "$which" != builtin ]; then
   "$bin/headcast-train" pretrain --head-model "$out/ict_facekit.npz" --resolution 128 --iterations "$ict_iterations" \
     --processes 2 --eval 40 --eval-every 500 --log-csv "$out/ict_general/loss.csv" \
     --eval-csv "$out/ict_general/eval.csv" --plots "$out/ict_general" --preview "$out/ict_general/preview.png" \
-    --report "$out/ict_general/report.json" --checkpoint-dir "$work/ckpt_ict" --out "$out/ict_general.hcavatar" \
+    --json "$out/ict_general/report.json" --checkpoint-dir "$work/ckpt_ict" --out "$out/ict_general.hcavatar" \
     > /dev/null
   /usr/bin/python3 "$here/bench/strip_machine_paths.py" --root "$here" "$out/ict_general"
   [ "$which" = ict ] && { du -sh "$out"; exit 0; }
 fi
 mkdir -p "$out/general" "$out/demo"
 
-echo "== 1. general model (built-in head, 128 px, $general_iterations steps)"
-"$bin/headcast-train" pretrain --head-model builtin --resolution 128 --iterations "$general_iterations" --batch 4 \
-  --neck-deg 30 --eval 40 --eval-every 500 --log-csv "$out/general/loss.csv" --eval-csv "$out/general/eval.csv" \
-  --plots "$out/general" --preview "$out/general/preview.png" --report "$out/general/report.json" \
-  --checkpoint-dir "$work/ckpt_general" --out "$out/builtin_general.hcavatar" > /dev/null
+if [ "$which" != demo ]; then
+  echo "== 1. general model (built-in head, 128 px, $general_iterations steps)"
+  "$bin/headcast-train" pretrain --head-model builtin --resolution 128 --iterations "$general_iterations" --batch 4 \
+    --neck-deg 30 --eval 40 --eval-every 500 --log-csv "$out/general/loss.csv" --eval-csv "$out/general/eval.csv" \
+    --plots "$out/general" --preview "$out/general/preview.png" --json "$out/general/report.json" \
+    --checkpoint-dir "$work/ckpt_general" --out "$out/builtin_general.hcavatar" > /dev/null
+fi
 
-echo "== 2. demo subject: 450 rendered frames; 300 to train on, the last 150 are the demo input"
-"$bin/headcast-headmodel" render-rgbd builtin --out "$work/render" --frames 450 --size 640 \
+echo "== 2. demo subject: $demo_train + 150 rendered frames; the first $demo_train train the avatar, the last 150 are the demo input"
+"$bin/headcast-headmodel" render-rgbd builtin --out "$work/render" --frames $((demo_train + 150)) --size 640 \
   --shape 0=0.8 --shape 3=-0.5 --shape 5=0.6 > /dev/null
-ffmpeg -loglevel error -y -framerate 30 -i "$work/render/rgb/%05d.png" -frames:v 300 \
+ffmpeg -loglevel error -y -framerate 30 -i "$work/render/rgb/%05d.png" -frames:v "$demo_train" \
   -c:v libx264 -crf 10 -pix_fmt yuv420p "$work/subject_train.mp4"
-ffmpeg -loglevel error -y -framerate 30 -start_number 300 -i "$work/render/rgb/%05d.png" \
+ffmpeg -loglevel error -y -framerate 30 -start_number "$demo_train" -i "$work/render/rgb/%05d.png" \
   -c:v libx264 -crf 18 -pix_fmt yuv420p "$out/demo/demo_sequence.mp4"
 cp "$work/render/truth.json" "$out/demo/render_truth.json"
 
-echo "== 3. prep (the sender's tracker, RGB only, identity calibration)"
-"$bin/headcast-train" prep --input "$work/subject_train.mp4" --out "$work/dataset" --resolutions 256 \
-  --test-frames 60 > "$out/demo/dataset.json"
-cp "$work/dataset/track_report.json" "$out/demo/track_report.json"
-
-echo "== 4. subject fine-tune (256 px, $subject_iterations steps)"
-"$bin/headcast-train" subject --general "$out/builtin_general.hcavatar" --data "$work/dataset" --resolution 256 \
-  --iterations "$subject_iterations" --batch 4 --eval 20 --eval-every 100 --log-csv "$out/demo/loss.csv" \
-  --eval-csv "$out/demo/eval.csv" --plots "$out/demo" --preview "$out/demo/preview.png" \
-  --report "$out/demo/report.json" --checkpoint-dir "$work/ckpt_subject" --out "$out/demo_avatar.hcavatar" > /dev/null
+echo "== 3. the demo avatar: headcast-train create (the sender's tracker with the renders' camera, $subject_iterations steps)"
+# Run inside the work folder with relative paths, so the avatar's manifest names no path of this machine.
+intrinsics=$(/usr/bin/python3 -c "import json; c = json.load(open('$work/render/truth.json'))['camera']; print(f\"{c['fx']},{c['fy']},{c['cx']},{c['cy']}\")")
+cp "$out/builtin_general.hcavatar" "$work/general.hcavatar"
+(cd "$work" && "$bin/headcast-train" create --input subject_train.mp4 --out demo_avatar.hcavatar --work create \
+  --head-model builtin --general general.hcavatar --iterations "$subject_iterations" --test-frames 60 \
+  --intrinsics "$intrinsics" --preview none > create.json)
+cp "$work/demo_avatar.hcavatar" "$out/demo_avatar.hcavatar"
+cp "$work/create.json" "$out/demo/create.json"
+for f in dataset/dataset.json dataset/track_report.json loss.csv eval.csv plots/losses.png plots/psnr.png \
+  preview.png eval/eval.json; do
+  if [ -f "$work/create/$f" ]; then cp "$work/create/$f" "$out/demo/$(basename "$f")"; fi
+done
+cp "$work/create/fine_tune.json" "$out/demo/report.json"
 
 # Shipped reports name no path of this machine.
 /usr/bin/python3 "$here/bench/strip_machine_paths.py" --root "$here" "$out/demo" "$out/general"

@@ -7,7 +7,9 @@
 #include <iostream>
 
 #include "common/avatar/avatar_renderer.h"
+#include "common/core/cli_flags.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/core/version.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/synthetic_motion.h"
@@ -23,7 +25,7 @@ struct RenderArgs {
   DisplayFlags display;
   int synthetic = 0, frames = 0, threads = 1;
   double orbit_deg = 0, fps = 30;
-  bool transfer_pose = false, unpaced = false, no_overlay = false;
+  bool transfer_pose = false, paced = true, no_overlay = false;
 };
 
 std::vector<FrameParams> LoadFrames(const std::string& path, const HeadModel& model) {
@@ -85,7 +87,7 @@ int Render(const RenderArgs& a) {
   auto display = MakeDisplay(display_options);
   RenderLoopOptions loop;
   loop.target_fps = a.fps;
-  loop.paced = !a.unpaced;
+  loop.paced = a.paced;
   SequenceSource source(frames, loop.paced);
   const RenderLoopStats s = RunRenderLoop(renderer, source, *display, loop);
   nlohmann::json report = {{"frames_in", frames.size()},
@@ -118,6 +120,8 @@ int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-avatar: avatar files, parameter recordings, and rendering (novel views, expression transfer)"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");
@@ -156,11 +160,11 @@ int main(int argc, char** argv) {
   render->add_option("--orbit", r.orbit_deg, "novel views: swing the camera around the head by +-DEG degrees");
   AddDisplayFlags(*render, r.display);
   render->add_option("--fps", r.fps, "target frame rate")->capture_default_str();
-  render->add_flag("--unpaced", r.unpaced, "render every frame as fast as possible (offline export)");
+  AddPacingFlag(*render, &r.paced, {}, {"--unpaced"});
   render->add_flag("--no-overlay", r.no_overlay, "do not draw fps/latency text");
-  render->add_option("--frames", r.frames, "render at most this many frames");
+  AddMaxFramesFlag(*render, &r.frames, "render at most this many frames", {"--frames"});
   render->add_option("--threads", r.threads, "libtorch threads")->capture_default_str();
-  render->add_option("--stats-json", r.stats_json, "write the render statistics here");
+  AddJsonFlag(*render, &r.stats_json, "the render statistics", {"--stats-json"});
 
   CLI11_PARSE(app, argc, argv);
   try {

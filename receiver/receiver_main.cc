@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/avatar/avatar_backend.h"
+#include "common/core/cli_flags.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
 #include "common/core/service_notify.h"
@@ -72,7 +73,7 @@ void AddFlags(CLI::App& app, ReceiverFlags& f) {
   app.add_option("--render-fps", f.render_fps, "display rate")->capture_default_str();
   app.add_option("--threads", f.threads, "libtorch threads")->capture_default_str();
   app.add_option("--duration", f.duration, "stop after this many seconds (0: run until interrupted)");
-  app.add_option("--stats-json", f.stats_json, "write render and server statistics here at the end");
+  AddJsonFlag(app, &f.stats_json, "render and server statistics at the end", {"--stats-json"});
   app.add_option("--latency-csv", f.latency_csv,
                  "log every received frame: arrival time, session, sequence, capture-to-arrival ms (same-host clocks)");
   app.add_option("--display-csv", f.display_csv,

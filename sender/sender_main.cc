@@ -13,6 +13,7 @@
 #include "common/capture/capture_flags.h"
 #include "common/capture/frame_source.h"
 #include "common/capture/newest_frame_source.h"
+#include "common/core/cli_flags.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
 #include "common/core/timer.h"
@@ -31,7 +32,7 @@ std::atomic<bool> g_stop{false};
 
 struct SenderFlags {
   SenderOptions session;
-  std::string log_level, head_model = "builtin", params, record, stats_json, components, token_file;
+  std::string log_level, head_model = "builtin", params, record, stats_json, components, token_file, frames_csv;
   int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
@@ -76,7 +77,7 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_option("--calibration-frames", f.live.tracker.rgbd_identity_frames,
                  "--input with depth: frames whose fitted shapes give the identity (median), then frozen")
       ->capture_default_str();
-  app.add_flag("!--as-fast-as-possible", f.source.realtime, "--input files: do not pace to their frame rate");
+  AddPacingFlag(app, &f.source.realtime, {}, {"--as-fast-as-possible"});
   app.add_option("--params", f.params, "replay this parameter recording (.hcrec)");
   app.add_option("--synthetic", f.synthetic, "send this many frames of the synthetic talking head (default source)");
   app.add_flag("--loop", f.loop, "replay the source forever");
@@ -101,8 +102,11 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
                      "a key frame at least every N frames (default 30; 10 s under a 32 kbit/s budget)");
   app.add_option("--queue", o.queue_frames, "frames queued at most (older ones are dropped)")->capture_default_str();
   app.add_option("--record", f.record, "also record the sent parameters (.hcrec)");
+  app.add_option("--frames-csv", f.frames_csv,
+                 "--input: write sequence,input_frame per sent frame here (which input frame each one was tracked "
+                 "from; headcast-train compare --frame-map)");
   app.add_option("--duration", f.duration, "stop after this many seconds (0: at the end of the source)");
-  app.add_option("--stats-json", f.stats_json, "write sender statistics here at the end");
+  AddJsonFlag(app, &f.stats_json, "the sender's statistics at the end", {"--stats-json"});
 }
 
 std::vector<int> ParseComponents(const std::string& text) {
@@ -153,6 +157,12 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept);
   int read = 0, fitted = 0, skipped = 0, with_depth = 0;
   uint64_t sequence = 0;
+  std::ofstream frames_csv;
+  if (!f.frames_csv.empty()) {
+    frames_csv.open(f.frames_csv);
+    if (!frames_csv) throw std::runtime_error(f.frames_csv + ": cannot be written");
+    frames_csv << "sequence,input_frame\n";
+  }
   while (!g_stop && !client.counters().gave_up && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {
     CapturedFrame frame;
     std::string problem;
@@ -180,6 +190,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     p.capture_time_s = f.source.realtime ? frame.capture_time_s : SteadyNowSeconds();
     client.Submit(p);
     if (recorder) recorder->Write(p);
+    if (frames_csv.is_open()) frames_csv << p.sequence << "," << frame.index << "\n";
   }
   auto median = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Median(); };
   auto p95 = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Percentile(95); };

@@ -74,6 +74,8 @@ Eigen::VectorXf ReadImportance(const std::string& path) {
 int main(int argc, char** argv) {
   CLI::App app{"headcast-fit-mesh: fit the head model to a polygonal head mesh (weighted residual, METHOD §8)"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   std::string mesh_path, head_model_spec = "builtin", out, fit = "shape,expression,pose", unit = "m", topology = "auto",
                          weights = "importance-count", loss = "norm", importance, landmarks, fitted_mesh, log_level;
   bool black_box = false;

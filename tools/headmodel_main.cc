@@ -283,6 +283,8 @@ int main(int argc, char** argv) {
   using namespace headcast;
   CLI::App app{"headcast-headmodel: convert, inspect and render head models (FLAME layout)"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");

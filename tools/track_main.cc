@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "common/capture/capture_flags.h"
+#include "common/core/cli_flags.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/program.h"
@@ -33,9 +34,9 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
       ->required();
   app.add_option("--head-model", f.head_model, "builtin or a model .npz")->capture_default_str();
   app.add_option("--out", f.out, "parameter recording to write (.hcrec)")->required();
-  app.add_option("--report", f.report, "JSON report to write");
+  AddJsonFlag(app, &f.report, "the tracking report", {"--report"});
   app.add_option("--overlay", t.overlay, "MP4 with the detected and fitted landmarks over the frames");
-  app.add_option("--max-frames", t.max_frames, "stop after this many frames");
+  AddMaxFramesFlag(app, &t.max_frames, "stop after this many frames");
   app.add_option("--fov", t.fov_deg, "vertical field of view of the camera, degrees (when nothing better is known)")
       ->capture_default_str();
   app.add_option("--predictor", t.tracker.face.predictor_path, "dlib 68-point shape predictor (.dat)")
@@ -43,7 +44,7 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_flag("!--no-gaze", t.tracker.face.locate_irises, "do not locate the irises: the eyes look straight ahead");
   SourceOptions& s = t.source;
   AddDepthFlags(app, s);
-  app.add_flag("--realtime", s.realtime, "pace recorded inputs to their frame rate");
+  AddPacingFlag(app, &s.realtime, {"--realtime"});
   app.add_option("--intrinsics", f.intrinsics,
                  "camera intrinsics fx,fy,cx,cy in pixels (else calibration, the stereo calibration, or --fov)");
   app.add_option("--calibration-frames", t.calibration_frames,
@@ -91,6 +92,8 @@ int Run(TrackFlags& f) {
 int main(int argc, char** argv) {
   CLI::App app{"headcast-track: track a face in a video and fit the head model to every frame"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   TrackFlags flags;
   AddFlags(app, flags);
   return headcast::RunProgram(app, argc, argv, [&] { return Run(flags); });

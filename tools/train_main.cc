@@ -12,13 +12,16 @@
 
 #include "common/capture/capture_flags.h"
 #include "common/core/camera.h"
+#include "common/core/cli_flags.h"
 #include "common/core/local_ranks.h"
 #include "common/core/log.h"
+#include "common/core/program.h"
 #include "common/core/version.h"
 #include "receiver/display/display.h"
 #include "training/create.h"
 #include "training/run_report.h"
 #include "training/runs.h"
+#include "training/session_compare.h"
 
 namespace {
 
@@ -73,7 +76,7 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--eval", out->eval_frames, "held-out samples per evaluation")->capture_default_str();
   app->add_option("--plots", out->plot_dir, "write losses.png (and psnr.png) here");
   app->add_option("--preview", out->preview, "ground truth | avatar for 4 held-out samples (PNG)");
-  app->add_option("--report", out->report, "the training report (JSON)");
+  AddJsonFlag(*app, &out->report, "the training report", {"--report"});
 }
 
 // The network's size, for a new avatar (a fine-tune keeps its general model's).
@@ -118,6 +121,8 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
 int main(int argc, char** argv) {
   CLI::App app{"headcast-train: build avatars"};
   headcast::AddVersionFlag(app);
+  headcast::AddConfigFile(app);
+  app.fallthrough();  // global flags (--log, --config) after a subcommand too
   app.require_subcommand(1);
   std::string log_level;
   app.add_option("--log", log_level, "log level");
@@ -131,7 +136,7 @@ int main(int argc, char** argv) {
   prep->add_option("--resolutions", p.resolutions, "crop sizes (128, 256, 512)")->delimiter(',')->capture_default_str();
   prep->add_option("--test-frames", p.test_frames, "the last N fitted frames are the test split")
       ->capture_default_str();
-  prep->add_option("--max-frames", p.max_frames, "use only the first N frames");
+  AddMaxFramesFlag(*prep, &p.max_frames, "use only the first N frames");
   prep->add_flag("!--no-calibrate", p.calibrate, "no identity calibration (shape stays neutral)");
   prep->add_option("--identity-from", p.identity_from,
                    "shape from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
@@ -197,7 +202,7 @@ int main(int argc, char** argv) {
   eval->add_option("--avatar", e.avatar, ".hcavatar")->required();
   eval->add_option("--data", e.dataset, "dataset folder from prep")->required();
   eval->add_option("--out", e.out_dir, "folder for eval.json, per_frame.csv and the videos")->required();
-  eval->add_option("--max-frames", e.max_frames, "evaluate at most N frames");
+  AddMaxFramesFlag(*eval, &e.max_frames, "evaluate at most N frames");
   eval->add_option("--split", e.split, "test (held-out frames) or train (real training frames)")
       ->check(CLI::IsMember({"test", "train"}))
       ->capture_default_str();
@@ -208,6 +213,19 @@ int main(int argc, char** argv) {
   eval->add_flag("!--no-landmarks", e.landmarks,
                  "skip the expression-fidelity figures (dlib landmarks on avatar and true frames)");
   eval->add_option("--predictor", e.landmark_predictor, "dlib's 68-point shape predictor")->capture_default_str();
+
+  auto* compare = app.add_subcommand(
+      "compare",
+      "a session against its input: the receiver's recording rendered beside the frames it was tracked from");
+  CompareOptions m;
+  compare->add_option("--head-model", m.head_model, "builtin or a model .npz")->capture_default_str();
+  compare->add_option("--avatar", m.avatar, ".hcavatar (the receiver's)")->required();
+  compare->add_option("--recording", m.recording, "the receiver's --record (.hcrec)")->required();
+  compare->add_option("--truth", m.truth, "the input the sender tracked: a video or image folder")->required();
+  compare->add_option("--frame-map", m.frame_map,
+                      "the sender's --frames-csv (without it, sequence k is input frame k)");
+  compare->add_option("--out", m.out_dir, "folder for compare.json, per_frame.csv, side_by_side.mp4")->required();
+  compare->add_option("--caption", m.caption, "a line of text under the panels");
 
   auto* plot = app.add_subcommand("plot", "line plot of CSV columns (logs of several runs in one picture)");
   std::vector<std::string> series;
@@ -319,6 +337,8 @@ int main(int argc, char** argv) {
       report = RunCreate(c, hooks);
       if (c.distributed.rank > 0) return 0;
       std::cerr << CreateSummaryText(report);
+    } else if (compare->parsed()) {
+      report = RunCompare(m);
     } else if (plot->parsed()) {
       std::vector<PlotSeries> lines;
       for (const std::string& spec : series) {

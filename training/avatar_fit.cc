@@ -477,6 +477,28 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
   return r;
 }
 
+EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
+                            const std::vector<FrameParams>& frames, const std::function<cv::Mat(int)>& target,
+                            const std::function<void(int, const cv::Mat&, const cv::Mat&)>& each) {
+  avatar.modules().eval();
+  torch::InferenceMode inference;
+  SampleStats ms;
+  EvalResult r;
+  ShownFrames shown(avatar);
+  const HeadIdentity identity = model.MakeIdentity(subject.shape.cast<double>());
+  for (int k = 0; k < static_cast<int>(frames.size()); ++k) {
+    const cv::Mat truth = target(k);
+    if (truth.empty()) continue;
+    Stopwatch watch;
+    const cv::Mat bgr = shown.Render(model, identity, subject, frames[k]);
+    ms.Add(watch.ElapsedMs());
+    Score(bgr, truth, &r);
+    if (each) each(k, truth, bgr);
+  }
+  Finish(ms, &r);
+  return r;
+}
+
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
                         const FrameParams& frame) {
   avatar.modules().eval();

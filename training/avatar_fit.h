@@ -147,6 +147,13 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
                              const std::vector<int>& positions,
                              const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render = nullptr);
 
+// PSNR/SSIM of the avatar rendered for `frames` (as the receiver shows them)
+// against `target(k)` (BGR, the avatar's size; an empty Mat skips frame k).
+// `each(k, target, avatar_bgr)` per scored frame if given.
+EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
+                            const std::vector<FrameParams>& frames, const std::function<cv::Mat(int)>& target,
+                            const std::function<void(int, const cv::Mat&, const cv::Mat&)>& each = nullptr);
+
 // The avatar's picture (BGR) for a subject and frame, e.g. beside its ground truth.
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame);
 

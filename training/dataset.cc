@@ -51,15 +51,7 @@ PinholeCamera CropIntrinsics(const PinholeCamera& camera, double x0, double y0, 
   return k;
 }
 
-namespace {
-
-double Percentile(std::vector<double> v, double q) {
-  std::sort(v.begin(), v.end());
-  return v[static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1))];
-}
-
-// The square crop of `image` at (x0, y0, side), resized; outside the frame is black.
-cv::Mat Crop(const cv::Mat& image, double x0, double y0, double side, int resolution, int interpolation) {
+cv::Mat CropSquare(const cv::Mat& image, double x0, double y0, double side, int resolution, int interpolation) {
   const double s = resolution / side;
   cv::Matx23d affine(s, 0, -x0 * s, 0, s, -y0 * s);
   // Map pixel centres (see CropIntrinsics).
@@ -69,6 +61,13 @@ cv::Mat Crop(const cv::Mat& image, double x0, double y0, double side, int resolu
   cv::warpAffine(image, out, affine, cv::Size(resolution, resolution), interpolation, cv::BORDER_CONSTANT,
                  cv::Scalar::all(0));
   return out;
+}
+
+namespace {
+
+double Percentile(std::vector<double> v, double q) {
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1))];
 }
 
 }  // namespace
@@ -272,8 +271,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
-      WriteImage((rd / "images" / FrameFileName(n)).string(), Crop(frame, x0, y0, side, r, cv::INTER_AREA));
-      cv::Mat m = Crop(mask, x0, y0, side, r, cv::INTER_LINEAR);
+      WriteImage((rd / "images" / FrameFileName(n)).string(), CropSquare(frame, x0, y0, side, r, cv::INTER_AREA));
+      cv::Mat m = CropSquare(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
       const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
       const Landmarks2d crop_landmarks = fitter.Project(params, crop_camera);

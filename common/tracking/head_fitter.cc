@@ -293,7 +293,8 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
 }
 
 HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmarks2d>& key_frames,
-                                                      const PinholeCamera& initial, std::vector<FrameParams>* frames) {
+                                                      const PinholeCamera& initial, std::vector<FrameParams>* frames,
+                                                      bool known_focal) {
   Calibration result;
   const int S = model_.num_shape(), E = num_expression_;
   // Per-frame starts with the current identity.
@@ -343,6 +344,7 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
                            shape.data());
   problem.SetParameterLowerBound(&log_focal, 0, -std::log(options_.max_focal_change));
   problem.SetParameterUpperBound(&log_focal, 0, std::log(options_.max_focal_change));
+  if (known_focal) problem.SetParameterBlockConstant(&log_focal);
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_SCHUR;
   solver.max_num_iterations = 100;

@@ -75,6 +75,8 @@ class HeadFitter {
   // current identity. Key frames should span head turns (the focal length is
   // only observable through perspective changes). On success the identity is
   // set, *frames holds the frames' parameters and the calibrated camera is returned.
+  // With `known_focal` (the user gave the intrinsics) the focal length stays
+  // that of `initial`: it is a measurement, not a starting value.
   struct Calibration {
     bool ok = false;
     Eigen::VectorXd shape;
@@ -83,7 +85,7 @@ class HeadFitter {
     int frames = 0;
   };
   Calibration CalibrateIdentity(const std::vector<Landmarks2d>& key_frames, const PinholeCamera& initial,
-                                std::vector<FrameParams>* frames = nullptr);
+                                std::vector<FrameParams>* frames = nullptr, bool known_focal = false);
   // Model landmarks of `frame` projected with `camera`.
   Landmarks2d Project(const FrameParams& frame, const PinholeCamera& camera) const;
   const HeadFitterOptions& options() const { return options_; }

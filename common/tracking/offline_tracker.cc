@@ -71,7 +71,7 @@ IdentityCalibration CalibrateOverKeyFrames(const HeadModel& model, const Offline
     key_frames.push_back(seen[static_cast<size_t>(std::lround(k * (seen.size() - 1.0) / (keys - 1)))].second);
   HeadFitter fitter(model, o.tracker.fit);
   if (o.identity.size() > 0) fitter.SetIdentity(o.identity);
-  const HeadFitter::Calibration cal = fitter.CalibrateIdentity(key_frames, *initial);
+  const HeadFitter::Calibration cal = fitter.CalibrateIdentity(key_frames, *initial, nullptr, o.intrinsics.has_value());
   if (!cal.ok) throw std::runtime_error(o.input + ": identity calibration failed");
   spdlog::info("identity calibrated over {} key frames: focal {:.1f} px, rms {:.2f} px", cal.frames, cal.camera.fx,
                cal.rms_px);

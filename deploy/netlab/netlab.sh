@@ -117,7 +117,7 @@ fi
 
 "${run_rx[@]}" "$bin/headcast-receiver" --listen "$listen" "${rx_tls[@]}" --token "$token" --head-model "$head_model" --avatar demo="$work/avatar.hcavatar" \
   --display none --render-fps "$fps" --duration "$(awk "BEGIN{print $duration + 15}")" --latency-csv "$out/latency.csv" \
-  --stats-json "$out/receiver.json" > /dev/null 2> "$work/receiver.log" &
+  --json "$out/receiver.json" > /dev/null 2> "$work/receiver.log" &
 rpid=$!
 for _ in $(seq 100); do grep -q listening "$work/receiver.log" && break; sleep 0.1; done
 grep -q listening "$work/receiver.log" || { cat "$work/receiver.log"; exit 1; }
@@ -132,7 +132,7 @@ fi
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
   --head-model "$head_model" --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
   --max-kbps "$max_kbps" "${freshest[@]}" \
-  --stats-json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
+  --json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
 spid=$!
 echo "t,up_bytes,down_bytes,up_packets,down_packets" > "$out/timeline.csv"
 start=$(date +%s.%N)

@@ -11,7 +11,7 @@ trap 'rm -rf "$tmp"' EXIT
 "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --out "$tmp/ict.npz" > /dev/null 2>&1 ||
   { echo "SKIP: no ../shared/data (set HEADCAST_DATA)"; exit 77; }
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 150 \
-  --out "$tmp/d14.hcrec" --report "$tmp/track.json" > /dev/null 2>&1 || bad "tracking failed"
+  --out "$tmp/d14.hcrec" --json "$tmp/track.json" > /dev/null 2>&1 || bad "tracking failed"
 json() { grep -o "\"$1\": [0-9.e+-]*" "$tmp/codec.json" | head -1 | awk '{print $2}'; }
 "$bin/headcast-bench" codec --recording "$tmp/d14.hcrec" --head-model "$tmp/ict.npz" --key-interval 300 \
   --json "$tmp/codec.json" > /dev/null 2>&1 || bad "codec bench failed"

@@ -45,7 +45,7 @@ grep -q "^ExecStart=/usr/bin/headcast-receiver " "$tmp/root/usr/lib/systemd/syst
 
 version=$(dpkg-deb -f "$deb" Version)
 wrong=""
-for program in "$tmp"/root/usr/bin/headcast-*; do
+for program in "$tmp/root/usr/bin"/headcast-*; do
   [ "$("$program" --version 2>&1)" = "headcast $version" ] || wrong="$wrong $(basename "$program")"
 done
 [ -z "$wrong" ] && ok "every installed program answers --version with the package's version ($version)" ||
@@ -53,7 +53,7 @@ done
 
 port=$((20000 + $$ % 20000))
 "$tmp/root/usr/bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --display none \
-  --avatar "demo=$tmp/root/usr/share/headcast/models/demo_avatar.hcavatar" --stats-json "$tmp/rx.json" \
+  --avatar "demo=$tmp/root/usr/share/headcast/models/demo_avatar.hcavatar" --json "$tmp/rx.json" \
   > /dev/null 2> "$tmp/rx.log" &
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "the installed receiver never listened"

@@ -15,11 +15,11 @@ ffmpeg -loglevel error -y -framerate 30 -i "$tmp/seq/rgb/%05d.png" -c:v libx264 
 "$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
-  --display none --target-delay 0.05 --display-csv "$tmp/shown.csv" --stats-json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+  --display none --target-delay 0.05 --display-csv "$tmp/shown.csv" --json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq.mp4" --fov 45 \
-  --identity-from "$tmp/a.hcavatar" --stats-json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
+  --identity-from "$tmp/a.hcavatar" --json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx"; rx=
 fitted=$(json "$tmp/tx.json" "j['tracking']['frames_fitted']")

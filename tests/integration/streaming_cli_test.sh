@@ -110,6 +110,6 @@ out=$("$bin/headcast-receiver" --listen 127.0.0.1:0 --plaintext --token-file "$t
 # longer than any fixed window, and the receiver writes its stats on SIGTERM too.
 kill -TERM "$rpid"; wait "$rpid"; rpid=
 grep -q '"frames_received": 60' "$tmp/receiver.json" && ok "receiver got 60 frames" || bad "receiver: $(cat "$tmp/receiver.json")"
-sent=$("$bin/headcast-avatar" render "$tmp/demo.hcavatar" --params "$tmp/received.hcrec" --display none --unpaced --stats-json "$tmp/r.json" > /dev/null 2>&1; grep -o '"rendered": [0-9]*' "$tmp/r.json")
+sent=$("$bin/headcast-avatar" render "$tmp/demo.hcavatar" --params "$tmp/received.hcrec" --display none --pacing none --json "$tmp/r.json" > /dev/null 2>&1; grep -o '"rendered": [0-9]*' "$tmp/r.json")
 [ "$sent" = '"rendered": 60' ] && ok "the receiver's recording replays (60 frames)" || bad "replay: $sent"
 checks_summary "streaming cli"

@@ -9,8 +9,8 @@ trap 'rm -rf "$tmp"' EXIT
 "$bin" info "$tmp/a.hcavatar" | grep -q '"format": "headcast-avatar"' && ok "info" || bad "info"
 "$bin" synth-params --frames 20 --out "$tmp/p.hcrec" >/dev/null && ok "synth-params" || bad "synth-params"
 "$bin" synth-params --frames 20 --seed 7 --out "$tmp/q.hcrec" >/dev/null
-out=$("$bin" render "$tmp/a.hcavatar" --params "$tmp/p.hcrec" --display offscreen --video "$tmp/v.mp4" --unpaced \
-      --orbit 30 --transfer "$tmp/q.hcrec" --stats-json "$tmp/s.json" 2>&1)
+out=$("$bin" render "$tmp/a.hcavatar" --params "$tmp/p.hcrec" --display offscreen --video "$tmp/v.mp4" --pacing none \
+      --orbit 30 --transfer "$tmp/q.hcrec" --json "$tmp/s.json" 2>&1)
 grep -q '"rendered": 20' "$tmp/s.json" && [ -s "$tmp/v.mp4" ] && ok "render offscreen + video, orbit, transfer" || bad "render: $out"
 out=$("$bin" render "$tmp/a.hcavatar" --head-model "$tmp/none.npz" --display none 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "none.npz" <<<"$out" && ok "missing head model refused" || bad "missing head model: $out"
@@ -24,7 +24,7 @@ out=$("$bin" render "$tmp/a.hcavatar" --display hologram 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "unknown display" <<<"$out" && ok "unknown display refused" || bad "display: $out"
 # Raw frames on stdout for ffmpeg: whole frames of the asked size, the report on stderr.
 "$bin" render "$tmp/a.hcavatar" --params "$tmp/p.hcrec" --display pipe --output-size 320x240 --background green \
-  --unpaced > "$tmp/raw.bin" 2> "$tmp/pipe.log"
+  --pacing none > "$tmp/raw.bin" 2> "$tmp/pipe.log"
 [ "$(stat -c %s "$tmp/raw.bin")" -eq $((320 * 240 * 3 * 20)) ] && grep -q '"rendered": 20' "$tmp/pipe.log" &&
   ok "pipe: 20 bgr24 frames of 320x240 on stdout" || bad "pipe: $(stat -c %s "$tmp/raw.bin") bytes; $(tail -3 "$tmp/pipe.log")"
 if command -v ffmpeg >/dev/null; then

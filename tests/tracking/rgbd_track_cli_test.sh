@@ -12,7 +12,7 @@ trap 'kill "${rx:-}" 2>/dev/null; rm -rf "$tmp"' EXIT
   [ -s "$tmp/seq/associations.txt" ] && ok "render-rgbd writes a sequence" || bad "render-rgbd"
 fx=$("$python" -c "import json; print(json.load(open('$tmp/seq/truth.json'))['camera']['fx'])")
 "$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 \
-  --out "$tmp/t.hcrec" --report "$tmp/r.json" > /dev/null 2> "$tmp/log" && grep -q '"fitted_frames": 12' "$tmp/r.json" &&
+  --out "$tmp/t.hcrec" --json "$tmp/r.json" > /dev/null 2> "$tmp/log" && grep -q '"fitted_frames": 12' "$tmp/r.json" &&
   ok "12 of 12 RGB-D frames fitted" || bad "track: $(cat "$tmp/r.json" "$tmp/log" 2>/dev/null | tail -5)"
 acc=$("$python" -c "import json; print(json.load(open('$tmp/r.json'))['rgbd_accuracy_mm_median'])" 2>/dev/null)
 awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || bad "accuracy: $acc"
@@ -25,12 +25,12 @@ awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || ba
 "$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))
 "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
-  --display none --stats-json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+  --display none --json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq" \
-  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --as-fast-as-possible --record "$tmp/live.hcrec" \
-  --stats-json "$tmp/tx.json" \
+  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --pacing none --record "$tmp/live.hcrec" \
+  --json "$tmp/tx.json" \
   > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx"; rx=
@@ -55,6 +55,6 @@ sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and t['f
 # Unreadable depth is a per-frame status.
 printf 'junk' > "$tmp/seq/depth/00003.png"
 "$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --max-frames 6 \
-  --out "$tmp/u.hcrec" --report "$tmp/u.json" > /dev/null 2>&1 && grep -q '"unreadable_frames": 1' "$tmp/u.json" &&
+  --out "$tmp/u.hcrec" --json "$tmp/u.json" > /dev/null 2>&1 && grep -q '"unreadable_frames": 1' "$tmp/u.json" &&
   ok "unreadable depth is a status, the run completes" || bad "bad depth: $(cat "$tmp/u.json" 2>/dev/null)"
 checks_summary "rgbd track cli"

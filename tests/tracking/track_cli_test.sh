@@ -7,7 +7,7 @@ trap 'rm -rf "$tmp"' EXIT
 "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --parts face,head,mouth,eyes --identity 10 \
   --out "$tmp/ict.npz" > /dev/null 2>&1 || { echo "SKIP: no ../shared/data (set HEADCAST_DATA)"; exit 77; }
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
-  --out "$tmp/d14.hcrec" --report "$tmp/r.json" --overlay "$tmp/o.mp4" > /dev/null 2>&1
+  --out "$tmp/d14.hcrec" --json "$tmp/r.json" --overlay "$tmp/o.mp4" > /dev/null 2>&1
 grep -q '"fitted_frames": 60' "$tmp/r.json" && ok "60 of 60 real frames fitted" || bad "fit: $(cat "$tmp/r.json")"
 err=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/r.json" | awk '{print $2}')
 awk "BEGIN{exit !($err < 0.03)}" && ok "landmark error $err IOD < 0.03" || bad "landmark error $err"
@@ -16,7 +16,7 @@ raw=$(grep -o '"jitter_iod_median_raw_landmarks": [0-9.]*' "$tmp/r.json" | awk '
 awk "BEGIN{exit !($jit < $raw && $jit < 0.015)}" && ok "fitted landmarks shake less than dlib's ($jit vs $raw IOD)" ||
   bad "jitter $jit vs raw $raw"
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 --calibrate \
-  --out "$tmp/c14.hcrec" --report "$tmp/c.json" > /dev/null 2>&1
+  --out "$tmp/c14.hcrec" --json "$tmp/c.json" > /dev/null 2>&1
 cerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/c.json" | awk '{print $2}')
 grep -q '"focal_px"' "$tmp/c.json" && awk "BEGIN{exit !($cerr < 0.03)}" &&
   ok "identity + focal calibrated over key frames (error $cerr IOD)" || bad "calibrate: $(cat "$tmp/c.json")"
@@ -26,7 +26,7 @@ out=$("$bin/headcast-track" --input "$tmp/cut.mp4" --out "$tmp/x.hcrec" 2>&1); r
 [ $rc -ne 0 ] && grep -qE "cut.mp4" <<<"$out" && ok "truncated video refused by name" || bad "truncated: rc=$rc $out"
 mkdir "$tmp/imgs" && echo "not an image" > "$tmp/imgs/a.png"
 cp "$data/landmarks/takeo.ppm" "$tmp/imgs/b.ppm"
-"$bin/headcast-track" --input "$tmp/imgs" --out "$tmp/y.hcrec" --report "$tmp/y.json" > /dev/null 2>&1
+"$bin/headcast-track" --input "$tmp/imgs" --out "$tmp/y.hcrec" --json "$tmp/y.json" > /dev/null 2>&1
 grep -q '"unreadable_frames": 1' "$tmp/y.json" && grep -q '"frames": 1' "$tmp/y.json" && ok "corrupt image is a status, the run completes" || bad "images: $(cat "$tmp/y.json" 2>/dev/null)"
 mkdir "$tmp/empty"
 out=$("$bin/headcast-track" --input "$tmp/empty" --out "$tmp/z.hcrec" 2>&1); rc=$?

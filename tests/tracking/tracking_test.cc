@@ -332,6 +332,35 @@ TEST(HeadFitter, CalibratesShapeAndFocalLengthOverKeyFrames) {
   EXPECT_LT(c.rms_px, 1.6);
 }
 
+// Given intrinsics are a measurement: calibration must not move the focal length.
+TEST(HeadFitter, CalibrationKeepsAKnownFocalLength) {
+  const HeadModel& model = Model();
+  const PinholeCamera truth_cam = PinholeCamera::FromFovY(640, 480, 40);
+  std::vector<Landmarks2d> key_frames;
+  HeadModelParams p;
+  p.shape = Eigen::VectorXd::Zero(model.num_shape());
+  for (int f = 0; f < 5; ++f) {
+    const HeadModelOutput out = model.Forward(p);
+    const RigidTransform cam_from_head = FrontalCamFromHead(0.6, -30 + 15.0 * f, 0, model.rest_landmark_centroid());
+    Landmarks2d l;
+    for (int k = 0; k < kNumLandmarks; ++k)
+      l[k] = truth_cam.Project(cam_from_head.Apply(out.landmarks.row(k).cast<double>().transpose()));
+    key_frames.push_back(l);
+  }
+  PinholeCamera given = truth_cam;
+  given.fx *= 0.9;
+  given.fy *= 0.9;
+  HeadFitter fitter(model, HeadFitterOptions{});
+  const HeadFitter::Calibration free = fitter.CalibrateIdentity(key_frames, given);
+  HeadFitter fixed_fitter(model, HeadFitterOptions{});
+  const HeadFitter::Calibration fixed = fixed_fitter.CalibrateIdentity(key_frames, given, nullptr, true);
+  ASSERT_TRUE(free.ok);
+  ASSERT_TRUE(fixed.ok);
+  EXPECT_DOUBLE_EQ(fixed.camera.fx, given.fx);
+  EXPECT_DOUBLE_EQ(fixed.camera.fy, given.fy);
+  EXPECT_GT(std::abs(free.camera.fx - given.fx), 0.01 * given.fx);  // free calibration does move it
+}
+
 // ceres::GradientChecker on the autodiff landmark residuals (per-frame and calibration).
 TEST(HeadFitter, LandmarkResidualJacobiansMatchNumericOnes) {
   std::mt19937 rng(2);

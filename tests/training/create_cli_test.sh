@@ -4,7 +4,8 @@
 # --resume -> --resume finishes (fine-tune with two ranks, eval) -> the summary
 # (held-out figures, an H.264 side-by-side, the commands to use the avatar);
 # resuming with other options is refused; a video recorded as from a camera
-# goes through the quality check; a head model without a general model is refused.
+# goes through the quality check; a head model without a general model is refused;
+# compare renders the session's received frames beside their input frames.
 set -u
 bin=$1 src=$2 python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
@@ -45,15 +46,44 @@ codec=$(ffprobe -v error -select_streams v:0 -show_entries stream=codec_name -of
 port=$((20000 + $$ % 20000))
 receiver=$(json "$tmp/b.json" "j['use']['receiver']")
 sender=$(json "$tmp/b.json" "j['use']['sender'].replace('/dev/video0', '$tmp/seq/rgb')")
-eval "exec $receiver --listen 127.0.0.1:$port --display none --stats-json $tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
+eval "exec $receiver --listen 127.0.0.1:$port --display none --json $tmp/rx.json --record $tmp/rx.hcrec" \
+  > /dev/null 2> "$tmp/rx.log" &
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "the printed receiver never listened"
-eval "$sender --target 127.0.0.1:$port" > /dev/null 2> "$tmp/tx.log"
+eval "$sender --target 127.0.0.1:$port --frames-csv $tmp/sent.csv" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -TERM "$rx"; wait "$rx"; rx=
 [ "$(json "$tmp/rx.json" "j['frames_received'] >= 30 and j['rendered'] > 0")" = True ] &&
   ok "the printed receiver and sender commands run a session with the new avatar" ||
   bad "printed commands: $(cat "$tmp/rx.json" 2>&1 | head -c 600) $(tail -2 "$tmp/rx.log")"
+
+# What the receiver showed against the frames the sender tracked (the demo's comparison).
+received=$(json "$tmp/rx.json" "j['frames_received']")
+"$bin/headcast-train" compare --avatar "$tmp/me.hcavatar" --recording "$tmp/rx.hcrec" --truth "$tmp/seq/rgb" \
+  --frame-map "$tmp/sent.csv" --out "$tmp/cmp" --caption "a caption" > "$tmp/cmp.json" 2> "$tmp/cmp.err"
+status=$?
+width=$(ffprobe -v error -select_streams v:0 -show_entries stream=codec_name,width -of csv=p=0 \
+  "$tmp/cmp/side_by_side.mp4" 2>/dev/null)
+[ $status -eq 0 ] && [ "$width" = "h264,384" ] &&
+  [ "$(json "$tmp/cmp.json" "j['frames'] == $received and 5 < j['psnr_db'] < 60 and 0 < j['ssim'] <= 1")" = True ] &&
+  [ "$(($(wc -l < "$tmp/cmp/per_frame.csv") - 1))" = "$received" ] &&
+  ok "compare: $received received frames against their input frames, three H.264 panels" ||
+  bad "compare: status $status video '$width' $(head -c 300 "$tmp/cmp.json") $(tail -2 "$tmp/cmp.err")"
+printf 'frame,psnr\n0,1\n' > "$tmp/foreign.csv"
+out=$("$bin/headcast-train" compare --avatar "$tmp/me.hcavatar" --recording "$tmp/rx.hcrec" --truth "$tmp/seq/rgb" \
+  --frame-map "$tmp/foreign.csv" --out "$tmp/cmp2" 2>&1)
+[ $? -ne 0 ] && grep -q "not a sender --frames-csv" <<<"$out" && ok "compare refuses a CSV that is no frame map" ||
+  bad "foreign map: $out"
+head -3 "$tmp/sent.csv" > "$tmp/short.csv"
+out=$("$bin/headcast-train" compare --avatar "$tmp/me.hcavatar" --recording "$tmp/rx.hcrec" --truth "$tmp/seq/rgb" \
+  --frame-map "$tmp/short.csv" --out "$tmp/cmp3" 2>&1)
+[ $? -ne 0 ] && grep -q "no input frame for sequence" <<<"$out" && ok "compare refuses a frame map without the received frames" ||
+  bad "short map: $out"
+mkdir -p "$tmp/few" && cp "$tmp/seq/rgb/00000.png" "$tmp/seq/rgb/00001.png" "$tmp/few/"
+out=$("$bin/headcast-train" compare --avatar "$tmp/me.hcavatar" --recording "$tmp/rx.hcrec" --truth "$tmp/few" \
+  --out "$tmp/cmp4" 2>&1)
+[ $? -ne 0 ] && grep -q "ends before input frame" <<<"$out" && ok "compare refuses an input shorter than the recording" ||
+  bad "short input: $out"
 
 out=$("$bin/headcast-train" create --input "$tmp/seq/rgb" --out "$tmp/me.hcavatar" --head-model builtin \
   --resolution 128 --iterations 7 --test-frames 8 --resume 2>&1)

@@ -30,17 +30,17 @@ masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
 # Data parallel: two processes on loopback train what one process trains with the whole batch.
 dp=(pretrain --resolution 128 --iterations 6 --batch 4 --eval 3 --seed 5)
 port=$((20000 + $$ % 20000))
-"$bin/headcast-train" "${dp[@]}" --out "$tmp/one.hcavatar" --report "$tmp/one.json" > /dev/null 2>&1
+"$bin/headcast-train" "${dp[@]}" --out "$tmp/one.hcavatar" --json "$tmp/one.json" > /dev/null 2>&1
 "$bin/headcast-train" "${dp[@]}" --world-size 2 --rank 1 --master-port $port --out "$tmp/r1.hcavatar" > /dev/null 2>&1 &
 "$bin/headcast-train" "${dp[@]}" --world-size 2 --rank 0 --master-port $port --out "$tmp/two.hcavatar" \
-  --report "$tmp/two.json" > /dev/null 2> "$tmp/dp.err"
+  --json "$tmp/two.json" > /dev/null 2> "$tmp/dp.err"
 wait
 same=$(json "$tmp/two.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/one.json'))['eval']['psnr_db']) < 1e-3 and abs(j['fit']['final_loss'] / json.load(open('$tmp/one.json'))['fit']['final_loss'] - 1) < 1e-4 and j['fit']['processes'] == 2")
 [ "$same" = True ] && [ ! -e "$tmp/r1.hcavatar" ] &&
   ok "two processes (c10d/Gloo over 127.0.0.1) = one process with the combined batch (loss, held-out PSNR)" ||
   bad "data parallel: $same $(tail -3 "$tmp/dp.err")"
 # --processes 2 starts the second rank itself (one thread each) and trains the same.
-"$bin/headcast-train" "${dp[@]}" --processes 2 --out "$tmp/p2.hcavatar" --report "$tmp/p2.json" > "$tmp/p2.out" 2> "$tmp/p2.err"
+"$bin/headcast-train" "${dp[@]}" --processes 2 --out "$tmp/p2.hcavatar" --json "$tmp/p2.json" > "$tmp/p2.out" 2> "$tmp/p2.err"
 same=$(json "$tmp/p2.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp/one.json'))['eval']['psnr_db']) < 1e-3 and abs(j['fit']['final_loss'] / json.load(open('$tmp/one.json'))['fit']['final_loss'] - 1) < 1e-4 and j['fit']['processes'] == 2 and j['fit']['threads_per_process'] == 1")
 [ "$same" = True ] && [ "$(grep -c '"psnr_db"' "$tmp/p2.out")" = 1 ] && ! pgrep -f "$tmp/p2.hcavatar" > /dev/null &&
   ok "--processes 2: the same training, one report, no rank left running" || bad "--processes: $same $(tail -3 "$tmp/p2.err")"
@@ -52,7 +52,7 @@ out=$("$bin/headcast-train" "${dp[@]}" --processes 2 --world-size 2 --out "$tmp/
 "$bin/headcast-fit-mesh" --mesh "$tmp/scan.obj" --out "$tmp/params.json" --fit shape > /dev/null 2>&1
 subject=(subject --general "$tmp/general.hcavatar" --data "$tmp/ds" --resolution 128 --batch 2 --eval 4
          --eval-every 10 --identity-from "$tmp/params.json" --out "$tmp/s.hcavatar" --log-csv "$tmp/s.csv"
-         --eval-csv "$tmp/s_eval.csv" --plots "$tmp/plots" --report "$tmp/s.json" --checkpoint-dir "$tmp/ckpt"
+         --eval-csv "$tmp/s_eval.csv" --plots "$tmp/plots" --json "$tmp/s.json" --checkpoint-dir "$tmp/ckpt"
          --checkpoint-every 10)
 "$bin/headcast-train" "${subject[@]}" --iterations 20 > /dev/null 2> "$tmp/s.err" &&
   [ -s "$tmp/plots/losses.png" ] && [ -s "$tmp/plots/psnr.png" ] &&
@@ -77,9 +77,9 @@ same=$(json "$tmp/ev/eval.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp
 "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/dsi" --resolutions 128 --test-frames 8 --no-calibrate \
   --max-frames 20 --interpolate 1 > /dev/null 2>&1
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
-  --eval 2 --out "$tmp/i.hcavatar" --report "$tmp/i.json" > /dev/null 2>&1
+  --eval 2 --out "$tmp/i.hcavatar" --json "$tmp/i.json" > /dev/null 2>&1
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
-  --eval 2 --no-interpolated --out "$tmp/n.hcavatar" --report "$tmp/n.json" > /dev/null 2>&1
+  --eval 2 --no-interpolated --out "$tmp/n.hcavatar" --json "$tmp/n.json" > /dev/null 2>&1
 interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
 [ "$interp" -eq 11 ] && [ "$(json "$tmp/i.json" "j['interpolated_frames']")" = 11 ] &&
   [ "$(json "$tmp/n.json" "j['interpolated_frames']")" = 0 ] && [ "$(json "$tmp/i.json" "j['eval']['frames']")" = 8 ] &&
