@@ -121,7 +121,7 @@ int main(int argc, char** argv) {
     }
     std::cerr << "reproduce: " << cmd << "\n";  // stdout is the JSON alone
   } catch (const std::exception& e) {
-    std::cerr << "headcast-bench: " << e.what() << "\n";
+    std::cerr << "headcast-bench: " << headcast::InFlagNames(app, e.what()) << "\n";
     return 1;
   }
   return 0;

@@ -195,7 +195,7 @@ int main(int argc, char** argv) {
       return Render(r);
     }
   } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", headcast::InFlagNames(app, e.what()));
     return 1;
   }
   return 0;

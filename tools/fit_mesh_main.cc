@@ -198,7 +198,7 @@ int main(int argc, char** argv) {
                               {"seconds", clock.ElapsedSeconds()}};
     std::cout << summary.dump(2) << "\n";
   } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", headcast::InFlagNames(app, e.what()));
     return 1;
   }
   return 0;

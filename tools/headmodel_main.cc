@@ -406,7 +406,7 @@ int main(int argc, char** argv) {
       return RenderRgbd(g, rgbd_frames, rgbd_width, rgbd_height, rgbd_fov, rgbd_noise);
     }
   } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", headcast::InFlagNames(app, e.what()));
     return 1;
   }
   return 0;

@@ -60,6 +60,9 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_flag("--calibrate", t.calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "
                "head's yaw in a first pass, then track with them (METHOD §2)");
+  app.add_option("--shape-prior", t.tracker.fit.shape_prior,
+                 "with --calibrate: weight of the shape's squared coefficients against squared landmark pixels")
+      ->capture_default_str();
   AddCameraFlags(app, s, f.camera_size);
   app.add_option("--identity-from", f.identity_from,
                  "take the identity (shape) from an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json");

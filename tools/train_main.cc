@@ -187,7 +187,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
   AddSurfaceFlags(subject, &s.config, &s.fit);
-  subject->add_option("--identity-from", s.identity_from, "shape beta from headcast-fit-mesh's PARAMS.json");
+  subject->add_option(
+      "--identity-from", s.identity_from,
+      "the shape (beta) of an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json, not the dataset's");
   subject
       ->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
       ->capture_default_str();
@@ -354,7 +356,7 @@ int main(int argc, char** argv) {
     }
     std::cout << report.dump(2) << "\n";
   } catch (const std::exception& ex) {
-    spdlog::error("{}", ex.what());
+    spdlog::error("{}", headcast::InFlagNames(app, ex.what()));
     return 1;
   }
   return 0;

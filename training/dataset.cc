@@ -256,7 +256,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     fs::create_directories(dir / std::to_string(r) / "images");
     fs::create_directories(dir / std::to_string(r) / "masks");
   }
-  ProgressLine progress(0, static_cast<int>(fitted.size()));
+  ProgressLine progress(0, static_cast<int>(fitted.size()), 30, "frame");
   for (size_t next = 0; next < fitted.size(); ++next) {
     if (next % 20 == 0 || next + 1 == fitted.size()) progress.Show(static_cast<int>(next), "cropping");
     const FrameParams& params = fitted[next];

@@ -14,18 +14,25 @@
 
 namespace headcast {
 
-ProgressLine::ProgressLine(int first_step, int last_step, double file_every_s)
-    : first_(first_step), last_(last_step), terminal_(isatty(fileno(stderr)) != 0), file_every_s_(file_every_s) {}
+ProgressLine::ProgressLine(int first_step, int last_step, double file_every_s, std::string unit)
+    : first_(first_step),
+      last_(last_step),
+      unit_(std::move(unit)),
+      terminal_(isatty(fileno(stderr)) != 0),
+      file_every_s_(file_every_s) {}
 
 void ProgressLine::Show(int step, const std::string& figures) {
   const double done = (step + 1.0 - first_) / std::max(1, last_ - first_);
   const double elapsed = watch_.ElapsedSeconds();
+  // The first moments (loading, warm-up) say little about the rest.
+  const bool can_tell = done >= 0.01 || elapsed >= 3;
   const std::string times =
-      HumanDuration(elapsed) + ", ETA " + HumanDuration(elapsed * (1 - done) / std::max(done, 1e-9));
+      HumanDuration(elapsed) + ", ETA " +
+      (can_tell ? HumanDuration(elapsed * (1 - done) / std::max(done, 1e-9)) : std::string("estimating"));
   if (terminal_) {
-    std::fprintf(stderr, "\rstep %d/%d  %s  %s   ", step + 1, last_, figures.c_str(), times.c_str());
+    std::fprintf(stderr, "\r%s %d/%d  %s  %s   ", unit_.c_str(), step + 1, last_, figures.c_str(), times.c_str());
   } else if (step + 1 >= last_ || elapsed - last_line_s_ >= file_every_s_) {
-    std::fprintf(stderr, "step %d/%d  %s  %s\n", step + 1, last_, figures.c_str(), times.c_str());
+    std::fprintf(stderr, "%s %d/%d  %s  %s\n", unit_.c_str(), step + 1, last_, figures.c_str(), times.c_str());
     last_line_s_ = elapsed;
   }
 }

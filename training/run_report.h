@@ -16,12 +16,14 @@ namespace headcast {
 // the last step, so logs hold lines rather than carriage returns.
 class ProgressLine {
  public:
-  ProgressLine(int first_step, int last_step, double file_every_s = 30);
+  // `unit` names what is counted ("step", "frame").
+  ProgressLine(int first_step, int last_step, double file_every_s = 30, std::string unit = "step");
   void Show(int step, const std::string& figures);
   void Finish();
 
  private:
   int first_, last_;
+  std::string unit_;
   bool terminal_;
   double file_every_s_, last_line_s_ = -1e9;
   Stopwatch watch_;

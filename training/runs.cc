@@ -14,6 +14,7 @@
 #include "common/core/rotation.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
+#include "common/tracking/frame_tracker.h"
 #include "common/tracking/mesh_fitter.h"
 #include "proto/recording.h"
 #include "training/landmark_agreement.h"
@@ -194,8 +195,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
   SubjectParams subject = data.subject();
   std::string identity = "the dataset's (" + data.manifest().value("identity", std::string("?")) + ")";
   if (!o.identity_from.empty()) {
-    subject.shape = ReadIdentityFromMeshFit(o.identity_from, model).cast<float>();
-    identity = "headcast-fit-mesh " + o.identity_from;
+    subject.shape = ReadTrackingIdentity(o.identity_from, model).cast<float>();
+    identity = o.identity_from;
   }
   subject.texture = Resized(subject.texture, model.num_texture());
   Avatar avatar = [&] {
@@ -318,7 +319,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
     fidelity = "not computed: no dlib shape predictor at " + o.landmark_predictor;
   {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
-    ProgressLine progress(0, static_cast<int>(positions.size()), 10);
+    ProgressLine progress(0, static_cast<int>(positions.size()), 10, "frame");
     int done = 0;
     const EvalResult e =
         EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {

@@ -49,7 +49,7 @@ struct SubjectOptions {
   bool from_scratch = false;  // random networks instead (the comparison of the thesis's claim)
   std::string dataset;        // from `prep`
   int resolution = 256;
-  std::string identity_from;      // beta from headcast-fit-mesh's PARAMS.json instead of the dataset's
+  std::string identity_from;      // beta of an avatar or a headcast-fit-mesh PARAMS.json instead of the dataset's
   double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
   bool use_interpolated = true;   // train on the dataset's interpolated frames too, if it has them
   int freeze_layers = 4;

@@ -161,7 +161,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
   VideoWriter video((dir / "side_by_side.mp4").string(), 30);
   std::ofstream csv(dir / "per_frame.csv");
   csv << "sequence,input_frame,psnr,ssim\n";
-  ProgressLine progress(0, static_cast<int>(ordered.size()), 10);
+  ProgressLine progress(0, static_cast<int>(ordered.size()), 10, "frame");
   int done = 0;
   std::vector<int> scored;
   const EvalResult e = EvaluateOnFrames(

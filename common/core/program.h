@@ -5,13 +5,16 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <csignal>
 #include <exception>
 #include <functional>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <vector>
 
 namespace headcast {
 
@@ -52,6 +55,34 @@ T ParseNumber(const std::string& text, const std::string& what) {
   return value;
 }
 
+// Options structs check themselves and name their fields (tls_ca); the user
+// typed flags (--tls-ca). In `message`, every field that is the long name of
+// a flag of `app` or of its subcommands becomes that flag: names with an
+// underscore wherever they stand, one-word names where a check states a bound
+// ("iterations must be > 0"), so that ordinary words stay words.
+inline std::string InFlagNames(const CLI::App& app, std::string message) {
+  std::vector<const CLI::App*> apps = {&app};
+  for (size_t i = 0; i < apps.size(); ++i)
+    for (const CLI::App* sub : apps[i]->get_subcommands([](const CLI::App*) { return true; })) apps.push_back(sub);
+  auto is_word = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-'; };
+  for (const CLI::App* a : apps)
+    for (const CLI::Option* option : a->get_options()) {
+      for (const std::string& name : option->get_lnames()) {
+        std::string field = name;
+        std::replace(field.begin(), field.end(), '-', '_');
+        const bool compound = field.find('_') != std::string::npos;
+        for (size_t at = message.find(field); at != std::string::npos; at = message.find(field, at + 1)) {
+          const size_t end = at + field.size();
+          if ((at > 0 && is_word(message[at - 1])) || (end < message.size() && is_word(message[end]))) continue;
+          if (!compound && message.compare(end, 6, " must ") != 0) continue;
+          message.replace(at, field.size(), "--" + name);
+          at += 1;
+        }
+      }
+    }
+  return message;
+}
+
 inline int RunProgram(CLI::App& app, int argc, char** argv, const std::function<int()>& run) {
   try {
     app.parse(argc, argv);
@@ -61,7 +92,7 @@ inline int RunProgram(CLI::App& app, int argc, char** argv, const std::function<
   try {
     return run();
   } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
+    spdlog::error("{}", InFlagNames(app, e.what()));
     return 1;
   }
 }

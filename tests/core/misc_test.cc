@@ -14,8 +14,10 @@
 #include "common/core/bounded_queue.h"
 #include "common/core/camera.h"
 #include "common/core/check.h"
+#include "common/core/cli_flags.h"
 #include "common/core/image_io.h"
 #include "common/core/options.h"
+#include "common/core/program.h"
 #include "common/core/service_notify.h"
 #include "common/core/timer.h"
 #include "tests/testing/test_data.h"
@@ -219,6 +221,44 @@ TEST(Flags, IntrinsicsAndSizesAreParsedOrRefusedNamingTheFlag) {
   EXPECT_EQ(h, 720);
   for (const char* bad : {"1280", "1280x", "0x720", "1280x720p", "99999x1"})
     EXPECT_THROW(ParseSize(bad, "--camera-size", &w, &h), std::invalid_argument) << bad;
+}
+
+// An options check's field names come back as the flags the user typed.
+TEST(Flags, CheckErrorsNameTheFlags) {
+  CLI::App app;
+  std::string ca, out;
+  int iterations = 0;
+  app.add_option("--tls-ca", ca);
+  app.add_subcommand("train")->add_option("--iterations", iterations);
+  app.add_option("--out", out);
+  EXPECT_EQ(InFlagNames(app, "sender: cannot read tls_ca; iterations must be > 0 (got 0)"),
+            "sender: cannot read --tls-ca; --iterations must be > 0 (got 0)");
+  // One-word names stay words except where a bound is stated; longer names are not cut.
+  EXPECT_EQ(InFlagNames(app, "the out folder; my_tls_ca_file"), "the out folder; my_tls_ca_file");
+}
+
+// One name per concept: --json, --pacing, --max-frames; old names are hidden aliases.
+TEST(Flags, SharedFlagsAndTheirOldNames) {
+  CLI::App app;
+  std::string json;
+  bool realtime = true;
+  int frames = 0;
+  AddJsonFlag(app, &json, "the report", {"--stats-json"});
+  AddPacingFlag(app, &realtime, {"--realtime"}, {"--unpaced"});
+  AddMaxFramesFlag(app, &frames, "at most", {"--frames"});
+  app.parse("--pacing none --max-frames 5 --json a.json", false);
+  EXPECT_EQ(json, "a.json");
+  EXPECT_FALSE(realtime);
+  EXPECT_EQ(frames, 5);
+  app.parse("--frames 7 --unpaced --stats-json b.json", false);
+  EXPECT_EQ(json, "b.json");
+  EXPECT_EQ(frames, 7);
+  EXPECT_FALSE(realtime);
+  EXPECT_THROW(app.parse("--pacing sometimes", false), CLI::ValidationError);
+  const std::string help = app.help();
+  EXPECT_NE(help.find("--json"), std::string::npos);
+  EXPECT_EQ(help.find("--stats-json"), std::string::npos);
+  EXPECT_EQ(help.find("--unpaced"), std::string::npos);
 }
 
 }  // namespace
