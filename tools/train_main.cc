@@ -138,6 +138,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   AddMaxFramesFlag(*prep, &p.max_frames, "use only the first N frames");
   prep->add_flag("!--no-calibrate", p.calibrate, "no identity calibration (shape stays neutral)");
+  prep->add_option("--shape-prior", p.shape_prior,
+                   "identity calibration: weight of the shape's squared coefficients against squared landmark pixels")
+      ->capture_default_str();
   prep->add_option("--identity-from", p.identity_from,
                    "shape from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
   prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
@@ -262,6 +265,12 @@ int main(int argc, char** argv) {
                    "the last N fitted frames are held out for the figures (at most a sixth of them)")
       ->capture_default_str();
   create->add_option("--intrinsics", c.intrinsics, "camera fx,fy,cx,cy in pixels, when known");
+  create->add_option("--identity-from", c.identity_from,
+                     "your shape when known: an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json of a head scan "
+                     "(instead of calibrating it from the video)");
+  create->add_option("--shape-prior", c.shape_prior,
+                     "identity calibration: weight of the shape's squared coefficients against squared landmark "
+                     "pixels (default: the tracker's)");
   create->add_flag("--resume", c.resume, "continue an interrupted create in --work");
   create->add_option("--stop-after", c.stop_after, "end after this stage (record, prep, fine-tune); --resume goes on")
       ->check(CLI::IsMember({"record", "prep", "fine-tune"}));

@@ -455,28 +455,6 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
   return r;
 }
 
-EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
-                             const std::vector<int>& positions,
-                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render) {
-  avatar.modules().eval();
-  torch::InferenceMode inference;
-  SampleStats ms;
-  EvalResult r;
-  ShownFrames shown(avatar);
-  const HeadIdentity identity = model.MakeIdentity(data.subject().shape.cast<double>());
-  for (int i : positions) {
-    const RealSample& s = data.At(i);
-    const cv::Mat target = MaskedTarget(s.image_bgr, s.mask);
-    Stopwatch watch;
-    const cv::Mat bgr = shown.Render(model, identity, data.subject(), s.params);
-    ms.Add(watch.ElapsedMs());
-    Score(bgr, target, &r);
-    if (render) render(i, target, bgr);
-  }
-  Finish(ms, &r);
-  return r;
-}
-
 EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
                             const std::vector<FrameParams>& frames, const std::function<cv::Mat(int)>& target,
                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& each) {
@@ -497,6 +475,22 @@ EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const Subjec
   }
   Finish(ms, &r);
   return r;
+}
+
+EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
+                             const std::vector<int>& positions,
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render) {
+  std::vector<FrameParams> frames;
+  for (int i : positions) frames.push_back(data.At(i).params);
+  return EvaluateOnFrames(
+      avatar, model, data.subject(), frames,
+      [&](int k) {
+        const RealSample& s = data.At(positions[k]);
+        return MaskedTarget(s.image_bgr, s.mask);
+      },
+      [&](int k, const cv::Mat& target, const cv::Mat& bgr) {
+        if (render) render(positions[k], target, bgr);
+      });
 }
 
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,

@@ -209,6 +209,8 @@ nlohmann::json RunCreate(const CreateOptions& options, const CreateHooks& hooks)
                            {"resolution", options.resolution},
                            {"max_frames", options.max_frames},
                            {"test_frames", options.test_frames},
+                           {"identity_from", options.identity_from},
+                           {"shape_prior", options.shape_prior},
                            {"record_s", record_s}});
   if (state.Exists()) {
     if (!options.resume)
@@ -299,6 +301,9 @@ nlohmann::json RunCreate(const CreateOptions& options, const CreateHooks& hooks)
     p.test_share = 1.0 / 6;
     p.max_frames = options.max_frames;
     p.intrinsics = options.intrinsics;
+    p.identity_from = options.identity_from;
+    p.calibrate = options.identity_from.empty();
+    if (options.shape_prior >= 0) p.shape_prior = options.shape_prior;
     p.source = options.source;
     if (record_s > 0) p.source.realtime = false;
     p.resume = true;  // reuse a finished tracking pass of an interrupted run

@@ -32,7 +32,11 @@ struct CreateOptions {
   bool resume = false;     // continue the run in work_dir
   std::string stop_after;  // "", "record", "prep" or "fine-tune": end there (to look before training on)
   std::string intrinsics;  // camera fx,fy,cx,cy when known
-  bool landmarks = true;   // eval's dlib landmark figures
+  // The person's shape when known (an avatar, or headcast-fit-mesh's PARAMS.json
+  // of a head scan) instead of calibrating it from the video.
+  std::string identity_from;
+  double shape_prior = -1;  // calibration's shape prior (HeadFitterOptions::shape_prior); < 0: its default
+  bool landmarks = true;    // eval's dlib landmark figures
   // Cameras are recorded first: record_s seconds (0 = 60 for cameras, none for
   // files). A file given a record_s is read in real time as if it were a camera.
   double record_s = 0;

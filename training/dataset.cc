@@ -34,7 +34,8 @@ void PrepOptions::Check() const {
   c.InRange("interpolate", interpolate, 0, 8)
       .InRange("crop_scale", crop_scale, 1.0, 6.0)
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
-      .InRange("side_margin", side_margin, 0.0, mask_margin);
+      .InRange("side_margin", side_margin, 0.0, mask_margin)
+      .NonNegative("shape_prior", shape_prior);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -182,6 +183,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.source = o.source;
   track.max_frames = o.max_frames;
   track.calibrate = o.calibrate;
+  track.tracker.fit.shape_prior = o.shape_prior;
   track.tracker.face.locate_irises = o.gaze;
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
   if (!o.identity_from.empty()) {

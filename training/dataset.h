@@ -26,6 +26,7 @@
 #include "common/capture/frame_source.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/head_fitter.h"
 
 namespace headcast {
 
@@ -42,7 +43,8 @@ struct PrepOptions {
   bool calibrate = true;      // identity calibration over key frames (shape, focal)
   std::string identity_from;  // or: beta from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json
   std::string intrinsics;     // fx,fy,cx,cy when known (else calibration / field of view)
-  double crop_scale = 2.2;    // crop edge over the landmarks' extent (room for hair, ears, neck)
+  double shape_prior = HeadFitterOptions{}.shape_prior;  // calibration: weight of the shape's squared coefficients
+  double crop_scale = 2.2;  // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
   // head model's silhouette dilated by this fraction of the crop edge: pixels
   // the avatar cannot reach (background caught by GrabCut) are not targets.

@@ -131,8 +131,13 @@ nlohmann::json RunCompare(const CompareOptions& o) {
   std::unique_ptr<FrameSource> source = OpenFrameSource(o.truth, SourceOptions{});
   CapturedFrame current;
   bool have_current = false;
-  // The input frame `index`, cut to the avatar's framing; throws when the input ends first.
-  auto input_crop = [&](int64_t index) {
+  // The input frame `index` and its head mask (made on the full frame, as
+  // prep's are), cut to the avatar's framing; empty when that frame was
+  // unreadable; throws when the input ends first.
+  struct Cut {
+    cv::Mat image, mask;
+  };
+  auto input_cut = [&](int64_t index, const FrameParams& f) -> Cut {
     while (!have_current || static_cast<int64_t>(current.index) < index) {
       std::string why;
       const ReadStatus st = source->Read(&current, &why);
@@ -141,21 +146,24 @@ nlohmann::json RunCompare(const CompareOptions& o) {
                                  " (is it the input this recording was tracked from?)");
       have_current = st == ReadStatus::kFrame;
     }
-    if (static_cast<int64_t>(current.index) != index) return cv::Mat();  // unreadable
-    const std::optional<PinholeCamera> scaled = ContractCameraFor(contract, current.bgr.cols, current.bgr.rows);
-    if (!scaled)
+    if (static_cast<int64_t>(current.index) != index) return {};  // unreadable
+    const std::optional<PinholeCamera> full = ContractCameraFor(contract, current.bgr.cols, current.bgr.rows);
+    if (!full)
       throw std::runtime_error(o.truth + ": frames of " + std::to_string(current.bgr.cols) + "x" +
                                std::to_string(current.bgr.rows) + " are not of the avatar's camera (" +
                                std::to_string(contract.source.width) + "x" + std::to_string(contract.source.height) +
                                ")");
     const double s = static_cast<double>(current.bgr.cols) / contract.source.width;
-    return CropSquare(current.bgr, s * contract.crop_x0, s * contract.crop_y0, s * contract.crop_side, size,
-                      cv::INTER_AREA);
+    const double x0 = s * contract.crop_x0, y0 = s * contract.crop_y0, side = s * contract.crop_side;
+    Cut cut{CropSquare(current.bgr, x0, y0, side, size, cv::INTER_AREA),
+            CropSquare(HeadMask(current.bgr, fitter.Project(f, *full)), x0, y0, side, size, cv::INTER_LINEAR)};
+    cv::threshold(cut.mask, cut.mask, 127, 255, cv::THRESH_BINARY);
+    return cut;
   };
 
   std::vector<FrameParams> ordered;
   for (const auto& w : wanted) ordered.push_back(w.second);
-  std::vector<cv::Mat> crops(ordered.size());
+  std::vector<cv::Mat> crops(ordered.size());  // kept from the target to the video frame
   fs::create_directories(o.out_dir);
   const fs::path dir = o.out_dir;
   VideoWriter video((dir / "side_by_side.mp4").string(), 30);
@@ -168,9 +176,10 @@ nlohmann::json RunCompare(const CompareOptions& o) {
       avatar, model, subject, ordered,
       [&](int k) -> cv::Mat {
         progress.Show(done++, "comparing");
-        crops[k] = input_crop(wanted[k].first);
-        if (crops[k].empty()) return cv::Mat();
         const FrameParams& f = ordered[k];
+        Cut cut = input_cut(wanted[k].first, f);
+        crops[k] = cut.image;
+        if (crops[k].empty()) return cv::Mat();
         HeadModelOutput posed;
         model.Forward(identity, f.expression.cast<double>(), f.HeadPose(), &posed);
         RasterVertices in_camera;
@@ -178,7 +187,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         RasterBuffers silhouette;
         Rasterize(in_camera, model.data().faces, subject.intrinsics, RasterOptions{}, &silhouette);
         const Landmarks2d landmarks = fitter.Project(f, subject.intrinsics);
-        cv::Mat mask = HeadMask(crops[k], landmarks);
+        cv::Mat& mask = cut.mask;
         FillHairNotches(landmarks, &mask);
         cv::bitwise_and(mask,
                         MaskReach(silhouette.Mask(), landmarks, static_cast<int>(std::lround(prep.mask_margin * size)),

@@ -23,7 +23,13 @@ struct FaceTrackerOptions {
   // convention makes it see a bigger (or smaller) face each frame, and the
   // landmarks drift until the next detection. Off: fixed margins (comparisons).
   bool box_from_detection = true;
-  double min_face_px = 40;         // smaller faces are ignored, pixels (full frame)
+  double min_face_px = 40;  // smaller faces are ignored, pixels (full frame)
+  // While tracking, landmarks whose extent changes by more than this factor
+  // since the previous frame or the last detection, or whose centre moves by
+  // more than this share of the face's width in a frame, mean the box slipped
+  // off the face: the detector runs again in that frame.
+  double max_tracked_scale_change = 1.25;
+  double max_tracked_shift = 0.35;
   double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
   bool locate_irises = true;       // the irises in the eyes the landmarks give (gaze), filtered like them
@@ -41,6 +47,7 @@ struct FaceObservation {
   EyeIrises irises;         // filtered; not found when closed, or not looked for
   cv::Rect box;
   int faces_detected = 0;  // faces the detector saw (when it ran)
+  bool recovered = false;  // tracking slipped in this frame and the detector found the face again
 };
 
 class FaceTracker {

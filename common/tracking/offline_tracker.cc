@@ -216,6 +216,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   SampleStats ms, accuracy_mm;
   int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0, gaze_frames = 0;
   std::map<std::string, int> statuses;
+  int recovered = 0;  // frames where the followed box slipped and the detector found the face again
   Stopwatch watch;
   for (;;) {
     if (o.max_frames > 0 && frames >= o.max_frames) break;
@@ -253,6 +254,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     ms.Add(t.landmarks_ms + t.fit_ms);
     if (!t.fitted && !t.problem.empty()) spdlog::debug("frame {}: {}", index, t.problem);
     ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];
+    recovered += t.face.recovered;
     OfflineFrame seen{index, &frame, t.fitted, cv::Mat()};
     Landmarks2d model_landmarks{};
     std::array<Eigen::Vector2d, 2> model_pupils;
@@ -315,6 +317,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
             {"fitted_frames", fitted},
             {"unreadable_frames", unreadable},
             {"statuses", statuses},
+            {"tracking_recovered_frames", recovered},
             {"ms_per_frame_median", ms.Median()},
             {"ms_per_frame_p95", ms.Percentile(95)},
             {"frames_with_depth", with_depth},

@@ -85,4 +85,11 @@ PY
 else
   bad "python3-numpy is missing (deploy/setup.sh installs it)"
 fi
+# --config and global flags work in every program, also after a subcommand; unknown keys are refused.
+printf 'log = "warn"\n' > "$tmp/ok.toml"
+printf 'lgo = "warn"\n' > "$tmp/typo.toml"
+"$rec" --config "$tmp/ok.toml" info "$tmp/p.hcrec" > /dev/null 2>&1 && "$rec" info "$tmp/p.hcrec" --log warn > /dev/null 2>&1 &&
+  ok "--config FILE and --log after the subcommand are accepted" || bad "config / global flag after subcommand"
+out=$("$rec" --config "$tmp/typo.toml" info "$tmp/p.hcrec" 2>&1)
+[ $? -ne 0 ] && grep -q "lgo" <<<"$out" && ok "a misspelt config key is refused, named" || bad "config typo: $out"
 checks_summary "headcast-rec"
