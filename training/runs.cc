@@ -196,7 +196,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
   std::string identity = "the dataset's (" + data.manifest().value("identity", std::string("?")) + ")";
   if (!o.identity_from.empty()) {
     subject.shape = ReadTrackingIdentity(o.identity_from, model).cast<float>();
-    identity = o.identity_from;
+    const bool avatar = fs::path(o.identity_from).extension() == ".hcavatar";
+    identity = (avatar ? "the avatar " : "headcast-fit-mesh ") + o.identity_from;
   }
   subject.texture = Resized(subject.texture, model.num_texture());
   Avatar avatar = [&] {
