@@ -117,6 +117,12 @@ nlohmann::json RunCompare(const CompareOptions& o) {
       input = it->second;
     }
     wanted.emplace_back(input, f);
+    // A sender may stream fewer components (--expression-components): the rest are zero.
+    Eigen::VectorXf& e = wanted.back().second.expression;
+    const Eigen::Index kept = std::min<Eigen::Index>(e.size(), model.num_expression());
+    Eigen::VectorXf full = Eigen::VectorXf::Zero(model.num_expression());
+    full.head(kept) = e.head(kept);
+    e = full;
   }
   std::stable_sort(wanted.begin(), wanted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 
