@@ -7,7 +7,10 @@
 #   3. boots a container with systemd as PID 1, installs the receiver exactly as
 #      deploy/systemd/headcast-receiver.service says (system user, the example
 #      config, certificates from deploy/make_certs.sh, a token), starts the
-#      unit, and drives it with a sender over TLS with the token on loopback.
+#      unit, and drives it with a sender over TLS with the token on loopback;
+#   4. builds the runtime stage (the package alone, a user of its own), prints
+#      both images' sizes, runs the receiver in it with certificates and waits
+#      for Docker's health check (gRPC health over TLS) to say healthy.
 #
 #   deploy/check_deployment.sh OUT [BASE_IMAGE]
 #
@@ -24,14 +27,14 @@ say() { echo "check_deployment: $*" >&2; }
 clone=$(mktemp -d)
 trap 'rm -rf "$clone"; docker rm -f headcast-systemd-check >/dev/null 2>&1 || true' EXIT
 git clone -q "$root" "$clone/headcast"
-[ "$base" = debian:12 ] || sed -i "s|^FROM debian:12|FROM $base|" "$clone/headcast/deploy/Dockerfile"
+[ "$base" = debian:12 ] || sed -i "s|^FROM debian:12 |FROM $base |" "$clone/headcast/deploy/Dockerfile"
 
 if [ -n "${HEADCAST_CHECK_IMAGE:-}" ]; then  # an image built from this Dockerfile before: steps 2 and 3 only
   docker tag "$HEADCAST_CHECK_IMAGE" headcast:check
 else
-  say "1. docker build (Debian 12, setup.sh installs and builds everything)"
+  say "1. docker build --target build (Debian 12, setup.sh installs and builds everything)"
   start=$(date +%s)
-  docker build --network host -f "$clone/headcast/deploy/Dockerfile" -t headcast:check "$clone/headcast" \
+  docker build --network host -f "$clone/headcast/deploy/Dockerfile" --target build -t headcast:check "$clone/headcast" \
     > "$out/docker_build.log" 2>&1 || { tail -20 "$out/docker_build.log" >&2; exit 1; }
   say "   built in $(($(date +%s) - start)) s (log: $out/docker_build.log)"
 fi
@@ -81,4 +84,28 @@ print(f"check_deployment: the service took {rx['sessions_started']} TLS session(
       file=sys.stderr)
 sys.exit(0 if rx["sessions_started"] >= 1 and rx["frames_received"] == tx["frames_sent"] > 0 and rx["rendered"] > 0 else 1)
 EOF
-say "done: $out (docker_build.log, demo/, demo.log, systemd.log, journal.log, receiver_stats.json, sender.json)"
+
+say "4. the runtime image: size and health"
+docker build --network host -f "$clone/headcast/deploy/Dockerfile" -t headcast:check-runtime "$clone/headcast" \
+  > "$out/runtime_build.log" 2>&1 || { tail -20 "$out/runtime_build.log" >&2; exit 1; }
+size() { echo $(($(docker image inspect -f '{{.Size}}' "$1") / 1048576)); }
+say "   build stage $(size headcast:check) MB, runtime image $(size headcast:check-runtime) MB"
+mkdir -p "$out/runtime_certs"
+"$root/deploy/make_certs.sh" "$out/runtime_certs" localhost 127.0.0.1 > /dev/null
+(umask 077; openssl rand -hex 16 > "$out/runtime_certs/tokens.txt")
+chmod -R a+rX "$out/runtime_certs"
+docker rm -f headcast-runtime-check > /dev/null 2>&1 || true
+docker run -d --name headcast-runtime-check --network host -v "$out/runtime_certs:/certs:ro" headcast:check-runtime \
+  --listen 127.0.0.1:50051 --tls-cert /certs/server.pem --tls-key /certs/server.key --token-file /certs/tokens.txt \
+  --avatar demo=/usr/share/headcast/models/demo_avatar.hcavatar --display none > /dev/null
+health=starting
+for _ in $(seq 60); do
+  health=$(docker inspect -f '{{.State.Health.Status}}' headcast-runtime-check)
+  [ "$health" = starting ] || break
+  sleep 2
+done
+user=$(docker exec headcast-runtime-check id -un)
+docker rm -f headcast-runtime-check > /dev/null
+say "   health: $health, running as $user"
+[ "$health" = healthy ] && [ "$user" = headcast ] || exit 1
+say "done: $out (docker_build.log, demo/, demo.log, systemd.log, journal.log, receiver_stats.json, sender.json, runtime_build.log)"

@@ -5,6 +5,7 @@
 
 #include "common/core/zip_archive.h"
 #include "proto/headcast.grpc.pb.h"
+#include "proto/health.grpc.pb.h"
 
 namespace headcast {
 namespace {
@@ -99,6 +100,19 @@ class GrpcUplinkConnector final : public UplinkConnector {
 
 std::unique_ptr<UplinkConnector> MakeGrpcUplinkConnector(const SenderOptions& options) {
   return std::make_unique<GrpcUplinkConnector>(options);
+}
+
+std::string CheckReceiverHealth(const SenderOptions& options, double timeout_s) {
+  options.Check();
+  auto stub = grpc::health::v1::Health::NewStub(MakeChannel(options));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() +
+                       std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+  grpc::health::v1::HealthCheckRequest request;
+  grpc::health::v1::HealthCheckResponse response;
+  const grpc::Status status = stub->Check(&context, request, &response);
+  if (!status.ok()) return "unreachable: " + status.error_message();
+  return grpc::health::v1::HealthCheckResponse::ServingStatus_Name(response.status());
 }
 
 }  // namespace headcast

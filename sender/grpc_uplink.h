@@ -4,6 +4,7 @@
 #pragma once
 
 #include <memory>
+#include <string>
 
 #include "sender/session_client.h"
 
@@ -11,5 +12,11 @@ namespace headcast {
 
 // Throws naming the file when TLS material cannot be read.
 std::unique_ptr<UplinkConnector> MakeGrpcUplinkConnector(const SenderOptions& options);
+
+// Asks the receiver at options.target for its health (grpc.health.v1 Check,
+// over the same channel a session uses: TLS or plaintext on loopback) within
+// `timeout_s`. Returns "SERVING", "NOT_SERVING", ... or why it could not ask
+// ("unreachable: ..."); the caller decides what is healthy.
+std::string CheckReceiverHealth(const SenderOptions& options, double timeout_s);
 
 }  // namespace headcast

@@ -22,6 +22,7 @@
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/protocol.h"
 #include "proto/recording.h"
+#include "sender/grpc_uplink.h"
 #include "sender/live_tracker.h"
 #include "sender/session_client.h"
 
@@ -36,6 +37,7 @@ struct SenderFlags {
   int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
+  double health_check_s = 0;  // > 0: only ask the receiver's health, this long at most
   std::string input, identity_from, intrinsics, camera_size = "640x480";
   SourceOptions source;
   LiveTrackerOptions live;
@@ -102,6 +104,10 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
                      "a key frame at least every N frames (default 30; 10 s under a 32 kbit/s budget)");
   app.add_option("--queue", o.queue_frames, "frames queued at most (older ones are dropped)")->capture_default_str();
   app.add_option("--record", f.record, "also record the sent parameters (.hcrec)");
+  app.add_option("--health-check", f.health_check_s,
+                 "only ask the receiver at --target whether it is serving (gRPC health), waiting at most this many "
+                 "seconds; exit 0 when it is (for Docker HEALTHCHECK, systemd, load balancers)")
+      ->check(CLI::Range(0.1, 60.0));
   app.add_option("--frames-csv", f.frames_csv,
                  "--input: write sequence,input_frame per sent frame here (which input frame each one was tracked "
                  "from; headcast-train compare --frame-map)");
@@ -252,6 +258,11 @@ int Run(SenderFlags& f) {
   InitLogging(f.log_level);
   StopOnSignals(&g_stop);
   SenderOptions& o = f.session;
+  if (f.health_check_s > 0) {
+    const std::string status = CheckReceiverHealth(o, f.health_check_s);
+    std::cout << status << "\n";
+    return status == "SERVING" ? 0 : 1;
+  }
   if (!f.token_file.empty()) {
     const std::vector<std::string> tokens = ReadTokenFile(f.token_file);
     if (tokens.size() != 1) throw std::runtime_error(f.token_file + ": a sender's token file holds one token");

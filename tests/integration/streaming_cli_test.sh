@@ -106,9 +106,16 @@ out=$("$bin/headcast-receiver" --listen 127.0.0.1:0 --plaintext --token-file "$t
   --display none --duration 1 2>&1); rc=$?
 [ $rc -eq 1 ] && grep -q "short_tokens.txt: line 1: a token needs at least 16" <<<"$out" && ok "a short token is refused" \
   || bad "short token (rc $rc): $out"
+# The health probe, over TLS as a session would connect: serving now, unreachable once it is gone.
+health=$("$bin/headcast-sender" --target "localhost:$port" --tls-ca "$tmp/certs/ca.pem" --health-check 10 2>&1)
+[ $? -eq 0 ] && [ "$health" = SERVING ] && ok "--health-check: the receiver is SERVING (gRPC health over TLS)" ||
+  bad "health check: $health"
 # SIGTERM rather than a short duration: under load the checks above may take
 # longer than any fixed window, and the receiver writes its stats on SIGTERM too.
 kill -TERM "$rpid"; wait "$rpid"; rpid=
+health=$("$bin/headcast-sender" --target "localhost:$port" --tls-ca "$tmp/certs/ca.pem" --health-check 1 2>&1)
+[ $? -eq 1 ] && grep -q "^unreachable" <<<"$health" && ok "--health-check fails (exit 1) when no receiver answers" ||
+  bad "health check of a stopped receiver: $health"
 grep -q '"frames_received": 60' "$tmp/receiver.json" && ok "receiver got 60 frames" || bad "receiver: $(cat "$tmp/receiver.json")"
 sent=$("$bin/headcast-avatar" render "$tmp/demo.hcavatar" --params "$tmp/received.hcrec" --display none --pacing none --json "$tmp/r.json" > /dev/null 2>&1; grep -o '"rendered": [0-9]*' "$tmp/r.json")
 [ "$sent" = '"rendered": 60' ] && ok "the receiver's recording replays (60 frames)" || bad "replay: $sent"
