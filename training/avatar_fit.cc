@@ -493,6 +493,13 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
       });
 }
 
+Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n) {
+  Eigen::VectorXf out = Eigen::VectorXf::Zero(n);
+  const int k = std::min<int>(n, static_cast<int>(v.size()));
+  out.head(k) = v.head(k);
+  return out;
+}
+
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject,
                         const FrameParams& frame) {
   avatar.modules().eval();

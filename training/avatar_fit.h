@@ -154,6 +154,9 @@ EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const Subjec
                             const std::vector<FrameParams>& frames, const std::function<cv::Mat(int)>& target,
                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& each = nullptr);
 
+// `v` truncated or padded with zeros to `n` values (parameters of another count).
+Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n);
+
 // The avatar's picture (BGR) for a subject and frame, e.g. beside its ground truth.
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame);
 

@@ -118,14 +118,6 @@ cv::Mat Stack(const std::vector<cv::Mat>& rows) {
   return sheet;
 }
 
-// Truncates or pads with zeros.
-Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n) {
-  Eigen::VectorXf out = Eigen::VectorXf::Zero(n);
-  const int k = std::min<int>(n, static_cast<int>(v.size()));
-  out.head(k) = v.head(k);
-  return out;
-}
-
 }  // namespace
 
 void PretrainOptions::Check() const {

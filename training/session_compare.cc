@@ -118,11 +118,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
     }
     wanted.emplace_back(input, f);
     // A sender may stream fewer components (--expression-components): the rest are zero.
-    Eigen::VectorXf& e = wanted.back().second.expression;
-    const Eigen::Index kept = std::min<Eigen::Index>(e.size(), model.num_expression());
-    Eigen::VectorXf full = Eigen::VectorXf::Zero(model.num_expression());
-    full.head(kept) = e.head(kept);
-    e = full;
+    wanted.back().second.expression = Resized(f.expression, model.num_expression());
   }
   std::stable_sort(wanted.begin(), wanted.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
 
@@ -169,7 +165,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
 
   std::vector<FrameParams> ordered;
   for (const auto& w : wanted) ordered.push_back(w.second);
-  std::vector<cv::Mat> crops(ordered.size());  // kept from the target to the video frame
+  cv::Mat input_panel, fit_panel;  // the frame being scored, from its target to its video frame
   fs::create_directories(o.out_dir);
   const fs::path dir = o.out_dir;
   VideoWriter video((dir / "side_by_side.mp4").string(), 30);
@@ -184,10 +180,12 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         progress.Show(done++, "comparing");
         const FrameParams& f = ordered[k];
         Cut cut = input_cut(wanted[k].first, f);
-        crops[k] = cut.image;
-        if (crops[k].empty()) return cv::Mat();
+        if (cut.image.empty()) return cv::Mat();
         HeadModelOutput posed;
         model.Forward(identity, f.expression.cast<double>(), f.HeadPose(), &posed);
+        input_panel = cut.image;
+        fit_panel =
+            RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
         RasterVertices in_camera;
         TransformToCamera(posed.vertices, f.CamFromHead(), &in_camera);
         RasterBuffers silhouette;
@@ -200,26 +198,20 @@ nlohmann::json RunCompare(const CompareOptions& o) {
                                   static_cast<int>(std::lround(prep.side_margin * size))),
                         mask);
         ClearBelowJawLine(landmarks, &mask);
-        return MaskedTarget(crops[k], mask);
+        return MaskedTarget(cut.image, mask);
       },
       [&](int k, const cv::Mat& target, const cv::Mat& shown) {
         scored.push_back(k);
-        const FrameParams& f = ordered[k];
-        HeadModelOutput posed;
-        model.Forward(identity, f.expression.cast<double>(), f.HeadPose(), &posed);
-        cv::Mat input = crops[k].clone(), avatar_panel = shown.clone();
-        cv::Mat fit =
-            RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
+        cv::Mat input = input_panel.clone(), avatar_panel = shown.clone();
         Label(&input, "input");
-        Label(&fit, "head-model fit");
+        Label(&fit_panel, "head-model fit");
         char text[64];
         std::snprintf(text, sizeof(text), "avatar %.1f dB", cv::PSNR(target, shown));
         Label(&avatar_panel, text);
         cv::Mat row;
-        cv::hconcat(std::vector<cv::Mat>{input, fit, avatar_panel}, row);
+        cv::hconcat(std::vector<cv::Mat>{input, fit_panel, avatar_panel}, row);
         if (!o.caption.empty()) cv::vconcat(row, CaptionStrip(o.caption, row.cols), row);
         video.Write(row);
-        crops[k].release();
       });
   progress.Finish();
   video.Close();
