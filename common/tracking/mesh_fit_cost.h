@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <vector>
 
 #include "common/core/rotation.h"
@@ -37,7 +38,12 @@ struct MeshBasis {
     return next++;
   }
 
-  MeshBasis(const HeadModel& model, int num_shape, int num_expression) : n(model.num_vertices()) {
+  // `folded_shape`: a known identity built into the mean (with num_shape 0:
+  // tracking a calibrated person fits the expression alone, and each residual
+  // costs a fraction of the full basis).
+  MeshBasis(const HeadModel& model, int num_shape, int num_expression,
+            const Eigen::VectorXd& folded_shape = Eigen::VectorXd())
+      : n(model.num_vertices()) {
     const auto& d = model.data();
     ns = num_shape;
     ne = num_expression;
@@ -50,6 +56,12 @@ struct MeshBasis {
     jaw_dirs.setZero(3, k);
     if (ns > 0) jaw_dirs.leftCols(ns) = model.JointShapeDirs(kJawJoint).leftCols(ns).cast<double>();
     if (ne > 0) jaw_dirs.middleCols(ns, ne) = model.JointExpressionDirs(kJawJoint).leftCols(ne).cast<double>();
+    if (folded_shape.size() > 0) {
+      if (folded_shape.size() > model.num_shape()) throw std::invalid_argument("MeshBasis: too many shape values");
+      const Eigen::Index s = folded_shape.size();
+      mean += d.shapedirs.leftCols(s).cast<double>() * folded_shape;
+      jaw_mean += model.JointShapeDirs(kJawJoint).leftCols(s).cast<double>() * folded_shape;
+    }
     jaw_weight = d.weights.col(kJawJoint).cast<double>();
     if (model.has_posedirs()) jaw_posedirs = d.posedirs.middleCols(9 * (kJawJoint - 1), 9).cast<double>();
   }
@@ -96,6 +108,11 @@ struct MeshBasis {
            Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix<double, 3, 3, Eigen::RowMajor>(jaw.RmI).data());
     }
     const double w = jaw_weight[i];
+    if (w == 0 && jaw_posedirs.rows() == 0) {  // off the jaw (most of the head): the jaw plays no part
+      *q += b * p;
+      if (dq_dc) dq_dc->noalias() += b * Bi;
+      return;
+    }
     const Eigen::Vector3d u = p - jaw.joint;
     *q += b * (p + w * jaw.RmI * u);
     if (dq_dc) {
@@ -228,6 +245,19 @@ struct FreeBlocks {
 
 // All model vertices posed by `state`, in the target's frame.
 RowMatrixX3f PoseAll(const MeshBasis& basis, const FitState& state);
+// The part of the surface a target can reach, so that closest points need not
+// pose and search the whole head: the faces to search, the faces around their
+// vertices (the vertex normals come out as over the whole mesh) and the
+// vertices those touch.
+struct SurfacePatch {
+  std::vector<int> faces, normal_faces, vertices;
+};
+// Faces that can come within `reach` of a point in the box [lo, hi] (each
+// face's centroid and size in `posed`), plus the faces holding `extra_faces`.
+SurfacePatch PatchNear(const HeadModel& model, const RowMatrixX3f& posed, const Eigen::Vector3f& lo,
+                       const Eigen::Vector3f& hi, float reach, const std::vector<int>& extra_faces = {});
+// The patch's vertices posed by `state` (the other rows are zero).
+RowMatrixX3f PosePatch(const MeshBasis& basis, const FitState& state, const SurfacePatch& patch);
 // Closest point on triangle abc to p, as barycentrics.
 Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                    const Eigen::Vector3d& c);
@@ -236,7 +266,8 @@ Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector
 // one), skipped when the surfaces face different ways.
 std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
                                           const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
-                                          const Eigen::VectorXf& nu, double max_distance);
+                                          const Eigen::VectorXf& nu, double max_distance,
+                                          const SurfacePatch* patch = nullptr);
 // One Ceres solve over `pairs` (weighted, robust loss, priors); returns the iterations used.
 int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, const SolveSettings& settings,
               const FreeBlocks& free, FitState* state);

@@ -49,16 +49,64 @@ void BlackBoxFitOptions::Check() const {
 namespace mesh_fit_internal {
 
 // All model vertices posed by `state`, in the mesh frame.
-RowMatrixX3f PoseAll(const MeshBasis& b, const FitState& st) {
+namespace {
+
+template <class EachVertex>
+RowMatrixX3f Pose(const MeshBasis& b, const FitState& st, EachVertex each) {
   const MeshBasis::Jaw jaw = b.MakeJaw(st.coefficients.data(), st.jaw.data());
   const Eigen::Matrix3d sR = std::exp(st.log_scale) * AxisAngleToMatrix(st.rotation);
-  RowMatrixX3f out(b.n, 3);
-  for (int i = 0; i < b.n; ++i) {
+  RowMatrixX3f out = RowMatrixX3f::Zero(b.n, 3);
+  each([&](int i) {
     Eigen::Vector3d q = Eigen::Vector3d::Zero();
     b.Vertex(i, st.coefficients.data(), jaw, 1.0, &q, nullptr, nullptr);
     out.row(i) = (sR * q + st.translation).cast<float>().transpose();
-  }
+  });
   return out;
+}
+
+}  // namespace
+
+RowMatrixX3f PoseAll(const MeshBasis& b, const FitState& st) {
+  return Pose(b, st, [&](auto pose) {
+    for (int i = 0; i < b.n; ++i) pose(i);
+  });
+}
+
+RowMatrixX3f PosePatch(const MeshBasis& b, const FitState& st, const SurfacePatch& patch) {
+  return Pose(b, st, [&](auto pose) {
+    for (int i : patch.vertices) pose(i);
+  });
+}
+
+SurfacePatch PatchNear(const HeadModel& model, const RowMatrixX3f& posed, const Eigen::Vector3f& lo,
+                       const Eigen::Vector3f& hi, float reach, const std::vector<int>& extra_faces) {
+  const auto& faces = model.data().faces;
+  SurfacePatch patch;
+  std::vector<char> searched(faces.rows(), 0), touched(posed.rows(), 0), normal(faces.rows(), 0);
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    const Eigen::Vector3f c =
+        (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))).transpose() / 3;
+    float radius = 0;
+    for (int k = 0; k < 3; ++k) radius = std::max(radius, (posed.row(faces(f, k)).transpose() - c).norm());
+    // Distance from the centroid to the box: the face can reach the box only within its own radius of it.
+    const float d = (c.cwiseMax(lo) - c).cwiseMax(c - c.cwiseMin(hi)).cwiseMax(0.f).norm();
+    if (d <= reach + radius) searched[f] = 1;
+  }
+  for (int f : extra_faces) searched[f] = 1;
+  for (Eigen::Index f = 0; f < faces.rows(); ++f)
+    if (searched[f]) {
+      patch.faces.push_back(static_cast<int>(f));
+      for (int k = 0; k < 3; ++k) touched[faces(f, k)] = 1;
+    }
+  std::vector<char> posed_vertex(posed.rows(), 0);
+  for (Eigen::Index f = 0; f < faces.rows(); ++f)
+    if (touched[faces(f, 0)] || touched[faces(f, 1)] || touched[faces(f, 2)]) {
+      patch.normal_faces.push_back(static_cast<int>(f));
+      for (int k = 0; k < 3; ++k) posed_vertex[faces(f, k)] = 1;
+    }
+  for (Eigen::Index i = 0; i < posed.rows(); ++i)
+    if (posed_vertex[i]) patch.vertices.push_back(static_cast<int>(i));
+  return patch;
 }
 
 // Closest point on triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5), as barycentrics.
@@ -114,13 +162,28 @@ using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<
 // triangle tests per point.
 std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
                                           const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
-                                          const Eigen::VectorXf& nu, double max_distance) {
+                                          const Eigen::VectorXf& nu, double max_distance, const SurfacePatch* patch) {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
   constexpr double kMinNormalAgreement = 0.5;  // cos 60 degrees
-  const RowMatrixX3f model_normals = VertexNormals(posed, model.data().faces);
-  const auto& faces = model.data().faces;
+  const auto& all_faces = model.data().faces;
+  // The faces searched, as rows of their own (indices below are into these).
+  RowMatrixX3i faces;
+  RowMatrixX3f model_normals;
+  if (patch) {
+    faces.resize(static_cast<Eigen::Index>(patch->faces.size()), 3);
+    for (size_t f = 0; f < patch->faces.size(); ++f)
+      faces.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->faces[f]);
+    RowMatrixX3i around(static_cast<Eigen::Index>(patch->normal_faces.size()), 3);
+    for (size_t f = 0; f < patch->normal_faces.size(); ++f)
+      around.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->normal_faces[f]);
+    model_normals = VertexNormals(posed, around);
+  } else {
+    faces = all_faces;
+    model_normals = VertexNormals(posed, all_faces);
+  }
   std::vector<Correspondence> out;
+  if (faces.rows() == 0) return out;
   RowMatrixX3f centroids(faces.rows(), 3);
   std::vector<float> radius(faces.rows());
   for (Eigen::Index f = 0; f < faces.rows(); ++f) {

@@ -42,12 +42,20 @@ float DepthAt(const cv::Mat& depth_m, const Eigen::Vector2d& pixel, int radius) 
 }
 
 struct RgbdFitter::Impl {
-  MeshBasis basis;
+  // With the shape fitted: shape and expression columns. With it frozen: the
+  // identity folded into the mean, expression columns alone.
+  std::unique_ptr<MeshBasis> basis;
+  int ne = 0;
   Eigen::VectorXf nu;
   Eigen::VectorXd identity;
-  Impl(const HeadModel& model, int ne) : basis(model, model.num_shape(), ne) {
+  Impl(const HeadModel& model, int num_expression, bool fit_shape) : ne(num_expression) {
     nu = Eigen::VectorXf::Ones(model.num_vertices());
     identity = Eigen::VectorXd::Zero(model.num_shape());
+    Rebuild(model, fit_shape);
+  }
+  void Rebuild(const HeadModel& model, bool fit_shape) {
+    basis = fit_shape ? std::make_unique<MeshBasis>(model, model.num_shape(), ne)
+                      : std::make_unique<MeshBasis>(model, 0, ne, identity);
   }
 };
 
@@ -55,7 +63,7 @@ RgbdFitter::RgbdFitter(const HeadModel& model, const RgbdFitOptions& options) : 
   options.Check();
   const int ne =
       options.num_expression > 0 ? std::min(options.num_expression, model.num_expression()) : model.num_expression();
-  impl_ = std::make_unique<Impl>(model, ne);
+  impl_ = std::make_unique<Impl>(model, ne, options.fit_shape);
 }
 
 RgbdFitter::~RgbdFitter() = default;
@@ -64,6 +72,7 @@ void RgbdFitter::SetIdentity(const Eigen::VectorXd& shape) {
   if (shape.size() > model_.num_shape()) throw std::invalid_argument("SetIdentity: too many shape values");
   impl_->identity.setZero();
   impl_->identity.head(shape.size()) = shape;
+  if (!options_.fit_shape) impl_->Rebuild(model_, false);
 }
 
 namespace {
@@ -129,8 +138,8 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                 std::to_string(camera.width) + "x" + std::to_string(camera.height);
     return r;
   }
-  const MeshBasis& basis = impl_->basis;
-  const int ns = basis.ns;
+  const MeshBasis& basis = *impl_->basis;
+  const int ns = basis.ns;  // 0 when the identity is folded into the basis
   // 1. 3D landmarks.
   std::array<Eigen::Vector3d, kNumLandmarks> lmk3d;
   std::array<bool, kNumLandmarks> has3d{};
@@ -176,7 +185,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
 
   FitState st;
   st.coefficients = Eigen::VectorXd::Zero(basis.k);
-  st.coefficients.head(ns) = impl_->identity;
+  if (options_.fit_shape) st.coefficients.head(ns) = impl_->identity;
   SolveSettings settings;
   settings.loss = MeshLoss::kHuber;
   settings.loss_scale_m = options_.robust_scale_m;
@@ -253,6 +262,18 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     }
   }
 
+  // Closest points search the surface near the cloud only (the pose moves
+  // little from here on: the reach allows for it).
+  Eigen::VectorXi landmark_faces;
+  {
+    RowMatrixX3f unused;
+    embed(&landmark_faces, &unused);
+  }
+  const SurfacePatch patch =
+      PatchNear(model_, PoseAll(basis, st), cloud.colwise().minCoeff().transpose(),
+                cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
+                std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
+
   // Block 2: landmarks + point-to-mesh over everything; block 3: points over shape.
   FreeBlocks all;
   all.shape = options_.fit_shape;
@@ -266,7 +287,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   for (int round = 0; round < rounds; ++round) {
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
-    points = ClosestPoints(model_, PoseAll(basis, st), cloud, cloud_normals, ones, impl_->nu, gate);
+    points = ClosestPoints(model_, PosePatch(basis, st, patch), cloud, cloud_normals, ones, impl_->nu, gate, &patch);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
       return r;
@@ -281,15 +302,15 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     }
     SolveOnce(basis, pairs, settings, block3 ? shape_only : all, &st);
   }
-  const RowMatrixX3f posed = PoseAll(basis, st);
+  const RowMatrixX3f posed = PosePatch(basis, st, patch);
   // The accuracy: each point's distance to the final surface (fresh closest points).
-  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu, options_.max_point_distance_m);
+  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu, options_.max_point_distance_m, &patch);
   r.paired_points = static_cast<int>(points.size());
   r.accuracy_m = MeasurePairs(posed, points).all_m;
   const auto lmk = landmark_pairs(true, 1.0);
   r.landmarks_3d = static_cast<int>(lmk.size());
   r.landmark_rmse_m = MeasurePairs(posed, lmk).all_m;
-  r.params.shape = st.coefficients.head(ns);
+  r.params.shape = options_.fit_shape ? Eigen::VectorXd(st.coefficients.head(ns)) : impl_->identity;
   r.params.expression = Eigen::VectorXd::Zero(model_.num_expression());
   r.params.expression.head(basis.ne) = st.coefficients.segment(ns, basis.ne);
   r.params.pose.segment<3>(3 * kJawJoint) = st.jaw;

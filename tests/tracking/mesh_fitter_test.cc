@@ -245,6 +245,64 @@ TEST(MeshFitCost, ClosestPointsAreTheClosestOfAllFaces) {
             n / 5);  // the gate drops some
 }
 
+// Closest points searched on a patch around the targets (PatchNear, as the
+// RGB-D fit does per frame) pair every target exactly as the whole head does,
+// normals included, and pose and search a part of the head only.
+TEST(MeshFitCost, ClosestPointsOnAPatchMatchTheWholeHead) {
+  using namespace mesh_fit_internal;
+  const HeadModel& model = Builtin();
+  HeadModelParams params;
+  params.expression = Eigen::VectorXd::Zero(model.num_expression());
+  params.expression[0] = 0.8;
+  params.pose.segment<3>(3 * kJawJoint) = Eigen::Vector3d(0.15, 0, 0);
+  const MeshBasis basis(model, 0, model.num_expression());
+  FitState st;
+  st.coefficients = params.expression;
+  st.jaw = params.pose.segment<3>(3 * kJawJoint);
+  st.rotation = Eigen::Vector3d(3.0, 0.3, 0.05);  // about x by ~170 degrees: facing the camera
+  st.translation = Eigen::Vector3d(0.01, -0.02, 0.5);
+  const RowMatrixX3f posed = PoseAll(basis, st);
+  // Targets: the surface facing the camera within 6 cm of the nose tip (the
+  // landmark), pushed up to 1.5 cm off it, with its normals.
+  const RowMatrixX3f normals = VertexNormals(posed, model.data().faces);
+  const Eigen::RowVector3f nose = posed.row(model.data().faces(model.data().lmk_faces[30], 0));
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<Eigen::RowVector3f> chosen, chosen_normals;
+  for (int i = 0; i < model.num_vertices(); ++i)
+    if (normals(i, 2) < -0.5 && (posed.row(i) - nose).norm() < 0.06) {
+      chosen.push_back(posed.row(i) + 0.015f * static_cast<float>(u(rng)) * normals.row(i));
+      chosen_normals.push_back(normals.row(i));
+    }
+  ASSERT_GT(chosen.size(), 300u);
+  RowMatrixX3f points(static_cast<Eigen::Index>(chosen.size()), 3), point_normals(points.rows(), 3);
+  for (size_t i = 0; i < chosen.size(); ++i) {
+    points.row(static_cast<Eigen::Index>(i)) = chosen[i];
+    point_normals.row(static_cast<Eigen::Index>(i)) = chosen_normals[i];
+  }
+  const Eigen::VectorXf ones = Eigen::VectorXf::Ones(model.num_vertices());
+  const double gate = 0.01;
+  const SurfacePatch patch = PatchNear(model, posed, points.colwise().minCoeff().transpose(),
+                                       points.colwise().maxCoeff().transpose(), static_cast<float>(gate));
+  EXPECT_LT(patch.faces.size(), static_cast<size_t>(model.num_faces()) / 2);
+  const std::vector<Correspondence> whole = ClosestPoints(model, posed, points, point_normals, ones, ones, gate);
+  const std::vector<Correspondence> part =
+      ClosestPoints(model, PosePatch(basis, st, patch), points, point_normals, ones, ones, gate, &patch);
+  ASSERT_EQ(whole.size(), part.size());
+  ASSERT_GT(whole.size(), chosen.size() / 2);
+  // The same surface point (on an edge two faces share it: either may be named).
+  auto surface_point = [&](const Correspondence& c) {
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) x += c.bary[k] * posed.row(c.vertices[k]).cast<double>().transpose();
+    return x;
+  };
+  for (size_t i = 0; i < whole.size(); ++i) {
+    EXPECT_EQ(whole[i].target, part[i].target) << i;
+    EXPECT_LT((surface_point(whole[i]) - surface_point(part[i])).norm(), 1e-7) << i;
+    EXPECT_LT((whole[i].metric - part[i].metric).norm(), 1e-5) << i;
+  }
+}
+
 TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
   const HeadModel& model = Builtin();
   for (unsigned seed : {1u, 2u, 3u}) {
