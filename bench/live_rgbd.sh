@@ -5,7 +5,11 @@
 # from the first frames then frozen; the sender pinned to one core, frames read
 # as fast as it tracks them) to headcast-receiver; ms per stage from the
 # sender's report, head position and rotation error against the truth.
-#   bench/live_rgbd.sh OUT [--frames N] [--noise MM]
+# With --stereo B the sender reads side-by-side stereo frames of the same
+# sequence (a right camera B metres to the right, rendered by render-rgbd
+# --stereo-baseline) through zed: and the stereo calibration: depth by stereo
+# matching in the face's box, as a ZED-style camera gives it.
+#   bench/live_rgbd.sh OUT [--frames N] [--noise MM] [--stereo BASELINE_M]
 # Writes OUT/live_rgbd.json and prints it.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -14,18 +18,21 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/live_rgbd.sh OUT $*"
-frames=60 noise=1
+frames=60 noise=1 stereo=0
 while [ $# -gt 0 ]; do
   case $1 in
     --frames) frames=$2; shift 2 ;;
     --noise) noise=$2; shift 2 ;;
+    --stereo) stereo=$2; shift 2 ;;
     *) echo "live_rgbd: unknown option $1" >&2; exit 2 ;;
   esac
 done
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 "$bin/headcast-headmodel" render-rgbd builtin --out "$out/seq" --frames "$frames" --shape 0=0.8 \
-  --depth-noise "$noise" > "$out/render.log" 2>&1
+  --depth-noise "$noise" --stereo-baseline "$stereo" > "$out/render.log" 2>&1
+input=(--input "$out/seq")
+[ "$stereo" = 0 ] || input=(--input "zed:$out/seq/side_by_side" --stereo-calibration "$out/seq/stereo.yml")
 fx=$("$python" -c "import json; print(json.load(open('$out/seq/truth.json'))['camera']['fx'])")
 "$bin/headcast-avatar" create --resolution 128 --out "$out/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))
@@ -34,23 +41,26 @@ port=$((20000 + $$ % 20000))
 rx=$!
 trap 'kill "$rx" 2>/dev/null || true' EXIT
 for _ in $(seq 100); do grep -q listening "$out/receiver.log" && break; sleep 0.1; done
-taskset -c 0 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$out/seq" \
+taskset -c 0 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo "${input[@]}" \
   --intrinsics "$fx,$fx,319.5,239.5" --pacing none --record "$out/live.hcrec" \
   --json "$out/sender.json" > /dev/null 2> "$out/sender.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx" || true
 "$python" "$root/tests/tracking/compare_track_truth.py" --proto-dir "$root/proto" --recording "$out/live.hcrec" \
   --truth "$out/seq/truth.json" --max-translation-mm 1000 > "$out/truth.json"
-"$python" - "$out" "$command" "$noise" <<'PY'
+"$python" - "$out" "$command" "$noise" "$stereo" <<'PY'
 import json, os, sys
-out, command, noise = sys.argv[1], sys.argv[2], float(sys.argv[3])
+out, command, noise, stereo = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
 s = json.load(open(os.path.join(out, "sender.json")))
 r = json.load(open(os.path.join(out, "receiver.json")))
 t = json.load(open(os.path.join(out, "truth.json")))
 k = s["tracking"]
-stage = {x: k[x] for x in ("read_wait_ms_median", "landmarks_ms_median", "landmarks_ms_p95", "fit_ms_median", "fit_ms_p95")}
+stage = {x: k[x] for x in ("read_wait_ms_median", "landmarks_ms_median", "landmarks_ms_p95", "depth_ms_median",
+                           "fit_ms_median", "fit_ms_p95", "capture_to_params_ms_median", "capture_to_params_ms_p95")}
 per_frame = k["landmarks_ms_median"] + k["fit_ms_median"]
-result = {"command": command, "depth_noise_mm": noise, "frames_read": k["frames_read"],
+depth = f"stereo, baseline {stereo} m, matched in the face's box" if stereo > 0 else f"rendered, {noise} mm noise"
+result = {"command": command, "depth": depth, "depth_noise_mm": noise if stereo == 0 else None,
+          "frames_read": k["frames_read"],
           "frames_with_depth": k["frames_with_depth"], "frames_fitted": k["frames_fitted"],
           "frames_sent": s["frames_sent"], "frames_received": r["frames_received"], "stages_ms": stage,
           "track_ms_median_one_core": per_frame,

@@ -35,8 +35,9 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   }
   camera_->width = bgr.cols;  // given intrinsics: the frame says how big it is
   camera_->height = bgr.rows;
-  const TrackedFrame t = tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params);
-  return {t.fitted, t.with_depth, t.face.status, t.landmarks_ms, t.fit_ms};
+  const TrackedFrame t =
+      tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params, frame.depth_on_demand.get());
+  return {t.fitted, t.with_depth, t.face.status, t.landmarks_ms, t.fit_ms, t.depth_ms};
 }
 
 }  // namespace headcast

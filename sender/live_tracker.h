@@ -30,6 +30,7 @@ struct LiveTrackResult {
   FaceStatus status = FaceStatus::kNoFace;
   double landmarks_ms = 0;  // detection/tracking + landmarks
   double fit_ms = 0;        // head-model fit
+  double depth_ms = 0;      // depth made on demand (stereo in the face's box)
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <opencv2/core/persistence.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -100,10 +101,32 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
   return p;
 }
 
+struct RgbdRenderOptions {
+  int frames = 30, width = 640;
+  double fov_deg = 45, noise_mm = 0;
+  double stereo_baseline_m = 0;  // > 0: also side-by-side stereo frames and their calibration
+};
+
+// The calibration of the rendered stereo pair (OpenCV YAML, as
+// ReadStereoCalibration reads it): one camera, the right one `baseline` to the
+// right, no distortion, no rotation.
+void WriteStereoCalibration(const std::string& path, const PinholeCamera& camera, double baseline) {
+  cv::FileStorage fs(path, cv::FileStorage::WRITE);
+  if (!fs.isOpened()) throw std::runtime_error(path + ": cannot write");
+  const cv::Mat K = (cv::Mat_<double>(3, 3) << camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1);
+  fs << "image_width" << camera.width << "image_height" << camera.height;
+  fs << "K1" << K << "D1" << cv::Mat::zeros(1, 5, CV_64F) << "K2" << K << "D2" << cv::Mat::zeros(1, 5, CV_64F);
+  fs << "R" << cv::Mat::eye(3, 3, CV_64F) << "T" << (cv::Mat_<double>(3, 1) << -baseline, 0, 0);
+}
+
 // A synthetic RGB-D sequence of the talking head (known parameters): colour
 // and 16-bit millimetre depth PNGs with a TUM-style associations.txt, and the
 // truth (parameters, camera) as JSON — for testing RGB-D tracking end to end.
-int RenderRgbd(const RenderArgs& args, int frames, int width, int height, double fov, double noise_mm) {
+// With a stereo baseline also side-by-side frames (left | right, as a
+// ZED-style camera delivers them) and stereo.yml, for the stereo path.
+int RenderRgbd(const RenderArgs& args, const RgbdRenderOptions& o) {
+  const int frames = o.frames, width = o.width, height = o.width * 3 / 4;
+  const double fov = o.fov_deg, noise_mm = o.noise_mm;
   const HeadModel model = LoadHeadModelSpec(args.model);
   const HeadModelParams base = ParamsFromArgs(model, args);
   const HeadIdentity id = model.MakeIdentity(base.shape);
@@ -111,6 +134,10 @@ int RenderRgbd(const RenderArgs& args, int frames, int width, int height, double
   const PinholeCamera camera = PinholeCamera::FromFovY(width, height, fov);
   std::filesystem::create_directories(args.out + "/rgb");
   std::filesystem::create_directories(args.out + "/depth");
+  if (o.stereo_baseline_m > 0) {
+    std::filesystem::create_directories(args.out + "/side_by_side");
+    WriteStereoCalibration(args.out + "/stereo.yml", camera, o.stereo_baseline_m);
+  }
   std::ofstream assoc(args.out + "/associations.txt");
   assoc << "# headcast-headmodel render-rgbd: time rgb time depth (depth: uint16 millimetres, 0 unknown)\n";
   std::ofstream truth(args.out + "/truth.json");
@@ -140,6 +167,14 @@ int RenderRgbd(const RenderArgs& args, int frames, int width, int height, double
     std::snprintf(name, sizeof(name), "%05d.png", i);
     WriteImage(args.out + "/rgb/" + name, r.image_bgr);
     cv::imwrite(args.out + "/depth/" + name, depth_mm);
+    if (o.stereo_baseline_m > 0) {
+      RigidTransform right_from_head = f.CamFromHead();
+      right_from_head.translation.x() -= o.stereo_baseline_m;
+      const HeadRender right = RenderHead(model, out.vertices, right_from_head, camera, albedo);
+      cv::Mat both;
+      cv::hconcat(r.image_bgr, right.image_bgr, both);
+      WriteImage(args.out + "/side_by_side/" + name, both);
+    }
     const double t = i / motion.fps;
     assoc << t << " rgb/" << name << " " << t << " depth/" << name << "\n";
     truth << (i ? ",\n  " : "\n  ") << "{\"jaw\": [" << f.jaw.x() << ", " << f.jaw.y() << ", " << f.jaw.z()
@@ -356,16 +391,20 @@ int main(int argc, char** argv) {
   export_mesh->add_option("--landmarks-out", landmarks_out, "also write the 68 landmarks (JSON)");
 
   RenderArgs g;
-  int rgbd_frames = 30, rgbd_width = 640, rgbd_height = 480;
-  double rgbd_fov = 45, rgbd_noise = 0;
+  RgbdRenderOptions rgbd;
   auto* render_rgbd = app.add_subcommand(
       "render-rgbd", "a synthetic RGB-D sequence of the talking head (colour, mm depth, associations.txt, truth.json)");
   render_rgbd->add_option("model", g.model, "builtin or a model .npz")->required();
   render_rgbd->add_option("--out", g.out, "folder to write")->required();
-  render_rgbd->add_option("--frames", rgbd_frames, "frames")->check(CLI::Range(1, 100000));
-  render_rgbd->add_option("--size", rgbd_width, "image width (height = 3/4 of it)")->check(CLI::Range(64, 4096));
-  render_rgbd->add_option("--fov", rgbd_fov, "vertical field of view, degrees")->capture_default_str();
-  render_rgbd->add_option("--depth-noise", rgbd_noise, "Gaussian depth noise, mm")->capture_default_str();
+  render_rgbd->add_option("--frames", rgbd.frames, "frames")->check(CLI::Range(1, 100000));
+  render_rgbd->add_option("--size", rgbd.width, "image width (height = 3/4 of it)")->check(CLI::Range(64, 4096));
+  render_rgbd->add_option("--fov", rgbd.fov_deg, "vertical field of view, degrees")->capture_default_str();
+  render_rgbd->add_option("--depth-noise", rgbd.noise_mm, "Gaussian depth noise, mm")->capture_default_str();
+  render_rgbd
+      ->add_option("--stereo-baseline", rgbd.stereo_baseline_m,
+                   "metres: also side-by-side stereo frames (side_by_side/) and their calibration (stereo.yml), "
+                   "for zed:OUT/side_by_side --stereo-calibration OUT/stereo.yml")
+      ->check(CLI::Range(0.0, 1.0));
   render_rgbd->add_option("--shape", g.shapes, "index=value, repeatable (the subject's identity)");
 
   CLI11_PARSE(app, argc, argv);
@@ -402,8 +441,7 @@ int main(int argc, char** argv) {
     } else if (export_mesh->parsed()) {
       return Export(x, landmarks_out);
     } else if (render_rgbd->parsed()) {
-      rgbd_height = rgbd_width * 3 / 4;
-      return RenderRgbd(g, rgbd_frames, rgbd_width, rgbd_height, rgbd_fov, rgbd_noise);
+      return RenderRgbd(g, rgbd);
     }
   } catch (const std::exception& e) {
     spdlog::error("{}", headcast::InFlagNames(app, e.what()));

@@ -13,9 +13,22 @@
 
 namespace headcast {
 
+// Depth a source makes only where it is asked for (side-by-side stereo:
+// matching the whole frame costs more than tracking it).
+class DepthOnDemand {
+ public:
+  virtual ~DepthOnDemand() = default;
+  // CV_32F metres aligned to the frame's bgr, the frame's size; 0 where
+  // unknown and outside `box` (clipped to the frame).
+  virtual cv::Mat DepthIn(const cv::Rect& box) const = 0;
+};
+
 struct CapturedFrame {
   cv::Mat bgr;      // 8-bit BGR
   cv::Mat depth_m;  // CV_32F metres aligned to bgr, 0 where unknown; empty without depth
+  // Or depth made on demand (stereo), computed where the tracker needs it.
+  std::shared_ptr<const DepthOnDemand> depth_on_demand;
+  bool has_depth() const { return !depth_m.empty() || depth_on_demand != nullptr; }
   // Steady-clock seconds at capture for live and real-time sources; media time
   // (index / fps) for files read as fast as possible.
   double capture_time_s = 0;

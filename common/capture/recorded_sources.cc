@@ -35,6 +35,7 @@ ReadStatus VideoFileSource::Read(CapturedFrame* frame, std::string* problem) {
       frame->index = index_;
       frame->capture_time_s = pacer_.Stamp(index_++);
       frame->depth_m.release();
+      frame->depth_on_demand.reset();
       frame->camera.reset();
       return ReadStatus::kFrame;
     }
@@ -65,6 +66,7 @@ ReadStatus ImageFolderSource::Read(CapturedFrame* frame, std::string* problem) {
   frame->index = index_;
   frame->capture_time_s = pacer_.Stamp(index_++);
   frame->depth_m.release();
+  frame->depth_on_demand.reset();
   frame->camera.reset();
   try {
     frame->bgr = ReadImage(file);
@@ -113,6 +115,7 @@ ReadStatus RgbdFolderSource::Read(CapturedFrame* frame, std::string* problem) {
     return ReadStatus::kSkipped;
   }
   raw.convertTo(frame->depth_m, CV_32F, 1.0 / options_.depth_units_per_metre);
+  frame->depth_on_demand.reset();
   return ReadStatus::kFrame;
 }
 

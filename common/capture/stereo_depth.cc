@@ -196,10 +196,67 @@ void StereoDepth::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* le
   }
 }
 
+cv::Mat StereoDepth::RectifyLeft(const cv::Mat& left) const {
+  if (left.size() != calib_.size)
+    throw std::invalid_argument("stereo: the left image is not of the calibration's size");
+  cv::Mat out;
+  cv::remap(left, out, map1x_, map1y_, cv::INTER_LINEAR);
+  return out;
+}
+
+cv::Mat StereoDepth::ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box_asked) const {
+  if (left_rectified.size() != calib_.size || right.size() != calib_.size)
+    throw std::invalid_argument("stereo: images are not of the calibration's size");
+  cv::Mat depth = cv::Mat::zeros(calib_.size, CV_32F);
+  const cv::Rect box = box_asked & cv::Rect(cv::Point(0, 0), calib_.size);
+  if (box.width < 8 || box.height < 8) return depth;
+  // A left pixel x matches right pixels x - d, d < the disparity range: the
+  // strip reaches that far left of the box (both images, so columns agree).
+  const int reach = static_cast<int>(std::ceil(match_.max_disparity / scale_)) + 1;
+  const int x0 = std::max(0, box.x - reach);
+  const cv::Rect strip(x0, box.y, box.x + box.width - x0, box.height);
+  cv::Mat right_rectified;
+  cv::remap(right, right_rectified, map2x_(strip), map2y_(strip), cv::INTER_LINEAR);
+  cv::Mat l = left_rectified(strip), r = right_rectified;
+  if (scale_ < 1) {
+    cv::resize(l, l, cv::Size(), scale_, scale_, cv::INTER_AREA);
+    cv::resize(r, r, cv::Size(), scale_, scale_, cv::INTER_AREA);
+  }
+  if (l.cols < 16 || l.rows < 8) return depth;
+  cv::Mat disparity = ComputeDisparity(l, r, match_);
+  if (scale_ < 1) {
+    cv::resize(disparity, disparity, strip.size(), 0, 0, cv::INTER_NEAREST);
+    disparity /= scale_;
+  }
+  const float fb = static_cast<float>(camera_.fx * baseline_);
+  for (int y = 0; y < box.height; ++y) {
+    const float* d = disparity.ptr<float>(y) + (box.x - x0);
+    float* z = depth.ptr<float>(box.y + y) + box.x;
+    for (int x = 0; x < box.width; ++x) z[x] = d[x] > 0 ? fb / d[x] : 0.f;
+  }
+  return depth;
+}
+
+namespace {
+
+// One frame's stereo pair, matched where the tracker asks.
+class StereoFrameDepth final : public DepthOnDemand {
+ public:
+  StereoFrameDepth(std::shared_ptr<const StereoDepth> depth, cv::Mat left_rectified, cv::Mat right)
+      : depth_(std::move(depth)), left_(std::move(left_rectified)), right_(std::move(right)) {}
+  cv::Mat DepthIn(const cv::Rect& box) const override { return depth_->ComputeIn(left_, right_, box); }
+
+ private:
+  std::shared_ptr<const StereoDepth> depth_;
+  cv::Mat left_, right_;
+};
+
+}  // namespace
+
 StereoDepthSource::StereoDepthSource(std::unique_ptr<FrameSource> side_by_side, const StereoCalibration& calibration,
                                      const SourceOptions& options)
     : inner_(std::move(side_by_side)),
-      depth_(calibration, options.depth_scale, options.wls_filter),
+      depth_(std::make_shared<const StereoDepth>(calibration, options.depth_scale, options.wls_filter)),
       eye_(calibration.size) {}
 
 ReadStatus StereoDepthSource::Read(CapturedFrame* frame, std::string* problem) {
@@ -215,10 +272,13 @@ ReadStatus StereoDepthSource::Read(CapturedFrame* frame, std::string* problem) {
   }
   const cv::Mat left = both.bgr(cv::Rect(0, 0, eye_.width, eye_.height));
   const cv::Mat right = both.bgr(cv::Rect(eye_.width, 0, eye_.width, eye_.height));
-  depth_.Compute(left, right, &frame->bgr, &frame->depth_m);
+  frame->bgr = depth_->RectifyLeft(left);
+  frame->depth_m.release();
+  // The right half is copied: an inner source may fill its buffer again on the next read.
+  frame->depth_on_demand = std::make_shared<StereoFrameDepth>(depth_, frame->bgr, right.clone());
   frame->capture_time_s = both.capture_time_s;
   frame->index = both.index;
-  frame->camera = depth_.camera();
+  frame->camera = depth_->camera();
   return ReadStatus::kFrame;
 }
 

@@ -45,6 +45,12 @@ class StereoDepth {
   StereoDepth(const StereoCalibration& calibration, double scale, bool wls_filter, double min_depth_m = 0.25);
   // Splits nothing: takes the left and right images (calibration size).
   void Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* left_rectified, cv::Mat* depth_m) const;
+  // The rectified left image alone.
+  cv::Mat RectifyLeft(const cv::Mat& left) const;
+  // Depth inside `box` of the rectified left image (the rest 0): only the
+  // rows of the box, and the columns a match for it can come from, are
+  // rectified (right) and matched. `right` is the raw right image.
+  cv::Mat ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box) const;
   const PinholeCamera& camera() const { return camera_; }  // of the rectified left image
   double baseline_m() const { return baseline_; }
 
@@ -58,7 +64,7 @@ class StereoDepth {
 };
 
 // Side-by-side frames from another source (camera, video, folder) turned into
-// colour + depth.
+// the rectified left image, with depth on demand (CapturedFrame::depth_on_demand).
 class StereoDepthSource final : public FrameSource {
  public:
   StereoDepthSource(std::unique_ptr<FrameSource> side_by_side, const StereoCalibration& calibration,
@@ -70,7 +76,7 @@ class StereoDepthSource final : public FrameSource {
 
  private:
   std::unique_ptr<FrameSource> inner_;
-  StereoDepth depth_;
+  std::shared_ptr<const StereoDepth> depth_;  // shared with the frames' depth on demand
   cv::Size eye_;
 };
 

@@ -244,6 +244,7 @@ ReadStatus V4l2Source::Read(CapturedFrame* frame, std::string* problem) {
   frame->capture_time_s = monotonic ? buf.timestamp.tv_sec + 1e-6 * buf.timestamp.tv_usec : SteadyNowSeconds();
   frame->index = index_++;
   frame->depth_m.release();
+  frame->depth_on_demand.reset();
   frame->camera.reset();
   const Buffer& b = buffers_[buf.index];
   ReadStatus status = ReadStatus::kFrame;

@@ -129,19 +129,42 @@ RgbdFitResult FrameTracker::RefitRgbd(const Landmarks2d& landmarks, const cv::Ma
   return Rgbd(false).Fit(landmarks, depth_m, camera, previous && previous->ok ? previous : nullptr);
 }
 
+cv::Rect DepthBoxForFit(const Landmarks2d& landmarks, const cv::Size& image) {
+  double u_lo = INFINITY, u_hi = -INFINITY, v_lo = INFINITY, v_hi = -INFINITY;
+  for (const Eigen::Vector2d& p : landmarks) {
+    if (!p.allFinite()) continue;
+    u_lo = std::min(u_lo, p.x());
+    u_hi = std::max(u_hi, p.x());
+    v_lo = std::min(v_lo, p.y());
+    v_hi = std::max(v_hi, p.y());
+  }
+  if (!(u_hi > u_lo && v_hi > v_lo)) return {};
+  const double margin = 0.2 * (u_hi - u_lo), forehead = 0.45 * (v_hi - v_lo);
+  const cv::Rect box(
+      cv::Point(static_cast<int>(std::floor(u_lo - margin)), static_cast<int>(std::floor(v_lo - forehead))),
+      cv::Point(static_cast<int>(std::ceil(u_hi + margin)), static_cast<int>(std::ceil(v_hi + margin))));
+  return box & cv::Rect(cv::Point(0, 0), image);
+}
+
 TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
-                                 FrameParams* params) {
+                                 FrameParams* params, const DepthOnDemand* depth_on_demand) {
   TrackedFrame r;
   Stopwatch watch;
   r.face = faces_.Track(bgr, time_s);
   r.landmarks_ms = watch.ElapsedMs();
   watch.Restart();
-  if (r.face.status != FaceStatus::kNoFace && !depth_m.empty()) {
+  r.depth_m = depth_m;
+  if (r.face.status != FaceStatus::kNoFace && depth_m.empty() && depth_on_demand) {
+    r.depth_m = depth_on_demand->DepthIn(DepthBoxForFit(r.face.landmarks, bgr.size()));
+    r.depth_ms = watch.ElapsedMs();
+    watch.Restart();
+  }
+  if (r.face.status != FaceStatus::kNoFace && !r.depth_m.empty()) {
     // RGB-D (METHOD §3): the shape is fitted on the first frames, then frozen at their median.
     r.with_depth = true;
     const RgbdFitResult fit =
-        identity_frozen_ ? Rgbd(false).Fit(r.face.landmarks, depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
-                         : Rgbd(true).Fit(r.face.landmarks, depth_m, camera);
+        identity_frozen_ ? Rgbd(false).Fit(r.face.landmarks, r.depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
+                         : Rgbd(true).Fit(r.face.landmarks, r.depth_m, camera);
     if (fit.ok) {
       ApplyRgbdFit(fit, &last_);
       r.fitted = true;

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/frame_source.h"
 #include "common/core/camera.h"
 #include "common/headmodel/params.h"
 #include "common/tracking/face_tracker.h"
@@ -39,6 +40,8 @@ struct TrackedFrame {
   bool identity_frozen_now = false;  // this frame completed the RGB-D identity
   double landmarks_ms = 0;           // detection/tracking + landmarks
   double fit_ms = 0;                 // head-model fit
+  double depth_ms = 0;               // RGB-D: depth made on demand (stereo matching in the face's box)
+  cv::Mat depth_m;                   // RGB-D: the depth the fit read
   double rgbd_accuracy_m = 0;        // RGB-D: point-to-mesh RMS after the fit
   int contour_rejected = 0;          // RGB-D: contour landmarks taken for background
   std::string problem;               // why not fitted, when a fit failed
@@ -54,12 +57,14 @@ class FrameTracker {
   const Eigen::VectorXd& identity() const { return identity_; }
   bool identity_frozen() const { return identity_frozen_; }
 
-  // Tracks one frame; `depth_m` empty for colour-only frames. On success
-  // *params holds the frame's expression, jaw and cam_from_head (the caller
-  // stamps sequence, time and confidence). No face or a failed fit marks the
-  // tracker cold: the next face starts from PnP with a neutral expression.
+  // Tracks one frame; `depth_m` empty for colour-only frames, or
+  // `depth_on_demand` asked for depth in the face's box once the landmarks
+  // are found (stereo). On success *params holds the frame's expression, jaw
+  // and cam_from_head (the caller stamps sequence, time and confidence). No
+  // face or a failed fit marks the tracker cold: the next face starts from PnP
+  // with a neutral expression.
   TrackedFrame Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
-                     FrameParams* params);
+                     FrameParams* params, const DepthOnDemand* depth_on_demand = nullptr);
 
   // RGB-D: fits `landmarks` and `depth_m` again with the frozen identity,
   // warm from `previous` when given (frames held during identity calibration).
@@ -101,6 +106,10 @@ Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& m
 // The camera contract an avatar file (.hcavatar) records, if any; nothing for
 // other files. Throws naming the file when it is unreadable or the contract malformed.
 std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path);
+
+// Where the RGB-D fit reads depth around these landmarks: their span with a
+// margin and the forehead above (more than the fit's own cloud box takes).
+cv::Rect DepthBoxForFit(const Landmarks2d& landmarks, const cv::Size& image);
 
 // An RGB-D fit as the frame parameters the sender streams.
 void ApplyRgbdFit(const RgbdFitResult& fit, FrameParams* params);

@@ -234,7 +234,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     }
     const cv::Mat& frame = captured.bgr;
     const int index = frames++;
-    with_depth += !captured.depth_m.empty();
+    with_depth += captured.has_depth();
     if (index == 0)
       camera = FirstFrameCamera(o, calibration ? std::optional(calibration->camera) : std::nullopt, captured);
     if (index > 0 && index % 100 == 0) {
@@ -250,7 +250,8 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         spdlog::info("tracking: {} frames, {} fitted; {}", index, fitted, HumanDuration(elapsed));
     }
     FrameParams params;
-    const TrackedFrame t = tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params);
+    const TrackedFrame t = tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params,
+                                         captured.depth_on_demand.get());
     ms.Add(t.landmarks_ms + t.fit_ms);
     if (!t.fitted && !t.problem.empty()) spdlog::debug("frame {}: {}", index, t.problem);
     ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];
@@ -270,7 +271,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         contour_rejected += t.contour_rejected;
       }
       if (t.identity_frame)
-        held.push_back({t.face.landmarks, captured.depth_m.clone(), params});
+        held.push_back({t.face.landmarks, t.depth_m.clone(), params});
       else
         out.frames.push_back(params);
       if (t.identity_frozen_now) RefitHeld(tracker, camera, &held, &out.frames);

@@ -357,8 +357,14 @@ TEST(StereoDepth, SideBySideFramesGiveMetricDepth) {
   ASSERT_EQ(src->Read(&frame, &problem), ReadStatus::kFrame) << problem;
   ASSERT_TRUE(frame.camera.has_value());
   EXPECT_NEAR(frame.camera->fx, 700, 1e-6);
-  EXPECT_EQ(frame.depth_m.size(), cv::Size(1280, 720));
-  const cv::Mat centre = frame.depth_m(cv::Rect(400, 200, 600, 300));
+  ASSERT_TRUE(frame.has_depth());
+  ASSERT_TRUE(frame.depth_m.empty());  // made on demand, where the tracker asks
+  ASSERT_NE(frame.depth_on_demand, nullptr);
+  const cv::Rect box(400, 200, 600, 300);
+  const cv::Mat depth = frame.depth_on_demand->DepthIn(box);
+  EXPECT_EQ(depth.size(), cv::Size(1280, 720));
+  EXPECT_EQ(cv::countNonZero(depth) - cv::countNonZero(depth(box)), 0);  // nothing outside the box
+  const cv::Mat centre = depth(box);
   std::vector<float> values(centre.begin<float>(), centre.end<float>());
   std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
   const float median = values[values.size() / 2];
@@ -368,6 +374,18 @@ TEST(StereoDepth, SideBySideFramesGiveMetricDepth) {
               100.0 * good / values.size());
   EXPECT_NEAR(median, z, 0.01 * z);
   EXPECT_GT(good, 0.9 * values.size());
+  // The box matched alone gives what matching the whole frame gives there.
+  StereoDepth whole(ReadStereoCalibration(dir + "/SN1.conf", "HD"), o.depth_scale, o.wls_filter);
+  cv::Mat rectified, full;
+  whole.Compute(both(cv::Rect(0, 0, 1280, 720)), both(cv::Rect(1280, 0, 1280, 720)), &rectified, &full);
+  int agree = 0;
+  for (int y = box.y; y < box.y + box.height; ++y)
+    for (int x = box.x; x < box.x + box.width; ++x)
+      agree += std::abs(full.at<float>(y, x) - depth.at<float>(y, x)) < 0.01f * z;
+  EXPECT_GT(agree, 0.95 * box.area());
+  // A box off the frame, or too small to match, gives no depth.
+  EXPECT_EQ(cv::countNonZero(frame.depth_on_demand->DepthIn(cv::Rect(2000, 0, 100, 100))), 0);
+  EXPECT_EQ(cv::countNonZero(frame.depth_on_demand->DepthIn(cv::Rect(10, 10, 4, 4))), 0);
   EXPECT_EQ(src->Read(&frame, &problem), ReadStatus::kSkipped);
   EXPECT_NE(problem.find("2560x720"), std::string::npos) << problem;
 }

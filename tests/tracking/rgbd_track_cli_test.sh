@@ -8,8 +8,10 @@ bin=$1 src=$2 python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 trap 'kill "${rx:-}" 2>/dev/null; rm -rf "$tmp"' EXIT
 
-"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 12 --shape 0=0.8 --depth-noise 0.5 > /dev/null &&
-  [ -s "$tmp/seq/associations.txt" ] && ok "render-rgbd writes a sequence" || bad "render-rgbd"
+"$bin/headcast-headmodel" render-rgbd builtin --out "$tmp/seq" --frames 12 --shape 0=0.8 --depth-noise 0.5 \
+  --stereo-baseline 0.12 > /dev/null && [ -s "$tmp/seq/associations.txt" ] && [ -s "$tmp/seq/stereo.yml" ] &&
+  [ "$(ls "$tmp/seq/side_by_side" | wc -l)" = 12 ] && ok "render-rgbd writes a sequence (and side-by-side stereo)" ||
+  bad "render-rgbd"
 fx=$("$python" -c "import json; print(json.load(open('$tmp/seq/truth.json'))['camera']['fx'])")
 "$bin/headcast-track" --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 \
   --out "$tmp/t.hcrec" --json "$tmp/r.json" > /dev/null 2> "$tmp/log" && grep -q '"fitted_frames": 12' "$tmp/r.json" &&
@@ -46,6 +48,29 @@ sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and t['f
   --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/live_cmp.json" &&
   "$python" -c "import json,sys; j=json.load(open('$tmp/live_cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
   ok "live: head position within 10 mm, depth within 2 mm of the truth" || bad "live truth: $(cat "$tmp/live_cmp.json")"
+# Live from side-by-side stereo (zed:): depth matched in the face's box only.
+"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
+  --display none --json "$tmp/srx.json" > /dev/null 2> "$tmp/srx.log" &
+rx=$!
+wait_for "$tmp/srx.log" listening || bad "receiver never listened"
+"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "zed:$tmp/seq/side_by_side" \
+  --stereo-calibration "$tmp/seq/stereo.yml" --calibration-frames 4 --pacing none --record "$tmp/stereo.hcrec" \
+  --json "$tmp/stx.json" > /dev/null 2> "$tmp/stx.log"
+sleep 0.5
+kill -INT "$rx"; wait "$rx"; rx=
+"$python" -c "
+import json, sys
+t = json.load(open('$tmp/stx.json')); r = json.load(open('$tmp/srx.json'))
+k = t['tracking']
+sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and r['frames_received'] == 12
+         and k['depth_ms_median'] > 0 and k['capture_to_params_ms_median'] > 0 else 1)" &&
+  ok "live stereo session: 12 frames fitted with depth matched on demand, received" ||
+  bad "live stereo: $(cat "$tmp/stx.json" 2>/dev/null | head -30) $(tail -3 "$tmp/stx.log")"
+"$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/stereo.hcrec" \
+  --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/stereo_cmp.json" &&
+  "$python" -c "import json,sys; j=json.load(open('$tmp/stereo_cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 5 else 1)" &&
+  ok "live stereo: head position within 10 mm, depth within 5 mm of the truth" ||
+  bad "live stereo truth: $(cat "$tmp/stereo_cmp.json")"
 # Prep takes every input the tracker takes: the RGB-D folder, tracked in-process.
 "$bin/headcast-train" prep --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --no-calibrate --resolutions 128 \
   --test-frames 2 --out "$tmp/ds" > /dev/null 2> "$tmp/prep.log" &&
