@@ -26,51 +26,38 @@ awk "BEGIN{exit !($acc < 1.5)}" 2>/dev/null && ok "RGB-D accuracy $acc mm" || ba
 # the first frames, then frozen) and streams to a receiver on loopback.
 "$bin/headcast-avatar" create --resolution 128 --out "$tmp/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))
-"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
-  --display none --json "$tmp/rx.json" > /dev/null 2> "$tmp/rx.log" &
-rx=$!
-wait_for "$tmp/rx.log" listening || bad "receiver never listened"
-"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq" \
-  --intrinsics "$fx,$fx,319.5,239.5" --calibration-frames 4 --pacing none --record "$tmp/live.hcrec" \
-  --json "$tmp/tx.json" \
-  > /dev/null 2> "$tmp/tx.log"
-sleep 0.5
-kill -INT "$rx"; wait "$rx"; rx=
-"$python" -c "
+# live_session NAME MAX_DEPTH_ERROR_MM SENDER_INPUT_FLAGS...: a receiver on
+# loopback, the sender on the input, then the tracking and the truth checked.
+live_session() {
+  local name=$1 max_depth_mm=$2
+  shift 2
+  "$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
+    --display none --json "$tmp/$name.rx.json" > /dev/null 2> "$tmp/$name.rx.log" &
+  rx=$!
+  wait_for "$tmp/$name.rx.log" listening || bad "receiver never listened"
+  "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo "$@" --calibration-frames 4 \
+    --pacing none --record "$tmp/$name.hcrec" --json "$tmp/$name.tx.json" > /dev/null 2> "$tmp/$name.tx.log"
+  sleep 0.5
+  kill -INT "$rx"; wait "$rx"; rx=
+  "$python" -c "
 import json, sys
-t = json.load(open('$tmp/tx.json')); r = json.load(open('$tmp/rx.json'))
+t = json.load(open('$tmp/$name.tx.json')); r = json.load(open('$tmp/$name.rx.json'))
 k = t['tracking']
 sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and t['frames_sent'] == 12
-         and r['frames_received'] == 12 else 1)" &&
-  ok "live RGB-D session: 12 frames fitted with depth, sent and received" ||
-  bad "live RGB-D: $(cat "$tmp/tx.json" 2>/dev/null | head -30) $(tail -3 "$tmp/tx.log")"
-"$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/live.hcrec" \
-  --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/live_cmp.json" &&
-  "$python" -c "import json,sys; j=json.load(open('$tmp/live_cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 2 else 1)" &&
-  ok "live: head position within 10 mm, depth within 2 mm of the truth" || bad "live truth: $(cat "$tmp/live_cmp.json")"
-# Live from side-by-side stereo (zed:): depth matched in the face's box only.
-"$bin/headcast-receiver" --listen "127.0.0.1:$port" --plaintext --allow-no-token --avatar "demo=$tmp/a.hcavatar" \
-  --display none --json "$tmp/srx.json" > /dev/null 2> "$tmp/srx.log" &
-rx=$!
-wait_for "$tmp/srx.log" listening || bad "receiver never listened"
-"$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "zed:$tmp/seq/side_by_side" \
-  --stereo-calibration "$tmp/seq/stereo.yml" --calibration-frames 4 --pacing none --record "$tmp/stereo.hcrec" \
-  --json "$tmp/stx.json" > /dev/null 2> "$tmp/stx.log"
-sleep 0.5
-kill -INT "$rx"; wait "$rx"; rx=
-"$python" -c "
-import json, sys
-t = json.load(open('$tmp/stx.json')); r = json.load(open('$tmp/srx.json'))
-k = t['tracking']
-sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and r['frames_received'] == 12
-         and k['depth_ms_median'] > 0 and k['capture_to_params_ms_median'] > 0 else 1)" &&
-  ok "live stereo session: 12 frames fitted with depth matched on demand, received" ||
-  bad "live stereo: $(cat "$tmp/stx.json" 2>/dev/null | head -30) $(tail -3 "$tmp/stx.log")"
-"$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/stereo.hcrec" \
-  --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/stereo_cmp.json" &&
-  "$python" -c "import json,sys; j=json.load(open('$tmp/stereo_cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < 5 else 1)" &&
-  ok "live stereo: head position within 10 mm, depth within 5 mm of the truth" ||
-  bad "live stereo truth: $(cat "$tmp/stereo_cmp.json")"
+         and r['frames_received'] == 12 and k['capture_to_params_ms_median'] > 0 else 1)" &&
+    ok "live $name session: 12 frames fitted with depth, sent and received" ||
+    bad "live $name: $(head -30 "$tmp/$name.tx.json" 2>/dev/null) $(tail -3 "$tmp/$name.tx.log")"
+  "$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/$name.hcrec" \
+    --truth "$tmp/seq/truth.json" --max-translation-mm 10 > "$tmp/$name.cmp.json" &&
+    "$python" -c "import json,sys; j=json.load(open('$tmp/$name.cmp.json')); sys.exit(0 if j['depth_error_mm_median'] < $max_depth_mm else 1)" &&
+    ok "live $name: head position within 10 mm, depth within $max_depth_mm mm of the truth" ||
+    bad "live $name truth: $(cat "$tmp/$name.cmp.json")"
+}
+live_session rgbd 2 --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5"
+# From side-by-side stereo (zed:): depth matched in the face's box only, on demand.
+live_session stereo 5 --input "zed:$tmp/seq/side_by_side" --stereo-calibration "$tmp/seq/stereo.yml"
+"$python" -c "import json,sys; sys.exit(0 if json.load(open('$tmp/stereo.tx.json'))['tracking']['depth_ms_median'] > 0 else 1)" &&
+  ok "stereo depth made on demand (depth_ms reported)" || bad "stereo depth_ms: $(head -30 "$tmp/stereo.tx.json")"
 # Prep takes every input the tracker takes: the RGB-D folder, tracked in-process.
 "$bin/headcast-train" prep --input "$tmp/seq" --intrinsics "$fx,$fx,319.5,239.5" --no-calibrate --resolutions 128 \
   --test-frames 2 --out "$tmp/ds" > /dev/null 2> "$tmp/prep.log" &&
