@@ -33,8 +33,9 @@ double FaceRmsMm(const HeadModel& model, const RgbdFitResult& fit, const RowMatr
   return FaceRmsAgainstTruthMm(model, placed, truth_cam);
 }
 
-nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, double noise_mm) {
+nlohmann::json RunSequence(const RgbdScene& s, int frames, int cloud_points, double noise_mm, bool batched) {
   RgbdFitOptions calibrating, frozen;  // the identity from the first frame, as headcast-track calibrates it
+  frozen.batched_solve = batched;
   frozen.cloud_points = cloud_points;
   frozen.fit_shape = false;
   RgbdFitter first(s.model, calibrating), fitter(s.model, frozen);
@@ -101,15 +102,19 @@ nlohmann::json RunRgbdSuite(const BenchOptions& options) {
   out["what"] =
       "RgbdFitter::Fit per frame, 640x480, built-in head, landmarks = projected model landmarks + 1 px "
       "noise, wall at 1.4 m; identity frozen after the first frame; ms on this machine; face_rms: the "
-      "fitted face's vertices against the truth; *_cloud_3000: a denser cloud, side by side";
+      "fitted face's vertices against the truth; *_cloud_3000: a denser cloud; *_per_point_solve: a "
+      "Ceres residual block and robust loss per point instead of batched blocks; side by side";
   out["frames"] = frames;
   const int default_points = RgbdFitOptions{}.cloud_points;
   for (const int cloud_points : {default_points, 3000})
-    for (const double noise_mm : {0.0, 1.0}) {
-      std::string key = "noise_" + std::to_string(static_cast<int>(noise_mm)) + "mm";
-      if (cloud_points != default_points) key += "_cloud_" + std::to_string(cloud_points);
-      out[key] = RunSequence(scene, frames, cloud_points, noise_mm);
-    }
+    for (const bool batched : {true, false})
+      for (const double noise_mm : {0.0, 1.0}) {
+        if (cloud_points != default_points && !batched) continue;
+        std::string key = "noise_" + std::to_string(static_cast<int>(noise_mm)) + "mm";
+        if (cloud_points != default_points) key += "_cloud_" + std::to_string(cloud_points);
+        if (!batched) key += "_per_point_solve";
+        out[key] = RunSequence(scene, frames, cloud_points, noise_mm, batched);
+      }
   return out;
 }
 

@@ -7,8 +7,9 @@
 # sender's report, head position and rotation error against the truth.
 # With --stereo B the sender reads side-by-side stereo frames of the same
 # sequence (a right camera B metres to the right, rendered by render-rgbd
-# --stereo-baseline) through zed: and the stereo calibration: depth by stereo
-# matching in the face's box, as a ZED-style camera gives it.
+# --stereo-baseline, as an H.264 video) through zed: and the stereo
+# calibration: depth by stereo matching in the face's box, as a ZED-style
+# camera gives it.
 #   bench/live_rgbd.sh OUT [--frames N] [--noise MM] [--stereo BASELINE_M]
 # Writes OUT/live_rgbd.json and prints it.
 set -euo pipefail
@@ -32,7 +33,12 @@ out=$(cd "$out" && pwd)
 "$bin/headcast-headmodel" render-rgbd builtin --out "$out/seq" --frames "$frames" --shape 0=0.8 \
   --depth-noise "$noise" --stereo-baseline "$stereo" > "$out/render.log" 2>&1
 input=(--input "$out/seq")
-[ "$stereo" = 0 ] || input=(--input "zed:$out/seq/side_by_side" --stereo-calibration "$out/seq/stereo.yml")
+if [ "$stereo" != 0 ]; then
+  # A video, as a camera stream: decoding a PNG per frame would measure the disk format, not the camera.
+  ffmpeg -loglevel error -y -framerate 30 -i "$out/seq/side_by_side/%05d.png" -c:v libx264 -qp 0 -pix_fmt yuv444p \
+    "$out/seq/side_by_side.mp4"
+  input=(--input "zed:$out/seq/side_by_side.mp4" --stereo-calibration "$out/seq/stereo.yml")
+fi
 fx=$("$python" -c "import json; print(json.load(open('$out/seq/truth.json'))['camera']['fx'])")
 "$bin/headcast-avatar" create --resolution 128 --out "$out/a.hcavatar" > /dev/null 2>&1
 port=$((20000 + $$ % 20000))

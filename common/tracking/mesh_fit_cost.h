@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <stdexcept>
 #include <vector>
 
@@ -137,23 +138,29 @@ struct MeshBasis {
 // translation (3), log scale (1), jaw rotation (3).
 enum Block { kCoefficients = 0, kRotation, kTranslation, kLogScale, kJaw };
 
-// A point on the model surface (1..3 vertices with barycentric weights) in the
-// mesh frame minus its target point: 3 residuals, analytic Jacobians.
-class SurfacePointCost final : public ceres::CostFunction {
- public:
-  // `metric` weighs the difference: identity for point-to-point; for closest
-  // points n n^T + e (I - n n^T) with the target's normal n, mostly
-  // point-to-plane, so the surface may slide along itself between rounds.
-  SurfacePointCost(const MeshBasis* basis, const std::array<int, 3>& vertices, const Eigen::Vector3d& bary, int count,
-                   const Eigen::Vector3d& target, const Eigen::Matrix3d& metric = Eigen::Matrix3d::Identity())
-      : basis_(basis), vertices_(vertices), bary_(bary), count_(count), target_(target), metric_(metric) {
-    set_num_residuals(3);
-    *mutable_parameter_block_sizes() = {basis->k, 3, 3, 1, 3};
-  }
+// A point on the model surface (1..3 vertices with barycentric weights) and
+// the target it is pulled to, with the metric that weighs the difference:
+// identity for point-to-point; for closest points n n^T + e (I - n n^T) with
+// the target's normal n, mostly point-to-plane, so the surface may slide along
+// itself between rounds.
+struct SurfacePoint {
+  std::array<int, 3> vertices{};
+  Eigen::Vector3d bary = Eigen::Vector3d::Zero();
+  int count = 1;
+  Eigen::Vector3d target = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d metric = Eigen::Matrix3d::Identity();
+  double scale = 1;  // multiplies the residual (the square root of a fixed weight)
+};
 
-  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
-    const MeshBasis& b = *basis_;
-    const MeshBasis::Jaw& jaw = b.CachedJaw(p[kCoefficients], p[kJaw]);
+// The parameter-dependent parts every point of one evaluation shares.
+struct SurfaceFrame {
+  const MeshBasis::Jaw* jaw = nullptr;
+  Eigen::Matrix3d Rr;
+  std::array<Eigen::Matrix3d, 3> dRr;
+  double s = 1;
+  static SurfaceFrame For(const MeshBasis& b, double const* const* p) {
+    SurfaceFrame f;
+    f.jaw = &b.CachedJaw(p[kCoefficients], p[kJaw]);
     // The root rotation and its derivatives, once per parameter state and thread.
     thread_local Eigen::Vector3d cached_w(NAN, NAN, NAN);
     thread_local Eigen::Matrix3d Rr;
@@ -163,51 +170,87 @@ class SurfacePointCost final : public ceres::CostFunction {
       Rr = AxisAngleToMatrix(w, &dRr);
       cached_w = w;
     }
-    const double s = std::exp(p[kLogScale][0]);
-    const bool want = jacobians != nullptr;
-    const bool want_c = want && jacobians[kCoefficients], want_jaw = want && jacobians[kJaw];
-    Eigen::Vector3d q = Eigen::Vector3d::Zero();
-    Eigen::Matrix<double, 3, Eigen::Dynamic> dq_dc;
-    Eigen::Matrix3d dq_dtheta = Eigen::Matrix3d::Zero();
-    if (want_c) dq_dc.setZero(3, b.k);
-    for (int v = 0; v < count_; ++v)
-      b.Vertex(vertices_[v], p[kCoefficients], jaw, bary_[v], &q, want_c ? &dq_dc : nullptr,
-               want_jaw ? &dq_dtheta : nullptr);
-    const Eigen::Vector3d x = s * Rr * q + Eigen::Map<const Eigen::Vector3d>(p[kTranslation]);
-    Eigen::Map<Eigen::Vector3d> residual(residuals);
-    residual = metric_ * (x - target_);
-    if (!want) return true;
-    const Eigen::Matrix3d sR = s * metric_ * Rr;
-    if (want_c) {
-      Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[kCoefficients], 3, b.k);
-      J = sR * dq_dc;
-    }
-    if (jacobians[kRotation]) {
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kRotation]);
-      for (int a = 0; a < 3; ++a) J.col(a) = s * metric_ * dRr[a] * q;
-    }
-    if (jacobians[kTranslation]) {
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kTranslation]);
-      J = metric_;
-    }
-    if (jacobians[kLogScale]) {
-      Eigen::Map<Eigen::Vector3d> J(jacobians[kLogScale]);
-      J = sR * q;
-    }
-    if (want_jaw) {
-      Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kJaw]);
-      J = sR * dq_dtheta;
-    }
+    f.Rr = Rr;
+    f.dRr = dRr;
+    f.s = std::exp(p[kLogScale][0]);
+    return f;
+  }
+};
+
+// One point's 3 residuals, written at `residual`, and its Jacobian rows at
+// `row` of each requested block (row-major, as Ceres lays them out).
+inline void EvaluateSurfacePoint(const MeshBasis& b, const SurfaceFrame& f, const SurfacePoint& pt,
+                                 double const* const* p, double* residual, double** jacobians, int row) {
+  const bool want = jacobians != nullptr;
+  const bool want_c = want && jacobians[kCoefficients], want_jaw = want && jacobians[kJaw];
+  Eigen::Vector3d q = Eigen::Vector3d::Zero();
+  thread_local Eigen::Matrix<double, 3, Eigen::Dynamic> dq_dc;
+  Eigen::Matrix3d dq_dtheta = Eigen::Matrix3d::Zero();
+  if (want_c) dq_dc.setZero(3, b.k);
+  for (int v = 0; v < pt.count; ++v)
+    b.Vertex(pt.vertices[v], p[kCoefficients], *f.jaw, pt.bary[v], &q, want_c ? &dq_dc : nullptr,
+             want_jaw ? &dq_dtheta : nullptr);
+  const Eigen::Vector3d x = f.s * f.Rr * q + Eigen::Map<const Eigen::Vector3d>(p[kTranslation]);
+  const Eigen::Matrix3d M = pt.scale * pt.metric;
+  Eigen::Map<Eigen::Vector3d> r(residual);
+  r = M * (x - pt.target);
+  if (!want) return;
+  const Eigen::Matrix3d sR = f.s * M * f.Rr;
+  if (want_c) {
+    Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[kCoefficients] + 3 * row * b.k, 3,
+                                                                            b.k);
+    J = sR * dq_dc;
+  }
+  if (jacobians[kRotation]) {
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> J(jacobians[kRotation] + 9 * row);
+    for (int a = 0; a < 3; ++a) J.col(a) = f.s * M * f.dRr[a] * q;
+  }
+  if (jacobians[kTranslation])
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(jacobians[kTranslation] + 9 * row) = M;
+  if (jacobians[kLogScale]) Eigen::Map<Eigen::Vector3d>(jacobians[kLogScale] + 3 * row) = sR * q;
+  if (want_jaw) Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(jacobians[kJaw] + 9 * row) = sR * dq_dtheta;
+}
+
+// A point on the model surface minus its target point: 3 residuals, analytic Jacobians.
+class SurfacePointCost final : public ceres::CostFunction {
+ public:
+  SurfacePointCost(const MeshBasis* basis, const std::array<int, 3>& vertices, const Eigen::Vector3d& bary, int count,
+                   const Eigen::Vector3d& target, const Eigen::Matrix3d& metric = Eigen::Matrix3d::Identity())
+      : basis_(basis) {
+    point_ = {vertices, bary, count, target, metric, 1.0};
+    set_num_residuals(3);
+    *mutable_parameter_block_sizes() = {basis->k, 3, 3, 1, 3};
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
+    EvaluateSurfacePoint(*basis_, SurfaceFrame::For(*basis_, p), point_, p, residuals, jacobians, 0);
     return true;
   }
 
  private:
   const MeshBasis* basis_;
-  std::array<int, 3> vertices_;
-  Eigen::Vector3d bary_;
-  int count_;
-  Eigen::Vector3d target_;
-  Eigen::Matrix3d metric_;
+  SurfacePoint point_;
+};
+
+// Many surface points in one residual block: the same residuals and
+// Jacobians as a SurfacePointCost each, without Ceres's cost per block (which
+// dominates a solve of a thousand points). Weights are fixed (no loss function).
+class SurfacePointsCost final : public ceres::CostFunction {
+ public:
+  SurfacePointsCost(const MeshBasis* basis, std::vector<SurfacePoint> points)
+      : basis_(basis), points_(std::move(points)) {
+    set_num_residuals(3 * static_cast<int>(points_.size()));
+    *mutable_parameter_block_sizes() = {basis->k, 3, 3, 1, 3};
+  }
+  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
+    const SurfaceFrame f = SurfaceFrame::For(*basis_, p);
+    for (size_t i = 0; i < points_.size(); ++i)
+      EvaluateSurfacePoint(*basis_, f, points_[i], p, residuals + 3 * i, jacobians, static_cast<int>(i));
+    return true;
+  }
+
+ private:
+  const MeshBasis* basis_;
+  std::vector<SurfacePoint> points_;
 };
 
 // The fit's unknowns, stored as Ceres parameter blocks.
@@ -232,6 +275,10 @@ struct Correspondence {
 struct SolveSettings {
   MeshLoss loss = MeshLoss::kNorm;
   double loss_scale_m = 5e-4;
+  // Points in a few residual blocks, the robust loss as fixed weights taken at
+  // the starting state (one reweighting step per solve): much cheaper per
+  // iteration, for fits that solve again after new correspondences anyway.
+  bool batched = false;
   double shape_prior = 1e-9, expression_prior = 1e-9, jaw_prior = 1e-9;
   int max_iterations = 50;
   static SolveSettings From(const MeshFitOptions& options);
@@ -261,6 +308,32 @@ RowMatrixX3f PosePatch(const MeshBasis& basis, const FitState& state, const Surf
 // Closest point on triangle abc to p, as barycentrics.
 Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                    const Eigen::Vector3d& c);
+// Closest points on the posed surface (all of it, or a patch), through a
+// k-d tree over face centroids. One search may serve several rounds of a fit
+// while the surface moves: the answer stays exact (queries reach as much
+// farther as any vertex has moved since the tree was built), the tree is
+// built once.
+class ClosestPointSearch {
+ public:
+  ClosestPointSearch(const HeadModel& model, const RowMatrixX3f& posed, const SurfacePatch* patch = nullptr);
+  ~ClosestPointSearch();
+  ClosestPointSearch(const ClosestPointSearch&) = delete;
+  ClosestPointSearch& operator=(const ClosestPointSearch&) = delete;
+  // As ClosestPoints, on `posed` (the same model and patch, posed anew).
+  std::vector<Correspondence> Find(const RowMatrixX3f& posed, const RowMatrixX3f& points,
+                                   const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
+                                   const Eigen::VectorXf& nu, double max_distance) const;
+
+ private:
+  void Measure(const RowMatrixX3f& posed, RowMatrixX3f* centroids, std::vector<float>* radius) const;
+  struct Tree;
+  RowMatrixX3i faces_, around_;  // searched; whose vertex normals count
+  std::vector<int> vertices_;    // of the searched faces
+  RowMatrixX3f built_;           // the posed vertices the tree was built on
+  std::vector<int> large_faces_;
+  std::unique_ptr<Tree> tree_;
+};
+
 // For every point: the closest point on the posed model surface within
 // `max_distance`, mostly point-to-plane along the point's normal (when it has
 // one), skipped when the surfaces face different ways.

@@ -155,58 +155,87 @@ struct CloudAdaptor {
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
 
+struct ClosestPointSearch::Tree {
+  RowMatrixX3f centroids;  // at build time
+  CloudAdaptor adaptor{centroids};
+  KdTree index{3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)};
+};
+
+ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3f& posed, const SurfacePatch* patch)
+    : tree_(std::make_unique<Tree>()) {
+  const auto& all_faces = model.data().faces;
+  std::vector<char> used(posed.rows(), 0);
+  if (patch) {
+    faces_.resize(static_cast<Eigen::Index>(patch->faces.size()), 3);
+    for (size_t f = 0; f < patch->faces.size(); ++f)
+      faces_.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->faces[f]);
+    around_.resize(static_cast<Eigen::Index>(patch->normal_faces.size()), 3);
+    for (size_t f = 0; f < patch->normal_faces.size(); ++f)
+      around_.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->normal_faces[f]);
+  } else {
+    faces_ = all_faces;
+    around_ = all_faces;
+  }
+  for (Eigen::Index f = 0; f < faces_.rows(); ++f)
+    for (int k = 0; k < 3; ++k) used[faces_(f, k)] = 1;
+  for (Eigen::Index i = 0; i < posed.rows(); ++i)
+    if (used[i]) vertices_.push_back(static_cast<int>(i));
+  built_ = posed;
+  std::vector<float> radius;
+  Measure(posed, &tree_->centroids, &radius);
+  // A radius search on centroids finds every face within `reach` of a point
+  // when it searches reach + the faces' largest radius. Faces much larger than
+  // the typical one would widen every search: they are checked on their own.
+  if (!radius.empty()) {
+    std::vector<float> sorted = radius;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const float threshold = 3 * sorted[sorted.size() / 2];
+    for (Eigen::Index f = 0; f < faces_.rows(); ++f)
+      if (radius[f] > threshold) large_faces_.push_back(static_cast<int>(f));
+  }
+  tree_->index.buildIndex();
+}
+
+ClosestPointSearch::~ClosestPointSearch() = default;
+
+void ClosestPointSearch::Measure(const RowMatrixX3f& posed, RowMatrixX3f* centroids, std::vector<float>* radius) const {
+  centroids->resize(faces_.rows(), 3);
+  radius->resize(faces_.rows());
+  for (Eigen::Index f = 0; f < faces_.rows(); ++f) {
+    const Eigen::RowVector3f c = (posed.row(faces_(f, 0)) + posed.row(faces_(f, 1)) + posed.row(faces_(f, 2))) / 3;
+    centroids->row(f) = c;
+    (*radius)[f] = std::max({(posed.row(faces_(f, 0)) - c).norm(), (posed.row(faces_(f, 1)) - c).norm(),
+                             (posed.row(faces_(f, 2)) - c).norm()});
+  }
+}
+
 // For every target point: the closest point on the posed model surface. Each
 // face is bounded by a sphere around its centroid; the nearest centroids give
 // a first distance, and only faces whose sphere comes closer than it are
 // measured exactly -- the same answer as measuring every face, at a few
-// triangle tests per point.
-std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
-                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
-                                          const Eigen::VectorXf& nu, double max_distance, const SurfacePatch* patch) {
+// triangle tests per point. The tree holds the centroids where they were
+// built: every vertex has moved at most `moved` since, so each centroid has
+// too, and searching that much farther finds every face it must.
+std::vector<Correspondence> ClosestPointSearch::Find(const RowMatrixX3f& posed, const RowMatrixX3f& points,
+                                                     const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
+                                                     const Eigen::VectorXf& nu, double max_distance) const {
   // Mostly point-to-plane: a tenth of the weight stays on the tangential part.
   constexpr double kTangential = 0.1;
   constexpr double kMinNormalAgreement = 0.5;  // cos 60 degrees
-  const auto& all_faces = model.data().faces;
-  // The faces searched, as rows of their own (indices below are into these).
-  RowMatrixX3i faces;
-  RowMatrixX3f model_normals;
-  if (patch) {
-    faces.resize(static_cast<Eigen::Index>(patch->faces.size()), 3);
-    for (size_t f = 0; f < patch->faces.size(); ++f)
-      faces.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->faces[f]);
-    RowMatrixX3i around(static_cast<Eigen::Index>(patch->normal_faces.size()), 3);
-    for (size_t f = 0; f < patch->normal_faces.size(); ++f)
-      around.row(static_cast<Eigen::Index>(f)) = all_faces.row(patch->normal_faces[f]);
-    model_normals = VertexNormals(posed, around);
-  } else {
-    faces = all_faces;
-    model_normals = VertexNormals(posed, all_faces);
-  }
   std::vector<Correspondence> out;
-  if (faces.rows() == 0) return out;
-  RowMatrixX3f centroids(faces.rows(), 3);
-  std::vector<float> radius(faces.rows());
-  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
-    centroids.row(f) = c;
-    radius[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
-                          (posed.row(faces(f, 2)) - c).norm()});
-  }
-  // A radius search on centroids finds every face within `reach` of a point
-  // when it searches reach + the faces' largest radius. Faces much larger than
-  // the typical one would widen every search: they are checked on their own.
-  std::vector<int> large_faces;
-  float threshold = 0;
-  {
-    std::vector<float> sorted = radius;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    threshold = 3 * sorted[sorted.size() / 2];
-    for (Eigen::Index f = 0; f < faces.rows(); ++f)
-      if (radius[f] > threshold) large_faces.push_back(static_cast<int>(f));
-  }
-  CloudAdaptor centroid_cloud{centroids};
-  KdTree centroid_tree(3, centroid_cloud, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  centroid_tree.buildIndex();
+  if (faces_.rows() == 0) return out;
+  const RowMatrixX3f model_normals = VertexNormals(posed, around_);
+  RowMatrixX3f centroids;
+  std::vector<float> radius;
+  Measure(posed, &centroids, &radius);
+  float moved = 0;
+  for (int i : vertices_) moved = std::max(moved, (posed.row(i) - built_.row(i)).norm());
+  std::vector<char> large(faces_.rows(), 0);
+  for (int f : large_faces_) large[f] = 1;
+  float threshold = 0;  // the largest radius of the faces the tree answers for
+  for (Eigen::Index f = 0; f < faces_.rows(); ++f)
+    if (!large[f]) threshold = std::max(threshold, radius[f]);
+  const auto& faces = faces_;
   std::vector<std::pair<unsigned, float>> nearby;
   constexpr int kNeighbours = 4;
   for (Eigen::Index j = 0; j < points.rows(); ++j) {
@@ -226,24 +255,24 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
         c.bary = bary;
       }
     };
-    // Can face f (its centroid d2 away, squared) hold a point closer than the best so far?
-    auto may_be_closer = [&](int f, float d2) {
+    // Can face f hold a point closer than the best so far (its sphere, where it is now)?
+    auto may_be_closer = [&](int f) {
       const double reach = std::sqrt(best) + radius[static_cast<size_t>(f)];
-      return d2 < reach * reach;
+      return (centroids.row(f).transpose() - tf).squaredNorm() < reach * reach;
     };
     unsigned index[kNeighbours];
     float dist2[kNeighbours];
-    const size_t found = centroid_tree.knnSearch(tf.data(), kNeighbours, index, dist2);
+    const size_t found = tree_->index.knnSearch(tf.data(), kNeighbours, index, dist2);
     for (size_t m = 0; m < found; ++m) try_face(static_cast<int>(index[m]));
     // Only a face within max_distance can pair: no need to search farther.
-    const float reach = static_cast<float>(std::min(std::sqrt(best), max_distance)) + threshold;
+    const float reach = static_cast<float>(std::min(std::sqrt(best), max_distance)) + threshold + moved;
     nanoflann::SearchParams params;
     params.sorted = false;  // sorting costs more than the exact tests it would save
-    centroid_tree.radiusSearch(tf.data(), reach * reach, nearby, params);
+    tree_->index.radiusSearch(tf.data(), reach * reach, nearby, params);
     for (const auto& [f, d2] : nearby)
-      if (may_be_closer(static_cast<int>(f), d2)) try_face(static_cast<int>(f));
-    for (int f : large_faces)
-      if (may_be_closer(f, (centroids.row(f).transpose() - tf).squaredNorm())) try_face(f);
+      if (!large[f] && may_be_closer(static_cast<int>(f))) try_face(static_cast<int>(f));
+    for (int f : large_faces_)
+      if (may_be_closer(f)) try_face(f);
     if (!(best <= max_distance * max_distance)) continue;
     c.count = 3;
     c.target = t;
@@ -269,6 +298,12 @@ std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatri
     out.push_back(c);
   }
   return out;
+}
+
+std::vector<Correspondence> ClosestPoints(const HeadModel& model, const RowMatrixX3f& posed, const RowMatrixX3f& points,
+                                          const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
+                                          const Eigen::VectorXf& nu, double max_distance, const SurfacePatch* patch) {
+  return ClosestPointSearch(model, posed, patch).Find(posed, points, point_normals, omega, nu, max_distance);
 }
 
 Eigen::Matrix4d Umeyama(const std::vector<Eigen::Vector3d>& from, const std::vector<Eigen::Vector3d>& to, bool scale) {
@@ -311,10 +346,38 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   if (o.loss == MeshLoss::kCauchy) base = std::make_unique<ceres::CauchyLoss>(o.loss_scale_m);
   double* blocks[] = {st->coefficients.data(), st->rotation.data(), st->translation.data(), &st->log_scale,
                       st->jaw.data()};
-  for (const Correspondence& c : pairs) {
-    if (c.weight <= 0) continue;
-    problem.AddResidualBlock(new SurfacePointCost(&basis, c.vertices, c.bary, c.count, c.target, c.metric),
-                             new ceres::ScaledLoss(base.get(), c.weight, ceres::DO_NOT_TAKE_OWNERSHIP), blocks, 5);
+  if (o.batched) {
+    // Fixed weights: the pair's weight times the loss's slope at the starting state.
+    const Eigen::Matrix3d sR = std::exp(st->log_scale) * AxisAngleToMatrix(st->rotation);
+    const MeshBasis::Jaw jaw = basis.MakeJaw(st->coefficients.data(), st->jaw.data());
+    std::vector<SurfacePoint> points;
+    for (const Correspondence& c : pairs) {
+      if (c.weight <= 0) continue;
+      double slope = 1;
+      if (base) {
+        Eigen::Vector3d q = Eigen::Vector3d::Zero();
+        for (int v = 0; v < c.count; ++v)
+          basis.Vertex(c.vertices[v], st->coefficients.data(), jaw, c.bary[v], &q, nullptr, nullptr);
+        double rho[3];
+        base->Evaluate((c.metric * (sR * q + st->translation - c.target)).squaredNorm(), rho);
+        slope = rho[1];
+      }
+      points.push_back({c.vertices, c.bary, c.count, c.target, c.metric, std::sqrt(c.weight * slope)});
+    }
+    // Two blocks, so that Ceres's two threads share the evaluation.
+    const size_t half = (points.size() + 1) / 2;
+    for (size_t begin = 0; begin < points.size(); begin += half) {
+      std::vector<SurfacePoint> part(
+          points.begin() + static_cast<std::ptrdiff_t>(begin),
+          points.begin() + static_cast<std::ptrdiff_t>(std::min(points.size(), begin + half)));
+      problem.AddResidualBlock(new SurfacePointsCost(&basis, std::move(part)), nullptr, blocks, 5);
+    }
+  } else {
+    for (const Correspondence& c : pairs) {
+      if (c.weight <= 0) continue;
+      problem.AddResidualBlock(new SurfacePointCost(&basis, c.vertices, c.bary, c.count, c.target, c.metric),
+                               new ceres::ScaledLoss(base.get(), c.weight, ceres::DO_NOT_TAKE_OWNERSHIP), blocks, 5);
+    }
   }
   if (problem.NumResidualBlocks() == 0) throw std::runtime_error("mesh fit: no usable correspondences");
   // Priors keep components the mesh does not constrain at zero. They are

@@ -23,7 +23,7 @@ void RgbdFitOptions::Check() const {
   c.InRange("warm_rounds", warm_rounds, 1, 100).InRange("warm_max_iterations", warm_max_iterations, 1, 1000);
   c.NonNegative("cloud_margin_m", cloud_margin_m).Positive("head_depth_m", head_depth_m);
   c.Positive("contour_tolerance_m", contour_tolerance_m).NonNegative("shape_prior", shape_prior);
-  c.NonNegative("contour_weight", contour_weight);
+  c.NonNegative("contour_weight", contour_weight).InRange("accuracy_every", accuracy_every, 1, 1000);
   c.NonNegative("expression_prior", expression_prior).InRange("max_iterations", max_iterations, 1, 1000);
   c.ThrowIfErrors();
 }
@@ -192,6 +192,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   settings.shape_prior = options_.shape_prior;
   settings.expression_prior = options_.expression_prior;
   settings.max_iterations = options_.max_iterations;
+  settings.batched = options_.batched_solve && !options_.fit_shape;
   if (previous && previous->ok) settings.max_iterations = options_.warm_max_iterations;
   const bool jaw = model_.JointIsArticulated(kJawJoint);
   // The landmarks' faces and barycentrics for the current view (the dynamic contour follows it).
@@ -274,6 +275,8 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                 cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
                 std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
 
+  const ClosestPointSearch search(model_, PosePatch(basis, st, patch), &patch);
+
   // Block 2: landmarks + point-to-mesh over everything; block 3: points over shape.
   FreeBlocks all;
   all.shape = options_.fit_shape;
@@ -287,7 +290,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   for (int round = 0; round < rounds; ++round) {
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
-    points = ClosestPoints(model_, PosePatch(basis, st, patch), cloud, cloud_normals, ones, impl_->nu, gate, &patch);
+    points = search.Find(PosePatch(basis, st, patch), cloud, cloud_normals, ones, impl_->nu, gate);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
       return r;
@@ -303,10 +306,17 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     SolveOnce(basis, pairs, settings, block3 ? shape_only : all, &st);
   }
   const RowMatrixX3f posed = PosePatch(basis, st, patch);
-  // The accuracy: each point's distance to the final surface (fresh closest points).
-  points = ClosestPoints(model_, posed, cloud, cloud_normals, ones, impl_->nu, options_.max_point_distance_m, &patch);
-  r.paired_points = static_cast<int>(points.size());
-  r.accuracy_m = MeasurePairs(posed, points).all_m;
+  r.paired_points = static_cast<int>(points.size());  // in the last round
+  // The accuracy: the distance of every n-th point to the final surface (fresh closest points).
+  const int every = options_.accuracy_every;
+  RowMatrixX3f sample((cloud.rows() + every - 1) / every, 3), sample_normals(sample.rows(), 3);
+  for (Eigen::Index i = 0; i < sample.rows(); ++i) {
+    sample.row(i) = cloud.row(i * every);
+    sample_normals.row(i) = cloud_normals.row(i * every);
+  }
+  r.accuracy_m =
+      MeasurePairs(posed, search.Find(posed, sample, sample_normals, ones, impl_->nu, options_.max_point_distance_m))
+          .all_m;
   const auto lmk = landmark_pairs(true, 1.0);
   r.landmarks_3d = static_cast<int>(lmk.size());
   r.landmark_rmse_m = MeasurePairs(posed, lmk).all_m;

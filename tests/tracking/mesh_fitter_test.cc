@@ -301,6 +301,29 @@ TEST(MeshFitCost, ClosestPointsOnAPatchMatchTheWholeHead) {
     EXPECT_LT((surface_point(whole[i]) - surface_point(part[i])).norm(), 1e-7) << i;
     EXPECT_LT((whole[i].metric - part[i].metric).norm(), 1e-5) << i;
   }
+  // A search built at this pose, asked after the head has moved (as the
+  // rounds of one fit ask it), answers as a search built anew.
+  const ClosestPointSearch kept(model, PosePatch(basis, st, patch), &patch);
+  FitState moved = st;
+  moved.rotation += Eigen::Vector3d(0.1, -0.05, 0.02);
+  moved.translation += Eigen::Vector3d(0.01, -0.015, 0.01);
+  moved.coefficients[1] += 0.5;
+  moved.jaw.x() += 0.1;
+  const RowMatrixX3f posed_again = PosePatch(basis, moved, patch);
+  const std::vector<Correspondence> fresh =
+      ClosestPoints(model, posed_again, points, point_normals, ones, ones, gate, &patch);
+  const std::vector<Correspondence> reused = kept.Find(posed_again, points, point_normals, ones, ones, gate);
+  ASSERT_EQ(fresh.size(), reused.size());
+  ASSERT_GT(fresh.size(), chosen.size() / 3);
+  for (size_t i = 0; i < fresh.size(); ++i) {
+    EXPECT_EQ(fresh[i].target, reused[i].target) << i;
+    Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) {
+      a += fresh[i].bary[k] * posed_again.row(fresh[i].vertices[k]).cast<double>().transpose();
+      b += reused[i].bary[k] * posed_again.row(reused[i].vertices[k]).cast<double>().transpose();
+    }
+    EXPECT_LT((a - b).norm(), 1e-7) << i;
+  }
 }
 
 TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
