@@ -19,8 +19,9 @@ class DepthOnDemand {
  public:
   virtual ~DepthOnDemand() = default;
   // CV_32F metres aligned to the frame's bgr, the frame's size; 0 where
-  // unknown and outside `box` (clipped to the frame).
-  virtual cv::Mat DepthIn(const cv::Rect& box) const = 0;
+  // unknown and outside `box` (clipped to the frame). With near_m < far_m
+  // only depths in that range are looked for (stereo: fewer disparities).
+  virtual cv::Mat DepthIn(const cv::Rect& box, double near_m = 0, double far_m = 0) const = 0;
 };
 
 struct CapturedFrame {

@@ -115,6 +115,7 @@ StereoCalibration ReadStereoCalibration(const std::string& path, const std::stri
 void StereoMatchOptions::Check() const {
   OptionsCheck c("StereoMatchOptions");
   c.InRange("max_disparity", max_disparity, 16, 1024).InRange("block_size", block_size, 1, 31);
+  c.InRange("min_disparity", min_disparity, 0, max_disparity - 1);
   c.That(block_size % 2 == 1, "block_size must be odd");
   c.Positive("wls_lambda", wls_lambda).Positive("wls_sigma_color", wls_sigma_color);
   c.ThrowIfErrors();
@@ -124,9 +125,9 @@ cv::Mat ComputeDisparity(const cv::Mat& left, const cv::Mat& right, const Stereo
   o.Check();
   if (left.empty() || left.size() != right.size() || left.type() != right.type())
     throw std::invalid_argument("ComputeDisparity: the images must be non-empty and of one size and type");
-  const int num = (o.max_disparity + 15) / 16 * 16;
+  const int num = (o.max_disparity - o.min_disparity + 15) / 16 * 16;
   const int channels = left.channels();
-  auto sgbm = cv::StereoSGBM::create(0, num, o.block_size, 8 * channels * o.block_size * o.block_size,
+  auto sgbm = cv::StereoSGBM::create(o.min_disparity, num, o.block_size, 8 * channels * o.block_size * o.block_size,
                                      32 * channels * o.block_size * o.block_size, 1, 63, 10, 100, 2,
                                      cv::StereoSGBM::MODE_SGBM_3WAY);
   cv::Mat raw, out;
@@ -142,7 +143,8 @@ cv::Mat ComputeDisparity(const cv::Mat& left, const cv::Mat& right, const Stereo
     raw = filtered;
   }
   raw.convertTo(out, CV_32F, 1.0 / 16);
-  out.setTo(0, out <= 0);  // SGBM marks unknown as (min_disparity - 1) * 16
+  // SGBM marks unknown as min_disparity - 1.
+  out.setTo(0, (out < static_cast<float>(o.min_disparity)) | (out <= 0));
   return out;
 }
 
@@ -204,15 +206,22 @@ cv::Mat StereoDepth::RectifyLeft(const cv::Mat& left) const {
   return out;
 }
 
-cv::Mat StereoDepth::ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box_asked) const {
+cv::Mat StereoDepth::ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box_asked,
+                               double near_m, double far_m) const {
   if (left_rectified.size() != calib_.size || right.size() != calib_.size)
     throw std::invalid_argument("stereo: images are not of the calibration's size");
   cv::Mat depth = cv::Mat::zeros(calib_.size, CV_32F);
   const cv::Rect box = box_asked & cv::Rect(cv::Point(0, 0), calib_.size);
   if (box.width < 8 || box.height < 8) return depth;
+  StereoMatchOptions match = match_;
+  const double fb_scaled = camera_.fx * baseline_ * scale_;  // disparity at the matching scale times depth
+  if (near_m > 0 && far_m > near_m) {
+    match.max_disparity = std::clamp(static_cast<int>(std::ceil(fb_scaled / near_m)), 16, match_.max_disparity);
+    match.min_disparity = std::clamp(static_cast<int>(std::floor(fb_scaled / far_m)), 0, match.max_disparity - 16);
+  }
   // A left pixel x matches right pixels x - d, d < the disparity range: the
   // strip reaches that far left of the box (both images, so columns agree).
-  const int reach = static_cast<int>(std::ceil(match_.max_disparity / scale_)) + 1;
+  const int reach = static_cast<int>(std::ceil(match.max_disparity / scale_)) + 1;
   const int x0 = std::max(0, box.x - reach);
   const cv::Rect strip(x0, box.y, box.x + box.width - x0, box.height);
   cv::Mat right_rectified;
@@ -223,7 +232,7 @@ cv::Mat StereoDepth::ComputeIn(const cv::Mat& left_rectified, const cv::Mat& rig
     cv::resize(r, r, cv::Size(), scale_, scale_, cv::INTER_AREA);
   }
   if (l.cols < 16 || l.rows < 8) return depth;
-  cv::Mat disparity = ComputeDisparity(l, r, match_);
+  cv::Mat disparity = ComputeDisparity(l, r, match);
   if (scale_ < 1) {
     cv::resize(disparity, disparity, strip.size(), 0, 0, cv::INTER_NEAREST);
     disparity /= scale_;
@@ -244,7 +253,9 @@ class StereoFrameDepth final : public DepthOnDemand {
  public:
   StereoFrameDepth(std::shared_ptr<const StereoDepth> depth, cv::Mat left_rectified, cv::Mat right)
       : depth_(std::move(depth)), left_(std::move(left_rectified)), right_(std::move(right)) {}
-  cv::Mat DepthIn(const cv::Rect& box) const override { return depth_->ComputeIn(left_, right_, box); }
+  cv::Mat DepthIn(const cv::Rect& box, double near_m, double far_m) const override {
+    return depth_->ComputeIn(left_, right_, box, near_m, far_m);
+  }
 
  private:
   std::shared_ptr<const StereoDepth> depth_;

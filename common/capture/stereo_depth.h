@@ -29,7 +29,8 @@ struct StereoCalibration {
 StereoCalibration ReadStereoCalibration(const std::string& path, const std::string& resolution = "HD");
 
 struct StereoMatchOptions {
-  int max_disparity = 128;  // pixels at the matching resolution; rounded up to a multiple of 16
+  int min_disparity = 0;
+  int max_disparity = 128;  // pixels at the matching resolution; the range rounded up to a multiple of 16
   int block_size = 5;
   bool wls_filter = true;
   double wls_lambda = 8000, wls_sigma_color = 1.5;
@@ -49,8 +50,10 @@ class StereoDepth {
   cv::Mat RectifyLeft(const cv::Mat& left) const;
   // Depth inside `box` of the rectified left image (the rest 0): only the
   // rows of the box, and the columns a match for it can come from, are
-  // rectified (right) and matched. `right` is the raw right image.
-  cv::Mat ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box) const;
+  // rectified (right) and matched. `right` is the raw right image. With
+  // near_m < far_m only disparities of that depth range are searched.
+  cv::Mat ComputeIn(const cv::Mat& left_rectified, const cv::Mat& right, const cv::Rect& box, double near_m = 0,
+                    double far_m = 0) const;
   const PinholeCamera& camera() const { return camera_; }  // of the rectified left image
   double baseline_m() const { return baseline_; }
 

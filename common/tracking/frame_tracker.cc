@@ -129,6 +129,9 @@ RgbdFitResult FrameTracker::RefitRgbd(const Landmarks2d& landmarks, const cv::Ma
   return Rgbd(false).Fit(landmarks, depth_m, camera, previous && previous->ok ? previous : nullptr);
 }
 
+// How far from the last frame's head origin this frame's face depth is looked for.
+constexpr double kDepthReach = 0.2;
+
 cv::Rect DepthBoxForFit(const Landmarks2d& landmarks, const cv::Size& image) {
   double u_lo = INFINITY, u_hi = -INFINITY, v_lo = INFINITY, v_hi = -INFINITY;
   for (const Eigen::Vector2d& p : landmarks) {
@@ -155,7 +158,14 @@ TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, dou
   watch.Restart();
   r.depth_m = depth_m;
   if (r.face.status != FaceStatus::kNoFace && depth_m.empty() && depth_on_demand) {
-    r.depth_m = depth_on_demand->DepthIn(DepthBoxForFit(r.face.landmarks, bgr.size()));
+    // Following a head, depth is looked for around where it was (the face lies
+    // within ~12 cm of the head's origin): stereo searches fewer disparities.
+    double near_m = 0, far_m = 0;
+    if (identity_frozen_ && last_rgbd_.ok) {
+      near_m = std::max(0.1, last_rgbd_.translation.z() - kDepthReach);
+      far_m = last_rgbd_.translation.z() + kDepthReach;
+    }
+    r.depth_m = depth_on_demand->DepthIn(DepthBoxForFit(r.face.landmarks, bgr.size()), near_m, far_m);
     r.depth_ms = watch.ElapsedMs();
     watch.Restart();
   }

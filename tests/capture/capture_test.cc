@@ -383,6 +383,18 @@ TEST(StereoDepth, SideBySideFramesGiveMetricDepth) {
     for (int x = box.x; x < box.x + box.width; ++x)
       agree += std::abs(full.at<float>(y, x) - depth.at<float>(y, x)) < 0.01f * z;
   EXPECT_GT(agree, 0.95 * box.area());
+  // Searched only around the expected depth: the same depths there; far from it, none right.
+  const cv::Mat ranged = frame.depth_on_demand->DepthIn(box, 0.6, 1.0);
+  int same = 0;
+  for (int y = box.y; y < box.y + box.height; ++y)
+    for (int x = box.x; x < box.x + box.width; ++x)
+      same += std::abs(ranged.at<float>(y, x) - depth.at<float>(y, x)) < 0.01f * z;
+  EXPECT_GT(same, 0.95 * box.area());
+  const cv::Mat elsewhere = frame.depth_on_demand->DepthIn(box, 0.3, 0.5);
+  int right_there = 0;
+  for (int y = box.y; y < box.y + box.height; ++y)
+    for (int x = box.x; x < box.x + box.width; ++x) right_there += std::abs(elsewhere.at<float>(y, x) - z) < 0.02f * z;
+  EXPECT_LT(right_there, 0.01 * box.area());
   // A box off the frame, or too small to match, gives no depth.
   EXPECT_EQ(cv::countNonZero(frame.depth_on_demand->DepthIn(cv::Rect(2000, 0, 100, 100))), 0);
   EXPECT_EQ(cv::countNonZero(frame.depth_on_demand->DepthIn(cv::Rect(10, 10, 4, 4))), 0);
