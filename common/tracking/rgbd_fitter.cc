@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include "common/core/options.h"
 #include "common/core/rotation.h"
@@ -275,7 +276,14 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                 cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
                 std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
 
-  const ClosestPointSearch search(model_, PosePatch(basis, st, patch), &patch);
+  // Tracking keeps one search for the frame's rounds (the surface moves
+  // little); fitting the shape moves it much, and wider searches would cost
+  // more than building the tree again each round.
+  std::unique_ptr<ClosestPointSearch> search;
+  auto search_on = [&](const RowMatrixX3f& posed) -> const ClosestPointSearch& {
+    if (!search || options_.fit_shape) search = std::make_unique<ClosestPointSearch>(model_, posed, &patch);
+    return *search;
+  };
 
   // Block 2: landmarks + point-to-mesh over everything; block 3: points over shape.
   FreeBlocks all;
@@ -290,7 +298,8 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   for (int round = 0; round < rounds; ++round) {
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
-    points = search.Find(PosePatch(basis, st, patch), cloud, cloud_normals, ones, impl_->nu, gate);
+    const RowMatrixX3f posed = PosePatch(basis, st, patch);
+    points = search_on(posed).Find(posed, cloud, cloud_normals, ones, impl_->nu, gate);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
       return r;
@@ -314,9 +323,9 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     sample.row(i) = cloud.row(i * every);
     sample_normals.row(i) = cloud_normals.row(i * every);
   }
-  r.accuracy_m =
-      MeasurePairs(posed, search.Find(posed, sample, sample_normals, ones, impl_->nu, options_.max_point_distance_m))
-          .all_m;
+  r.accuracy_m = MeasurePairs(posed, search_on(posed).Find(posed, sample, sample_normals, ones, impl_->nu,
+                                                           options_.max_point_distance_m))
+                     .all_m;
   const auto lmk = landmark_pairs(true, 1.0);
   r.landmarks_3d = static_cast<int>(lmk.size());
   r.landmark_rmse_m = MeasurePairs(posed, lmk).all_m;
