@@ -175,27 +175,8 @@ void StereoDepth::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* le
     throw std::invalid_argument("stereo: images are " + std::to_string(left.cols) + "x" + std::to_string(left.rows) +
                                 ", the calibration is for " + std::to_string(calib_.size.width) + "x" +
                                 std::to_string(calib_.size.height));
-  cv::Mat right_rectified;
-  cv::remap(left, *left_rectified, map1x_, map1y_, cv::INTER_LINEAR);
-  cv::remap(right, right_rectified, map2x_, map2y_, cv::INTER_LINEAR);
-  cv::Mat l = *left_rectified, r = right_rectified;
-  if (scale_ < 1) {
-    cv::resize(l, l, cv::Size(), scale_, scale_, cv::INTER_AREA);
-    cv::resize(r, r, cv::Size(), scale_, scale_, cv::INTER_AREA);
-  }
-  cv::Mat disparity = ComputeDisparity(l, r, match_);
-  if (scale_ < 1) {
-    cv::resize(disparity, disparity, calib_.size, 0, 0, cv::INTER_NEAREST);
-    disparity /= scale_;
-  }
-  // depth = f B / d, 0 where the disparity is unknown.
-  depth_m->create(disparity.size(), CV_32F);
-  const float fb = static_cast<float>(camera_.fx * baseline_);
-  for (int y = 0; y < disparity.rows; ++y) {
-    const float* d = disparity.ptr<float>(y);
-    float* z = depth_m->ptr<float>(y);
-    for (int x = 0; x < disparity.cols; ++x) z[x] = d[x] > 0 ? fb / d[x] : 0.f;
-  }
+  *left_rectified = RectifyLeft(left);
+  *depth_m = ComputeIn(*left_rectified, right, cv::Rect(cv::Point(0, 0), calib_.size));
 }
 
 cv::Mat StereoDepth::RectifyLeft(const cv::Mat& left) const {

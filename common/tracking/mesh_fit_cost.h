@@ -109,11 +109,6 @@ struct MeshBasis {
            Eigen::Map<const Eigen::Matrix<double, 9, 1>>(Eigen::Matrix<double, 3, 3, Eigen::RowMajor>(jaw.RmI).data());
     }
     const double w = jaw_weight[i];
-    if (w == 0 && jaw_posedirs.rows() == 0) {  // off the jaw (most of the head): the jaw plays no part
-      *q += b * p;
-      if (dq_dc) dq_dc->noalias() += b * Bi;
-      return;
-    }
     const Eigen::Vector3d u = p - jaw.joint;
     *q += b * (p + w * jaw.RmI * u);
     if (dq_dc) {
@@ -325,7 +320,6 @@ class ClosestPointSearch {
                                    const Eigen::VectorXf& nu, double max_distance) const;
 
  private:
-  void Measure(const RowMatrixX3f& posed, RowMatrixX3f* centroids, std::vector<float>* radius) const;
   struct Tree;
   RowMatrixX3i faces_, around_;  // searched; whose vertex normals count
   std::vector<int> vertices_;    // of the searched faces

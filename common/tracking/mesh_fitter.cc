@@ -78,19 +78,36 @@ RowMatrixX3f PosePatch(const MeshBasis& b, const FitState& st, const SurfacePatc
   });
 }
 
+namespace {
+
+// Each face's bounding sphere in `posed`: its centroid and the distance to its farthest corner.
+void FaceSpheres(const RowMatrixX3i& faces, const RowMatrixX3f& posed, RowMatrixX3f* centroids,
+                 std::vector<float>* radius) {
+  centroids->resize(faces.rows(), 3);
+  radius->resize(faces.rows());
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
+    centroids->row(f) = c;
+    (*radius)[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
+                             (posed.row(faces(f, 2)) - c).norm()});
+  }
+}
+
+}  // namespace
+
 SurfacePatch PatchNear(const HeadModel& model, const RowMatrixX3f& posed, const Eigen::Vector3f& lo,
                        const Eigen::Vector3f& hi, float reach, const std::vector<int>& extra_faces) {
   const auto& faces = model.data().faces;
   SurfacePatch patch;
-  std::vector<char> searched(faces.rows(), 0), touched(posed.rows(), 0), normal(faces.rows(), 0);
+  std::vector<char> searched(faces.rows(), 0), touched(posed.rows(), 0);
+  RowMatrixX3f centroids;
+  std::vector<float> radius;
+  FaceSpheres(faces, posed, &centroids, &radius);
   for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    const Eigen::Vector3f c =
-        (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))).transpose() / 3;
-    float radius = 0;
-    for (int k = 0; k < 3; ++k) radius = std::max(radius, (posed.row(faces(f, k)).transpose() - c).norm());
+    const Eigen::Vector3f c = centroids.row(f).transpose();
     // Distance from the centroid to the box: the face can reach the box only within its own radius of it.
     const float d = (c.cwiseMax(lo) - c).cwiseMax(c - c.cwiseMin(hi)).cwiseMax(0.f).norm();
-    if (d <= reach + radius) searched[f] = 1;
+    if (d <= reach + radius[f]) searched[f] = 1;
   }
   for (int f : extra_faces) searched[f] = 1;
   for (Eigen::Index f = 0; f < faces.rows(); ++f)
@@ -182,7 +199,7 @@ ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3
     if (used[i]) vertices_.push_back(static_cast<int>(i));
   built_ = posed;
   std::vector<float> radius;
-  Measure(posed, &tree_->centroids, &radius);
+  FaceSpheres(faces_, posed, &tree_->centroids, &radius);
   // A radius search on centroids finds every face within `reach` of a point
   // when it searches reach + the faces' largest radius. Faces much larger than
   // the typical one would widen every search: they are checked on their own.
@@ -197,17 +214,6 @@ ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3
 }
 
 ClosestPointSearch::~ClosestPointSearch() = default;
-
-void ClosestPointSearch::Measure(const RowMatrixX3f& posed, RowMatrixX3f* centroids, std::vector<float>* radius) const {
-  centroids->resize(faces_.rows(), 3);
-  radius->resize(faces_.rows());
-  for (Eigen::Index f = 0; f < faces_.rows(); ++f) {
-    const Eigen::RowVector3f c = (posed.row(faces_(f, 0)) + posed.row(faces_(f, 1)) + posed.row(faces_(f, 2))) / 3;
-    centroids->row(f) = c;
-    (*radius)[f] = std::max({(posed.row(faces_(f, 0)) - c).norm(), (posed.row(faces_(f, 1)) - c).norm(),
-                             (posed.row(faces_(f, 2)) - c).norm()});
-  }
-}
 
 // For every target point: the closest point on the posed model surface. Each
 // face is bounded by a sphere around its centroid; the nearest centroids give
@@ -227,7 +233,7 @@ std::vector<Correspondence> ClosestPointSearch::Find(const RowMatrixX3f& posed, 
   const RowMatrixX3f model_normals = VertexNormals(posed, around_);
   RowMatrixX3f centroids;
   std::vector<float> radius;
-  Measure(posed, &centroids, &radius);
+  FaceSpheres(faces_, posed, &centroids, &radius);
   float moved = 0;
   for (int i : vertices_) moved = std::max(moved, (posed.row(i) - built_.row(i)).norm());
   std::vector<char> large(faces_.rows(), 0);
@@ -348,21 +354,21 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
                       st->jaw.data()};
   if (o.batched) {
     // Fixed weights: the pair's weight times the loss's slope at the starting state.
-    const Eigen::Matrix3d sR = std::exp(st->log_scale) * AxisAngleToMatrix(st->rotation);
-    const MeshBasis::Jaw jaw = basis.MakeJaw(st->coefficients.data(), st->jaw.data());
+    const double* start[] = {blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]};
+    const SurfaceFrame frame = SurfaceFrame::For(basis, start);
     std::vector<SurfacePoint> points;
     for (const Correspondence& c : pairs) {
       if (c.weight <= 0) continue;
+      SurfacePoint point{c.vertices, c.bary, c.count, c.target, c.metric, 1.0};
       double slope = 1;
       if (base) {
-        Eigen::Vector3d q = Eigen::Vector3d::Zero();
-        for (int v = 0; v < c.count; ++v)
-          basis.Vertex(c.vertices[v], st->coefficients.data(), jaw, c.bary[v], &q, nullptr, nullptr);
-        double rho[3];
-        base->Evaluate((c.metric * (sR * q + st->translation - c.target)).squaredNorm(), rho);
+        double residual[3], rho[3];
+        EvaluateSurfacePoint(basis, frame, point, start, residual, nullptr, 0);
+        base->Evaluate(Eigen::Map<const Eigen::Vector3d>(residual).squaredNorm(), rho);
         slope = rho[1];
       }
-      points.push_back({c.vertices, c.bary, c.count, c.target, c.metric, std::sqrt(c.weight * slope)});
+      point.scale = std::sqrt(c.weight * slope);
+      points.push_back(point);
     }
     // Two blocks, so that Ceres's two threads share the evaluation.
     const size_t half = (points.size() + 1) / 2;

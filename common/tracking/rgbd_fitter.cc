@@ -246,12 +246,17 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   pose_only.jaw = jaw;
   SolveOnce(basis, landmark_pairs(false, 1.0), settings, pose_only, &st);
 
+  // The model where block 1 put it, and its landmarks for this view.
+  const RowMatrixX3f posed_after_block1 = PoseAll(basis, st);
+  Eigen::VectorXi landmark_faces;
+  RowMatrixX3f landmark_bary;
+  embed(&landmark_faces, &landmark_bary);
+
   // Contour landmarks whose depth disagrees with the posed model lie on the background.
   if (options_.reject_background_contour) {
-    Eigen::VectorXi faces;
-    RowMatrixX3f bary;
-    embed(&faces, &bary);
-    const RowMatrixX3f posed = PoseAll(basis, st);
+    const RowMatrixX3f& posed = posed_after_block1;
+    const Eigen::VectorXi& faces = landmark_faces;
+    const RowMatrixX3f& bary = landmark_bary;
     for (int l = 0; l < kNumContourLandmarks; ++l) {
       if (!has3d[l]) continue;
       Eigen::Vector3d model_point = Eigen::Vector3d::Zero();
@@ -266,13 +271,8 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
 
   // Closest points search the surface near the cloud only (the pose moves
   // little from here on: the reach allows for it).
-  Eigen::VectorXi landmark_faces;
-  {
-    RowMatrixX3f unused;
-    embed(&landmark_faces, &unused);
-  }
   const SurfacePatch patch =
-      PatchNear(model_, PoseAll(basis, st), cloud.colwise().minCoeff().transpose(),
+      PatchNear(model_, posed_after_block1, cloud.colwise().minCoeff().transpose(),
                 cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
                 std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
 
