@@ -235,14 +235,19 @@ bool ParamDecoder::Decode(const std::string& packet, FrameParams* out, std::stri
     next.previous[i] = q;
   }
   if (packet.size() - pos > rc.consumed()) return fail("trailing bytes after the frame");
+  FrameParams f;
+  SetValues(layout_, values, &f);
+  f.sequence = next.previous_sequence;
+  f.capture_time_s = origin + next.previous_time_ms / 1000.0;
+  f.confidence = static_cast<float>(level) / kConfidenceLevels;
+  // Each value within its own range does not make a frame: a rotation whose
+  // components are each <= pi may still turn by more, a head may sit behind
+  // the camera. What the stream hands on must be what a renderer accepts.
+  std::string invalid;
+  if (!f.IsValid(&invalid)) return fail("decoded frame refused: " + invalid);
   next.coded = key ? 0 : next.coded + 1;
   state_ = std::move(next);
   have_reference_ = true;
-  FrameParams f;
-  SetValues(layout_, values, &f);
-  f.sequence = state_.previous_sequence;
-  f.capture_time_s = origin + state_.previous_time_ms / 1000.0;
-  f.confidence = static_cast<float>(level) / kConfidenceLevels;
   if (out) *out = f;
   return true;
 }
