@@ -10,7 +10,7 @@ packages=(
   # toolchain
   build-essential cmake ninja-build pkg-config git clang-format
   # math, fitting, nearest neighbours
-  libeigen3-dev libceres-dev libnanoflann-dev
+  libeigen3-dev libceres-dev
   # neural networks on the CPU; OpenBLAS makes libtorch's matrix products ~12x faster
   libtorch-dev libopenblas0-pthread libopenblas-dev
   # c10d's Gloo headers: data-parallel training (headcast-train --world-size)

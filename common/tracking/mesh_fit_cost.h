@@ -304,16 +304,20 @@ RowMatrixX3f PosePatch(const MeshBasis& basis, const FitState& state, const Surf
 Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                    const Eigen::Vector3d& c);
 // Closest points on the posed surface (all of it, or a patch), through a
-// k-d tree over face centroids. One search may serve several rounds of a fit
-// while the surface moves: the answer stays exact (queries reach as much
-// farther as any vertex has moved since the tree was built), the tree is
-// built once.
+// bounding-volume hierarchy over its faces. One search may serve several
+// rounds of a fit while the surface moves: the hierarchy is made once and its
+// boxes are refitted to each pose asked about, so the answer stays exact.
+// Find refits the boxes: one search is not for several threads at once.
 class ClosestPointSearch {
  public:
   ClosestPointSearch(const HeadModel& model, const RowMatrixX3f& posed, const SurfacePatch* patch = nullptr);
   ~ClosestPointSearch();
   ClosestPointSearch(const ClosestPointSearch&) = delete;
   ClosestPointSearch& operator=(const ClosestPointSearch&) = delete;
+  // From now on only `patch`'s faces are searched (and its normal faces
+  // give the normals). For a search made over the whole head: one hierarchy
+  // then serves every frame of a sequence, each frame its own patch.
+  void Restrict(const SurfacePatch& patch);
   // As ClosestPoints, on `posed` (the same model and patch, posed anew).
   std::vector<Correspondence> Find(const RowMatrixX3f& posed, const RowMatrixX3f& points,
                                    const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
@@ -322,9 +326,8 @@ class ClosestPointSearch {
  private:
   struct Tree;
   RowMatrixX3i faces_, around_;  // searched; whose vertex normals count
-  std::vector<int> vertices_;    // of the searched faces
-  RowMatrixX3f built_;           // the posed vertices the tree was built on
-  std::vector<int> large_faces_;
+  bool whole_head_ = false;      // faces_ are the model's faces, in its order
+  std::vector<char> active_;     // per face of faces_ (empty: all of them)
   std::unique_ptr<Tree> tree_;
 };
 

@@ -1,5 +1,5 @@
 // Fitting the head model to a polygonal head: weighted residual, analytic
-// Jacobians in Ceres, closest points with nanoflann for other topologies.
+// Jacobians in Ceres, closest points through a bounding-volume hierarchy for other topologies.
 #include "common/tracking/mesh_fitter.h"
 
 #include <ceres/ceres.h>
@@ -12,7 +12,6 @@
 #include <cmath>
 #include <fstream>
 #include <memory>
-#include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <thread>
@@ -158,30 +157,59 @@ Eigen::Vector3d ClosestBarycentric(const Eigen::Vector3d& p, const Eigen::Vector
   return {1 - v - w, v, w};
 }
 
-// nanoflann adaptor over a row-major N x 3 float matrix.
-struct CloudAdaptor {
-  const RowMatrixX3f& points;
-  size_t kdtree_get_point_count() const { return static_cast<size_t>(points.rows()); }
-  float kdtree_get_pt(size_t i, size_t d) const {
-    return points(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d));
-  }
-  template <class Box>
-  bool kdtree_get_bbox(Box&) const {
-    return false;
-  }
-};
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3>;
-
+// A bounding-volume hierarchy over the searched faces. Its shape (which faces
+// share a node) is made once, by median splits where the faces are at
+// construction; its boxes are refitted to every pose a search is asked
+// about, so each answer is exact however far the surface has moved since.
 struct ClosestPointSearch::Tree {
-  RowMatrixX3f centroids;  // at build time
-  CloudAdaptor adaptor{centroids};
-  KdTree index{3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)};
+  static constexpr int kLeafFaces = 4;
+  struct Node {
+    Eigen::AlignedBox3f box;
+    int first = 0, count = 0;  // a leaf: order[first, first + count)
+    int right = 0;             // an inner node: children at index + 1 and `right`
+  };
+  std::vector<Node> nodes;  // depth first: children after their parent
+  std::vector<int> order;   // face indices, leaves' faces contiguous
+
+  int Build(const RowMatrixX3f& centroids, int first, int count) {
+    const int index = static_cast<int>(nodes.size());
+    nodes.emplace_back();
+    if (count <= kLeafFaces) {
+      nodes[index].first = first;
+      nodes[index].count = count;
+      return index;
+    }
+    Eigen::AlignedBox3f spread;
+    for (int i = first; i < first + count; ++i) spread.extend(centroids.row(order[i]).transpose());
+    int axis = 0;
+    spread.sizes().maxCoeff(&axis);
+    const auto begin = order.begin() + first, mid = begin + count / 2, end = begin + count;
+    std::nth_element(begin, mid, end, [&](int a, int b) { return centroids(a, axis) < centroids(b, axis); });
+    Build(centroids, first, count / 2);
+    const int right = Build(centroids, first + count / 2, count - count / 2);
+    nodes[index].right = right;
+    return index;
+  }
+
+  // Boxes around the active faces (all when `active` is empty) where `posed` puts them.
+  void Refit(const RowMatrixX3i& faces, const RowMatrixX3f& posed, const std::vector<char>& active) {
+    for (int i = static_cast<int>(nodes.size()) - 1; i >= 0; --i) {
+      Node& n = nodes[i];
+      n.box.setEmpty();
+      if (n.count > 0) {
+        for (int k = n.first; k < n.first + n.count; ++k)
+          if (active.empty() || active[order[k]])
+            for (int v = 0; v < 3; ++v) n.box.extend(posed.row(faces(order[k], v)).transpose());
+      } else {
+        n.box = nodes[i + 1].box.merged(nodes[n.right].box);
+      }
+    }
+  }
 };
 
 ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3f& posed, const SurfacePatch* patch)
     : tree_(std::make_unique<Tree>()) {
   const auto& all_faces = model.data().faces;
-  std::vector<char> used(posed.rows(), 0);
   if (patch) {
     faces_.resize(static_cast<Eigen::Index>(patch->faces.size()), 3);
     for (size_t f = 0; f < patch->faces.size(); ++f)
@@ -192,36 +220,34 @@ ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3
   } else {
     faces_ = all_faces;
     around_ = all_faces;
+    whole_head_ = true;
   }
-  for (Eigen::Index f = 0; f < faces_.rows(); ++f)
-    for (int k = 0; k < 3; ++k) used[faces_(f, k)] = 1;
-  for (Eigen::Index i = 0; i < posed.rows(); ++i)
-    if (used[i]) vertices_.push_back(static_cast<int>(i));
-  built_ = posed;
+  if (faces_.rows() == 0) return;
+  RowMatrixX3f centroids;
   std::vector<float> radius;
-  FaceSpheres(faces_, posed, &tree_->centroids, &radius);
-  // A radius search on centroids finds every face within `reach` of a point
-  // when it searches reach + the faces' largest radius. Faces much larger than
-  // the typical one would widen every search: they are checked on their own.
-  if (!radius.empty()) {
-    std::vector<float> sorted = radius;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const float threshold = 3 * sorted[sorted.size() / 2];
-    for (Eigen::Index f = 0; f < faces_.rows(); ++f)
-      if (radius[f] > threshold) large_faces_.push_back(static_cast<int>(f));
-  }
-  tree_->index.buildIndex();
+  FaceSpheres(faces_, posed, &centroids, &radius);
+  tree_->order.resize(static_cast<size_t>(faces_.rows()));
+  for (Eigen::Index f = 0; f < faces_.rows(); ++f) tree_->order[static_cast<size_t>(f)] = static_cast<int>(f);
+  tree_->nodes.reserve(static_cast<size_t>(4 * faces_.rows() / Tree::kLeafFaces + 1));
+  tree_->Build(centroids, 0, static_cast<int>(faces_.rows()));
 }
 
 ClosestPointSearch::~ClosestPointSearch() = default;
 
-// For every target point: the closest point on the posed model surface. Each
-// face is bounded by a sphere around its centroid; the nearest centroids give
-// a first distance, and only faces whose sphere comes closer than it are
-// measured exactly -- the same answer as measuring every face, at a few
-// triangle tests per point. The tree holds the centroids where they were
-// built: every vertex has moved at most `moved` since, so each centroid has
-// too, and searching that much farther finds every face it must.
+void ClosestPointSearch::Restrict(const SurfacePatch& patch) {
+  if (!whole_head_) throw std::logic_error("ClosestPointSearch::Restrict: the search was made over a patch");
+  active_.assign(static_cast<size_t>(faces_.rows()), 0);
+  for (int f : patch.faces) active_.at(static_cast<size_t>(f)) = 1;
+  around_.resize(static_cast<Eigen::Index>(patch.normal_faces.size()), 3);
+  for (size_t f = 0; f < patch.normal_faces.size(); ++f)
+    around_.row(static_cast<Eigen::Index>(f)) = faces_.row(patch.normal_faces[f]);
+}
+
+// For every target point: the closest point on the posed model surface within
+// max_distance. Branch and bound down the hierarchy, nearer child first: a
+// node whose box lies farther than the best face so far cannot hold a closer
+// one -- the same answer as measuring every face, at a few box and triangle
+// tests per point.
 std::vector<Correspondence> ClosestPointSearch::Find(const RowMatrixX3f& posed, const RowMatrixX3f& points,
                                                      const RowMatrixX3f& point_normals, const Eigen::VectorXf& omega,
                                                      const Eigen::VectorXf& nu, double max_distance) const {
@@ -231,24 +257,20 @@ std::vector<Correspondence> ClosestPointSearch::Find(const RowMatrixX3f& posed, 
   std::vector<Correspondence> out;
   if (faces_.rows() == 0) return out;
   const RowMatrixX3f model_normals = VertexNormals(posed, around_);
-  RowMatrixX3f centroids;
-  std::vector<float> radius;
-  FaceSpheres(faces_, posed, &centroids, &radius);
-  float moved = 0;
-  for (int i : vertices_) moved = std::max(moved, (posed.row(i) - built_.row(i)).norm());
-  std::vector<char> large(faces_.rows(), 0);
-  for (int f : large_faces_) large[f] = 1;
-  float threshold = 0;  // the largest radius of the faces the tree answers for
-  for (Eigen::Index f = 0; f < faces_.rows(); ++f)
-    if (!large[f]) threshold = std::max(threshold, radius[f]);
+  tree_->Refit(faces_, posed, active_);
   const auto& faces = faces_;
-  std::vector<std::pair<unsigned, float>> nearby;
-  constexpr int kNeighbours = 4;
+  const auto& nodes = tree_->nodes;
+  const auto& order = tree_->order;
+  // Only a face within max_distance can pair: the search starts there.
+  const double gate2 = std::nextafter(max_distance * max_distance, INFINITY);
+  std::vector<std::pair<float, int>> stack;
+  stack.reserve(64);
   for (Eigen::Index j = 0; j < points.rows(); ++j) {
     const Eigen::Vector3f tf = points.row(j).transpose();
     const Eigen::Vector3d t = tf.cast<double>();
-    double best = INFINITY;
+    double best = gate2;
     Correspondence c;
+    bool found = false;
     auto try_face = [&](int f) {
       const Eigen::Vector3d a = posed.row(faces(f, 0)).cast<double>().transpose();
       const Eigen::Vector3d b = posed.row(faces(f, 1)).cast<double>().transpose();
@@ -257,29 +279,44 @@ std::vector<Correspondence> ClosestPointSearch::Find(const RowMatrixX3f& posed, 
       const double d = (bary[0] * a + bary[1] * b + bary[2] * cc - t).squaredNorm();
       if (d < best) {
         best = d;
+        found = true;
         c.vertices = {faces(f, 0), faces(f, 1), faces(f, 2)};
         c.bary = bary;
       }
     };
-    // Can face f hold a point closer than the best so far (its sphere, where it is now)?
-    auto may_be_closer = [&](int f) {
-      const double reach = std::sqrt(best) + radius[static_cast<size_t>(f)];
-      return (centroids.row(f).transpose() - tf).squaredNorm() < reach * reach;
+    // Box distances in float, compared with a margin for its rounding.
+    auto prune = [&](float box2) { return box2 > best * (1 + 1e-5) + 1e-12; };
+    // An empty box (no active face below) is infinitely far.
+    auto distance2 = [&](int i) {
+      const Eigen::AlignedBox3f& box = nodes[static_cast<size_t>(i)].box;
+      return box.isEmpty() ? INFINITY : box.squaredExteriorDistance(tf);
     };
-    unsigned index[kNeighbours];
-    float dist2[kNeighbours];
-    const size_t found = tree_->index.knnSearch(tf.data(), kNeighbours, index, dist2);
-    for (size_t m = 0; m < found; ++m) try_face(static_cast<int>(index[m]));
-    // Only a face within max_distance can pair: no need to search farther.
-    const float reach = static_cast<float>(std::min(std::sqrt(best), max_distance)) + threshold + moved;
-    nanoflann::SearchParams params;
-    params.sorted = false;  // sorting costs more than the exact tests it would save
-    tree_->index.radiusSearch(tf.data(), reach * reach, nearby, params);
-    for (const auto& [f, d2] : nearby)
-      if (!large[f] && may_be_closer(static_cast<int>(f))) try_face(static_cast<int>(f));
-    for (int f : large_faces_)
-      if (may_be_closer(f)) try_face(f);
-    if (!(best <= max_distance * max_distance)) continue;
+    stack.clear();
+    stack.emplace_back(distance2(0), 0);
+    while (!stack.empty()) {
+      const auto [box2, i] = stack.back();
+      stack.pop_back();
+      if (prune(box2)) continue;
+      const Tree::Node& n = nodes[static_cast<size_t>(i)];
+      if (n.count > 0) {
+        for (int k = n.first; k < n.first + n.count; ++k) {
+          const int f = order[static_cast<size_t>(k)];
+          if (active_.empty() || active_[static_cast<size_t>(f)]) try_face(f);
+        }
+        continue;
+      }
+      const int left = i + 1, right = n.right;
+      const float dl = distance2(left), dr = distance2(right);
+      // The nearer child last, so that it is searched first.
+      if (dl <= dr) {
+        if (!prune(dr)) stack.emplace_back(dr, right);
+        if (!prune(dl)) stack.emplace_back(dl, left);
+      } else {
+        if (!prune(dl)) stack.emplace_back(dl, left);
+        if (!prune(dr)) stack.emplace_back(dr, right);
+      }
+    }
+    if (!found) continue;
     c.count = 3;
     c.target = t;
     const Eigen::Vector3d normal = point_normals.row(j).cast<double>().transpose();

@@ -7,7 +7,7 @@
 //
 // Same topology: vertex i of the mesh corresponds to model vertex i. Another
 // topology (a scan, a remeshed copy): after a landmark-based rigid alignment,
-// closest points on the model surface (nanoflann) and the weighted fit
+// closest points on the model surface (a bounding-volume hierarchy) and the weighted fit
 // alternate. The mesh is related to the model by a similarity:
 // mesh = scale * R * model(shape, expression, jaw) + t.
 #pragma once

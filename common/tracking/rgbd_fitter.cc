@@ -49,6 +49,7 @@ struct RgbdFitter::Impl {
   int ne = 0;
   Eigen::VectorXf nu;
   Eigen::VectorXd identity;
+  std::unique_ptr<ClosestPointSearch> search;  // tracking: made once, then restricted to each frame's patch
   Impl(const HeadModel& model, int num_expression, bool fit_shape) : ne(num_expression) {
     nu = Eigen::VectorXf::Ones(model.num_vertices());
     identity = Eigen::VectorXd::Zero(model.num_shape());
@@ -74,6 +75,7 @@ void RgbdFitter::SetIdentity(const Eigen::VectorXd& shape) {
   impl_->identity.setZero();
   impl_->identity.head(shape.size()) = shape;
   if (!options_.fit_shape) impl_->Rebuild(model_, false);
+  impl_->search.reset();  // made anew, tight around the new identity
 }
 
 namespace {
@@ -128,7 +130,7 @@ int CloudStride(const cv::Mat& depth, const cv::Rect& box, float z_near, float z
 }  // namespace
 
 RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
-                              const RgbdFitResult* previous) const {
+                              const RgbdFitResult* previous) {
   RgbdFitResult r;
   if (depth_m.empty() || depth_m.type() != CV_32FC1) {
     r.problem = "depth must be a CV_32F image in metres";
@@ -276,13 +278,19 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                 cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
                 std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
 
-  // Tracking keeps one search for the frame's rounds (the surface moves
-  // little); fitting the shape moves it much, and wider searches would cost
-  // more than building the tree again each round.
-  std::unique_ptr<ClosestPointSearch> search;
+  // Tracking keeps one search over the whole head for all frames (its
+  // hierarchy is refitted to each pose; each frame searches its patch).
+  // Fitting the shape moves the surface much: a hierarchy made anew each
+  // round stays tight.
+  std::unique_ptr<ClosestPointSearch> shape_search;
+  if (!options_.fit_shape) {
+    if (!impl_->search) impl_->search = std::make_unique<ClosestPointSearch>(model_, posed_after_block1);
+    impl_->search->Restrict(patch);
+  }
   auto search_on = [&](const RowMatrixX3f& posed) -> const ClosestPointSearch& {
-    if (!search || options_.fit_shape) search = std::make_unique<ClosestPointSearch>(model_, posed, &patch);
-    return *search;
+    if (!options_.fit_shape) return *impl_->search;
+    shape_search = std::make_unique<ClosestPointSearch>(model_, posed, &patch);
+    return *shape_search;
   };
 
   // Block 2: landmarks + point-to-mesh over everything; block 3: points over shape.

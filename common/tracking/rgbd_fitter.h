@@ -2,8 +2,8 @@
 // thesis's contribution). 2D landmarks + aligned metric depth give 3D
 // landmarks and a face point cloud; then
 //   block 1: pose (and jaw) from the 3D landmarks,
-//   block 2: 3D landmarks + point-to-mesh distances (nanoflann closest
-//            points) over shape, expression, jaw and pose,
+//   block 2: 3D landmarks + point-to-mesh distances (closest points on
+//            the model, exact) over shape, expression, jaw and pose,
 //   block 3: the point-to-mesh term alone over shape.
 // The 3D reconstruction accuracy is sqrt of the final mean squared
 // point-to-mesh distance, metres.
@@ -82,7 +82,7 @@ class RgbdFitter {
   // `depth_m`: CV_32F metres aligned to the image the landmarks are in, 0 unknown.
   // `previous`: warm start from the last frame's result (skips the landmark pose initialisation).
   RgbdFitResult Fit(const Landmarks2d& landmarks, const cv::Mat& depth_m, const PinholeCamera& camera,
-                    const RgbdFitResult* previous = nullptr) const;
+                    const RgbdFitResult* previous = nullptr);
   const RgbdFitOptions& options() const { return options_; }
 
  private:

@@ -324,6 +324,24 @@ TEST(MeshFitCost, ClosestPointsOnAPatchMatchTheWholeHead) {
     }
     EXPECT_LT((a - b).norm(), 1e-7) << i;
   }
+  // One search over the whole head, restricted to the patch (tracking keeps
+  // one for every frame), answers as a search made on the patch.
+  ClosestPointSearch whole_head(model, posed);
+  whole_head.Restrict(patch);
+  const std::vector<Correspondence> restricted = whole_head.Find(posed_again, points, point_normals, ones, ones, gate);
+  ASSERT_EQ(fresh.size(), restricted.size());
+  for (size_t i = 0; i < fresh.size(); ++i) {
+    EXPECT_EQ(fresh[i].target, restricted[i].target) << i;
+    Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 3; ++k) {
+      a += fresh[i].bary[k] * posed_again.row(fresh[i].vertices[k]).cast<double>().transpose();
+      b += restricted[i].bary[k] * posed_again.row(restricted[i].vertices[k]).cast<double>().transpose();
+    }
+    EXPECT_LT((a - b).norm(), 1e-7) << i;
+    EXPECT_LT((fresh[i].metric - restricted[i].metric).norm(), 1e-5) << i;
+  }
+  ClosestPointSearch on_patch(model, posed_again, &patch);
+  EXPECT_THROW(on_patch.Restrict(patch), std::logic_error);  // made over a patch already
 }
 
 TEST(MeshFitter, RecoversKnownParametersOfTheBuiltinHeadWithVertexNoise) {
