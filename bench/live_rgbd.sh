@@ -62,12 +62,14 @@ r = json.load(open(os.path.join(out, "receiver.json")))
 t = json.load(open(os.path.join(out, "truth.json")))
 k = s["tracking"]
 stage = {x: k[x] for x in ("read_wait_ms_median", "landmarks_ms_median", "landmarks_ms_p95", "depth_ms_median",
-                           "fit_ms_median", "fit_ms_p95", "capture_to_params_ms_median", "capture_to_params_ms_p95")}
+                           "fit_ms_median", "fit_ms_p95", "capture_to_params_ms_median", "capture_to_params_ms_p95",
+                           "tracking_capture_to_params_ms_median", "tracking_capture_to_params_ms_p95")}
 per_frame = k["landmarks_ms_median"] + k["fit_ms_median"]
 depth = f"stereo, baseline {stereo} m, matched in the face's box" if stereo > 0 else f"rendered, {noise} mm noise"
 result = {"command": command, "depth": depth, "depth_noise_mm": noise if stereo == 0 else None,
           "frames_read": k["frames_read"],
           "frames_with_depth": k["frames_with_depth"], "frames_fitted": k["frames_fitted"],
+          "identity_frames": k["identity_frames"],
           "frames_sent": s["frames_sent"], "frames_received": r["frames_received"], "stages_ms": stage,
           "track_ms_median_one_core": per_frame,
           "truth": {x: v for x, v in t.items() if "error" in x and "shape" not in x}}

@@ -28,9 +28,10 @@ struct LiveTrackResult {
   bool fitted = false;
   bool with_depth = false;  // fitted (or tried) by the RGB-D fit
   FaceStatus status = FaceStatus::kNoFace;
-  double landmarks_ms = 0;  // detection/tracking + landmarks
-  double fit_ms = 0;        // head-model fit
-  double depth_ms = 0;      // depth made on demand (stereo in the face's box)
+  double landmarks_ms = 0;      // detection/tracking + landmarks
+  double fit_ms = 0;            // head-model fit
+  double depth_ms = 0;          // depth made on demand (stereo in the face's box)
+  bool identity_frame = false;  // RGB-D: fitted with a free shape (the first frames, before the identity is frozen)
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.
