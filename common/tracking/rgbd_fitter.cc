@@ -278,20 +278,12 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
                 cloud.colwise().maxCoeff().transpose(), static_cast<float>(2 * options_.max_point_distance_m + 0.02),
                 std::vector<int>(landmark_faces.data(), landmark_faces.data() + landmark_faces.size()));
 
-  // Tracking keeps one search over the whole head for all frames (its
-  // hierarchy is refitted to each pose; each frame searches its patch).
-  // Fitting the shape moves the surface much: a hierarchy made anew each
-  // round stays tight.
-  std::unique_ptr<ClosestPointSearch> shape_search;
-  if (!options_.fit_shape) {
-    if (!impl_->search) impl_->search = std::make_unique<ClosestPointSearch>(model_, posed_after_block1);
-    impl_->search->Restrict(patch);
-  }
-  auto search_on = [&](const RowMatrixX3f& posed) -> const ClosestPointSearch& {
-    if (!options_.fit_shape) return *impl_->search;
-    shape_search = std::make_unique<ClosestPointSearch>(model_, posed, &patch);
-    return *shape_search;
-  };
+  // One search over the whole head serves every frame and round: its
+  // hierarchy is refitted to each pose asked about (exact however the surface
+  // moves), and each frame searches its own patch.
+  if (!impl_->search) impl_->search = std::make_unique<ClosestPointSearch>(model_, posed_after_block1);
+  impl_->search->Restrict(patch);
+  const ClosestPointSearch& search = *impl_->search;
 
   // Block 2: landmarks + point-to-mesh over everything; block 3: points over shape.
   FreeBlocks all;
@@ -307,7 +299,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     const bool block3 = round >= block2;
     const double gate = options_.max_point_distance_m * (round == 0 && !warm ? 2.0 : 1.0);
     const RowMatrixX3f posed = PosePatch(basis, st, patch);
-    points = search_on(posed).Find(posed, cloud, cloud_normals, ones, impl_->nu, gate);
+    points = search.Find(posed, cloud, cloud_normals, ones, impl_->nu, gate);
     if (points.size() < 50) {
       r.problem = "only " + std::to_string(points.size()) + " depth points near the model";
       return r;
@@ -331,9 +323,9 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
     sample.row(i) = cloud.row(i * every);
     sample_normals.row(i) = cloud_normals.row(i * every);
   }
-  r.accuracy_m = MeasurePairs(posed, search_on(posed).Find(posed, sample, sample_normals, ones, impl_->nu,
-                                                           options_.max_point_distance_m))
-                     .all_m;
+  r.accuracy_m =
+      MeasurePairs(posed, search.Find(posed, sample, sample_normals, ones, impl_->nu, options_.max_point_distance_m))
+          .all_m;
   const auto lmk = landmark_pairs(true, 1.0);
   r.landmarks_3d = static_cast<int>(lmk.size());
   r.landmark_rmse_m = MeasurePairs(posed, lmk).all_m;
