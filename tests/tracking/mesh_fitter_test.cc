@@ -288,19 +288,24 @@ TEST(MeshFitCost, ClosestPointsOnAPatchMatchTheWholeHead) {
   const std::vector<Correspondence> whole = ClosestPoints(model, posed, points, point_normals, ones, ones, gate);
   const std::vector<Correspondence> part =
       ClosestPoints(model, PosePatch(basis, st, patch), points, point_normals, ones, ones, gate, &patch);
-  ASSERT_EQ(whole.size(), part.size());
-  ASSERT_GT(whole.size(), chosen.size() / 2);
-  // The same surface point (on an edge two faces share it: either may be named).
-  auto surface_point = [&](const Correspondence& c) {
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 3; ++k) x += c.bary[k] * posed.row(c.vertices[k]).cast<double>().transpose();
-    return x;
+  // The same pairs: targets, surface points on `surface` (on an edge two
+  // faces share the point: either may be named) and metrics.
+  auto expect_same_pairs = [](const RowMatrixX3f& surface, const std::vector<Correspondence>& a,
+                              const std::vector<Correspondence>& b) {
+    ASSERT_EQ(a.size(), b.size());
+    auto surface_point = [&](const Correspondence& c) {
+      Eigen::Vector3d x = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) x += c.bary[k] * surface.row(c.vertices[k]).cast<double>().transpose();
+      return x;
+    };
+    for (size_t i = 0; i < a.size(); ++i) {
+      EXPECT_EQ(a[i].target, b[i].target) << i;
+      EXPECT_LT((surface_point(a[i]) - surface_point(b[i])).norm(), 1e-7) << i;
+      EXPECT_LT((a[i].metric - b[i].metric).norm(), 1e-5) << i;
+    }
   };
-  for (size_t i = 0; i < whole.size(); ++i) {
-    EXPECT_EQ(whole[i].target, part[i].target) << i;
-    EXPECT_LT((surface_point(whole[i]) - surface_point(part[i])).norm(), 1e-7) << i;
-    EXPECT_LT((whole[i].metric - part[i].metric).norm(), 1e-5) << i;
-  }
+  ASSERT_GT(whole.size(), chosen.size() / 2);
+  expect_same_pairs(posed, whole, part);
   // A search built at this pose, asked after the head has moved (as the
   // rounds of one fit ask it), answers as a search built anew.
   const ClosestPointSearch kept(model, PosePatch(basis, st, patch), &patch);
@@ -312,34 +317,13 @@ TEST(MeshFitCost, ClosestPointsOnAPatchMatchTheWholeHead) {
   const RowMatrixX3f posed_again = PosePatch(basis, moved, patch);
   const std::vector<Correspondence> fresh =
       ClosestPoints(model, posed_again, points, point_normals, ones, ones, gate, &patch);
-  const std::vector<Correspondence> reused = kept.Find(posed_again, points, point_normals, ones, ones, gate);
-  ASSERT_EQ(fresh.size(), reused.size());
   ASSERT_GT(fresh.size(), chosen.size() / 3);
-  for (size_t i = 0; i < fresh.size(); ++i) {
-    EXPECT_EQ(fresh[i].target, reused[i].target) << i;
-    Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 3; ++k) {
-      a += fresh[i].bary[k] * posed_again.row(fresh[i].vertices[k]).cast<double>().transpose();
-      b += reused[i].bary[k] * posed_again.row(reused[i].vertices[k]).cast<double>().transpose();
-    }
-    EXPECT_LT((a - b).norm(), 1e-7) << i;
-  }
+  expect_same_pairs(posed_again, fresh, kept.Find(posed_again, points, point_normals, ones, ones, gate));
   // One search over the whole head, restricted to the patch (tracking keeps
   // one for every frame), answers as a search made on the patch.
   ClosestPointSearch whole_head(model, posed);
   whole_head.Restrict(patch);
-  const std::vector<Correspondence> restricted = whole_head.Find(posed_again, points, point_normals, ones, ones, gate);
-  ASSERT_EQ(fresh.size(), restricted.size());
-  for (size_t i = 0; i < fresh.size(); ++i) {
-    EXPECT_EQ(fresh[i].target, restricted[i].target) << i;
-    Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 3; ++k) {
-      a += fresh[i].bary[k] * posed_again.row(fresh[i].vertices[k]).cast<double>().transpose();
-      b += restricted[i].bary[k] * posed_again.row(restricted[i].vertices[k]).cast<double>().transpose();
-    }
-    EXPECT_LT((a - b).norm(), 1e-7) << i;
-    EXPECT_LT((fresh[i].metric - restricted[i].metric).norm(), 1e-5) << i;
-  }
+  expect_same_pairs(posed_again, fresh, whole_head.Find(posed_again, points, point_normals, ones, ones, gate));
   ClosestPointSearch on_patch(model, posed_again, &patch);
   EXPECT_THROW(on_patch.Restrict(patch), std::logic_error);  // made over a patch already
 }
