@@ -103,6 +103,7 @@ HeadModelParams ParamsFromArgs(const HeadModel& model, const RenderArgs& args) {
 
 struct RgbdRenderOptions {
   int frames = 30, width = 640;
+  int first_frame = 0;  // of the synthetic motion: a later part of the same sequence
   double fov_deg = 45, noise_mm = 0;
   double stereo_baseline_m = 0;  // > 0: also side-by-side stereo frames and their calibration
 };
@@ -150,7 +151,7 @@ int RenderRgbd(const RenderArgs& args, const RgbdRenderOptions& o) {
   SyntheticMotionOptions motion;
   motion.distance = 0.55;
   for (int i = 0; i < frames; ++i) {
-    const FrameParams f = SyntheticTalkingHead(model, i, motion);
+    const FrameParams f = SyntheticTalkingHead(model, o.first_frame + i, motion);
     HeadModelOutput out;
     model.Forward(id, f.expression.cast<double>(), f.HeadPose(), &out);
     const HeadRender r = RenderHead(model, out.vertices, f.CamFromHead(), camera, albedo);
@@ -406,6 +407,10 @@ int main(int argc, char** argv) {
                    "for zed:OUT/side_by_side --stereo-calibration OUT/stereo.yml")
       ->check(CLI::Range(0.0, 1.0));
   render_rgbd->add_option("--shape", g.shapes, "index=value, repeatable (the subject's identity)");
+  render_rgbd
+      ->add_option("--first-frame", rgbd.first_frame,
+                   "start this many frames into the synthetic motion (files and times still count from 0)")
+      ->check(CLI::Range(0, 1000000));
 
   CLI11_PARSE(app, argc, argv);
   try {

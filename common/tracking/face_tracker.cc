@@ -20,7 +20,8 @@ void FaceTrackerOptions::Check() const {
   c.NotEmpty("predictor_path", predictor_path).InRange("detect_width", detect_width, 64, 8192);
   c.InRange("redetect_interval", redetect_interval, 1, 100000).Positive("min_face_px", min_face_px);
   c.InRange("max_tracked_scale_change", max_tracked_scale_change, 1.01, 10.0)
-      .InRange("max_tracked_shift", max_tracked_shift, 0.01, 10.0);
+      .InRange("max_tracked_shift", max_tracked_shift, 0.01, 10.0)
+      .InRange("max_scale_change_since_detection", max_scale_change_since_detection, 1.01, 10.0);
   c.Positive("filter_min_cutoff", filter_min_cutoff).NonNegative("filter_beta", filter_beta);
   c.ThrowIfErrors();
   iris.Check();
@@ -68,7 +69,7 @@ struct FaceTracker::Impl {
   bool tracking = false;
   int since_detection = 0;
   Landmarks2d previous{};
-  double detected_width = 0;  // the landmarks' extent at the last detection, pixels
+  cv::Size2d detected;  // the landmarks' extent at the last detection, pixels
   std::vector<OneEuroFilter> filters;
 
   // The box around landmarks as fractions of their bounding box's width and
@@ -197,12 +198,15 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   // that in 1/30 s. Detect again in this frame rather than follow the slip.
   if (!detect) {
     const cv::Rect2d was = Impl::Bounds(m.previous), now = Impl::Bounds(obs.raw);
-    const double limit = m.options.max_tracked_scale_change;
-    auto off = [limit](double scale) { return scale < 1 / limit || scale > limit; };
+    auto off = [](double scale, double limit) { return scale < 1 / limit || scale > limit; };
+    const double frame_limit = m.options.max_tracked_scale_change;
+    const double detection_limit = m.options.max_scale_change_since_detection;
     const cv::Point2d moved = (now.tl() + now.br()) / 2 - (was.tl() + was.br()) / 2;
     // Against the last frame (a sudden slip) and the last detection (a slow
     // creep, a few percent a frame, that no single frame shows).
-    if (off(now.width / std::max(was.width, 1.0)) || off(now.width / std::max(m.detected_width, 1.0)) ||
+    if (off(now.width / std::max(was.width, 1.0), frame_limit) ||
+        off(now.width / std::max(m.detected.width, 1.0), detection_limit) ||
+        off(now.height / std::max(m.detected.height, 1.0), detection_limit) ||
         cv::norm(moved) > m.options.max_tracked_shift * was.width) {
       m.since_detection = m.options.redetect_interval;
       FaceObservation again = Track(image, time_s);
@@ -230,7 +234,7 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
     }
   }
   if (detect && m.options.box_from_detection) m.MeasureMargins(box, obs.raw);
-  if (detect) m.detected_width = Impl::Bounds(obs.raw).width;
+  if (detect) m.detected = Impl::Bounds(obs.raw).size();
   obs.box = found;
   m.previous = obs.raw;
   m.tracking = true;

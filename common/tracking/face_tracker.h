@@ -24,12 +24,16 @@ struct FaceTrackerOptions {
   // landmarks drift until the next detection. Off: fixed margins (comparisons).
   bool box_from_detection = true;
   double min_face_px = 40;  // smaller faces are ignored, pixels (full frame)
-  // While tracking, landmarks whose extent changes by more than this factor
-  // since the previous frame or the last detection, or whose centre moves by
-  // more than this share of the face's width in a frame, mean the box slipped
-  // off the face: the detector runs again in that frame.
+  // While tracking, landmarks whose width changes by more than this factor
+  // since the previous frame, or whose centre moves by more than this share
+  // of the face's width in a frame, mean the box slipped off the face: the
+  // detector runs again in that frame.
   double max_tracked_scale_change = 1.25;
   double max_tracked_shift = 0.35;
+  // A slower creep (the landmarks shrinking onto the lower face a few percent
+  // a frame) shows against the last detection: width or height changed by
+  // more than this factor since then makes the detector check the face.
+  double max_scale_change_since_detection = 1.1;
   double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
   bool locate_irises = true;       // the irises in the eyes the landmarks give (gaze), filtered like them
