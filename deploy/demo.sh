@@ -1,22 +1,25 @@
 #!/usr/bin/env bash
 # The one-command demo: sets headcast up (packages, build), then runs a real
-# session on loopback. A recorded sequence of the synthetic demo subject goes
-# through the real sender (file source, the tracker, the codec, gRPC over
-# 127.0.0.1) to the real receiver holding the demo avatar, which shows it in a
+# session on loopback. The synthetic demo subject, seen as a ZED2-style RGB-D
+# camera sees it (colour + depth, rendered here from models/demo/subject.json:
+# the frames after those its avatar was made from), goes through the real
+# sender (file source, the RGB-D tracker, the codec, gRPC over 127.0.0.1) to
+# the real receiver holding the demo avatar, which shows it in a
 # window when there is a display and renders offscreen otherwise. It writes an
 # MP4 (input | head-model fit | avatar, labelled, with the session's
 # figures), a JSON report (frames, fps, glass-to-glass latency, uplink kbit/s,
 # the avatar's PSNR against the input frames) and a PNG plot, and prints
 # where they are.
 #
-#   deploy/demo.sh                                     # the bundled subject and avatar
+#   deploy/demo.sh                                     # the bundled subject (RGB-D) and avatar
+#   deploy/demo.sh --input models/demo/demo_sequence.mp4   # the same frames, colour only
 #   deploy/demo.sh --input /dev/video0 --avatar me.hcavatar --head-model ict.npz   # your camera, your avatar
-# Options: --input SRC (camera, video or image folder), --avatar A.hcavatar,
+# Options: --input SRC (camera, video, image or RGB-D folder), --avatar A.hcavatar,
 # --head-model builtin|M.npz, --intrinsics fx,fy,cx,cy | --fov DEG, --duration S,
 # --display auto|window|offscreen, --out DIR, --no-setup.
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-input=$root/models/demo/demo_sequence.mp4
+input=""  # default: the demo subject's RGB-D frames, rendered below
 avatar=$root/models/demo_avatar.hcavatar
 head_model=builtin intrinsics="" fov="" duration="" display=auto setup=1
 out=${HEADCAST_DEMO_OUT:-$root/out/demo}
@@ -31,7 +34,7 @@ while [ $# -gt 0 ]; do
     --display) display=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
     --no-setup) setup=0; shift ;;
-    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
     *) echo "demo: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -42,8 +45,20 @@ python=${HEADCAST_PYTHON:-/usr/bin/python3}
 mkdir -p "$out"
 rm -f "$out"/{shown.csv,arrival.csv,receiver.json,sender.json,wire.txt,received.hcrec,sent_frames.csv}
 
+if [ -z "$input" ]; then
+  # The bundled subject: its frames after the avatar's, rendered as colour + millimetre depth.
+  input=$out/subject_rgbd
+  rm -rf "$input"
+  mapfile -t subject < <("$python" -c "
+import json; s = json.load(open('$root/models/demo/subject.json'))
+print(s['first_frame']); print(s['frames']); print(s['size']); [print(v) for v in s['shape']]")
+  shape_flags=()
+  for v in "${subject[@]:3}"; do shape_flags+=(--shape "$v"); done
+  "$bin/headcast-headmodel" render-rgbd builtin --out "$input" --first-frame "${subject[0]}" --frames "${subject[1]}" \
+    --size "${subject[2]}" "${shape_flags[@]}" > /dev/null
+fi
 # The bundled subject's camera is the one its avatar was prepared with.
-if [ -z "$intrinsics$fov" ] && [ "$input" = "$root/models/demo/demo_sequence.mp4" ]; then
+if [ -z "$intrinsics$fov" ] && { [ "$input" = "$out/subject_rgbd" ] || [ "$input" = "$root/models/demo/demo_sequence.mp4" ]; }; then
   intrinsics=$("$python" -c "import json; print(','.join(str(v) for v in json.load(open('$root/models/demo/dataset.json'))['crop']['source_camera']))")
 fi
 camera=()

@@ -3,8 +3,10 @@
 #   builtin (from nothing but the built-in head model, ~40 min on 2 cores):
 #     1. the general model for the built-in head (headcast-train pretrain);
 #     2. a synthetic demo subject: a talking head with its own identity rendered
-#        by headcast-headmodel, as a video; its first frames train the avatar
-#        (prep -> subject), its last frames are the demo's input (never trained on);
+#        by headcast-headmodel as an RGB-D sequence (colour + depth, as a
+#        ZED2-style camera sees it); its first frames train the avatar, its
+#        last frames are the demo's input (never trained on; deploy/demo.sh
+#        renders them again from models/demo/subject.json);
 #     3. their reports, logs and plots; the avatar is made by `headcast-train create`.
 #   ict (from the ICT-FaceKit folder, ~12 min on 2 cores): what `headcast-train
 #     create` starts from, so a real person's avatar needs no download:
@@ -61,20 +63,32 @@ if [ "$which" != demo ]; then
     --checkpoint-dir "$work/ckpt_general" --out "$out/builtin_general.hcavatar" > /dev/null
 fi
 
-echo "== 2. demo subject: $demo_train + 150 rendered frames; the first $demo_train train the avatar, the last 150 are the demo input"
+echo "== 2. demo subject: $demo_train + 150 rendered RGB-D frames; the first $demo_train train the avatar, the last 150 are the demo input"
+subject_shape=(0=0.8 3=-0.5 5=0.6)
 "$bin/headcast-headmodel" render-rgbd builtin --out "$work/render" --frames $((demo_train + 150)) --size 640 \
-  --shape 0=0.8 --shape 3=-0.5 --shape 5=0.6 > /dev/null
-ffmpeg -loglevel error -y -framerate 30 -i "$work/render/rgb/%05d.png" -frames:v "$demo_train" \
-  -c:v libx264 -crf 10 -pix_fmt yuv420p "$work/subject_train.mp4"
+  $(printf -- '--shape %s ' "${subject_shape[@]}") > /dev/null
+# The training part as an RGB-D folder of its own: the first frames' pairs.
+mkdir -p "$work/train"
+ln -sfn ../render/rgb "$work/train/rgb"
+ln -sfn ../render/depth "$work/train/depth"
+head -n $((demo_train + 1)) "$work/render/associations.txt" > "$work/train/associations.txt"
+# The demo part as a colour video too (an RGB-only try: deploy/demo.sh --input models/demo/demo_sequence.mp4).
 ffmpeg -loglevel error -y -framerate 30 -start_number "$demo_train" -i "$work/render/rgb/%05d.png" \
   -c:v libx264 -crf 18 -pix_fmt yuv420p "$out/demo/demo_sequence.mp4"
 cp "$work/render/truth.json" "$out/demo/render_truth.json"
+/usr/bin/python3 - "$out/demo/subject.json" "$demo_train" "${subject_shape[@]}" <<'PY'
+import json, sys
+path, first, shape = sys.argv[1], int(sys.argv[2]), sys.argv[3:]
+json.dump({"what": "the demo's input: headcast-headmodel render-rgbd builtin --first-frame F --frames N --size S "
+                   "--shape ... (the avatar was made from the frames before F)",
+           "first_frame": first, "frames": 150, "size": 640, "shape": shape}, open(path, "w"), indent=2)
+PY
 
-echo "== 3. the demo avatar: headcast-train create (the sender's tracker with the renders' camera, $subject_iterations steps)"
+echo "== 3. the demo avatar: headcast-train create on the RGB-D frames (the renders' camera, $subject_iterations steps)"
 # Run inside the work folder with relative paths, so the avatar's manifest names no path of this machine.
 intrinsics=$(/usr/bin/python3 -c "import json; c = json.load(open('$work/render/truth.json'))['camera']; print(f\"{c['fx']},{c['fy']},{c['cx']},{c['cy']}\")")
 cp "$out/builtin_general.hcavatar" "$work/general.hcavatar"
-(cd "$work" && "$bin/headcast-train" create --input subject_train.mp4 --out demo_avatar.hcavatar --work create \
+(cd "$work" && "$bin/headcast-train" create --input train --out demo_avatar.hcavatar --work create \
   --head-model builtin --general general.hcavatar --iterations "$subject_iterations" --test-frames 60 \
   --intrinsics "$intrinsics" --preview none > create.json)
 cp "$work/demo_avatar.hcavatar" "$out/demo_avatar.hcavatar"
