@@ -47,6 +47,10 @@ if [ -f "$src/models/demo_avatar.hcavatar" ]; then
     grep -q "glass to glass p50" "$tmp/demo.out" &&
     ok "deploy/demo.sh: $shown frames shown, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
     bad "demo: $(tail -5 "$tmp/demo.out")"
+  # The shipped avatar reproduces its subject (32.4 dB when made; a bound below it, not the figure).
+  psnr=$(json "$tmp/demo/report.json" "j['avatar_vs_truth']['psnr_db']")
+  "$python" -c "import sys; sys.exit(0 if float('${psnr:-0}') >= 31 else 1)" &&
+    ok "demo avatar against the true frames: $psnr dB" || bad "demo avatar PSNR: ${psnr:-none}"
 else
   echo "skip: no models/demo_avatar.hcavatar (deploy/make_default_models.sh)"
 fi
