@@ -276,6 +276,7 @@ struct SolveSettings {
   bool batched = false;
   double shape_prior = 1e-9, expression_prior = 1e-9, jaw_prior = 1e-9;
   int max_iterations = 50;
+  int threads = 2;  // Ceres threads (at most the cores there are)
   static SolveSettings From(const MeshFitOptions& options);
 };
 

@@ -455,7 +455,7 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   so.max_num_iterations = o.max_iterations;
-  so.num_threads = std::max(1u, std::min(2u, std::thread::hardware_concurrency()));
+  so.num_threads = std::max(1, std::min(o.threads, static_cast<int>(std::thread::hardware_concurrency())));
   so.function_tolerance = 1e-9;
   so.parameter_tolerance = 1e-10;
   ceres::Solver::Summary summary;

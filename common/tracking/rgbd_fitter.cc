@@ -196,6 +196,9 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   settings.expression_prior = options_.expression_prior;
   settings.max_iterations = options_.max_iterations;
   settings.batched = options_.batched_solve && !options_.fit_shape;
+  // Tracking is one camera's work on one core (the other runs the receiver
+  // of a call, or another camera); the identity's few frames may take both.
+  settings.threads = options_.fit_shape ? 2 : 1;
   if (previous && previous->ok) settings.max_iterations = options_.warm_max_iterations;
   const bool jaw = model_.JointIsArticulated(kJawJoint);
   // The landmarks' faces and barycentrics for the current view (the dynamic contour follows it).
