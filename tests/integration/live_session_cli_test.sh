@@ -42,11 +42,14 @@ shown=$(json "$tmp/rx.json" "j['rendered']")
 
 if [ -f "$src/models/demo_avatar.hcavatar" ]; then
   "$src/deploy/demo.sh" --no-setup --display offscreen --out "$tmp/demo" > "$tmp/demo.out" 2>&1
+  # Every frame sent arrives; how many the receiver shows depends on the
+  # machine's load (ctest runs other tests beside it): some, not a count.
   shown=$(json "$tmp/demo/report.json" "j['frames']['shown']")
-  [ "${shown:-0}" -ge 30 ] && [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] &&
-    grep -q "glass to glass p50" "$tmp/demo.out" &&
-    ok "deploy/demo.sh: $shown frames shown, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
-    bad "demo: $(tail -5 "$tmp/demo.out")"
+  frames=$(json "$tmp/demo/report.json" "j['frames']")
+  [ "${shown:-0}" -ge 1 ] && json "$tmp/demo/report.json" "1 if j['frames']['received'] == j['frames']['sent'] > 0 else 0" | grep -q 1 &&
+    [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] && grep -q "glass to glass p50" "$tmp/demo.out" &&
+    ok "deploy/demo.sh: $frames, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
+    bad "demo: $frames $(head -5 "$tmp/demo.out")"
   # The shipped avatar reproduces its subject (32.4 dB when made; a bound below it, not the figure).
   psnr=$(json "$tmp/demo/report.json" "j['avatar_vs_truth']['psnr_db']")
   "$python" -c "import sys; sys.exit(0 if float('${psnr:-0}') >= 31 else 1)" &&
