@@ -79,16 +79,18 @@ RowMatrixX3f PosePatch(const MeshBasis& b, const FitState& st, const SurfacePatc
 
 namespace {
 
-// Each face's bounding sphere in `posed`: its centroid and the distance to its farthest corner.
+// Each face's bounding sphere in `posed`: its centroid and (when asked) the
+// distance to its farthest corner.
 void FaceSpheres(const RowMatrixX3i& faces, const RowMatrixX3f& posed, RowMatrixX3f* centroids,
-                 std::vector<float>* radius) {
+                 std::vector<float>* radius = nullptr) {
   centroids->resize(faces.rows(), 3);
-  radius->resize(faces.rows());
+  if (radius) radius->resize(faces.rows());
   for (Eigen::Index f = 0; f < faces.rows(); ++f) {
     const Eigen::RowVector3f c = (posed.row(faces(f, 0)) + posed.row(faces(f, 1)) + posed.row(faces(f, 2))) / 3;
     centroids->row(f) = c;
-    (*radius)[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
-                             (posed.row(faces(f, 2)) - c).norm()});
+    if (radius)
+      (*radius)[f] = std::max({(posed.row(faces(f, 0)) - c).norm(), (posed.row(faces(f, 1)) - c).norm(),
+                               (posed.row(faces(f, 2)) - c).norm()});
   }
 }
 
@@ -224,8 +226,7 @@ ClosestPointSearch::ClosestPointSearch(const HeadModel& model, const RowMatrixX3
   }
   if (faces_.rows() == 0) return;
   RowMatrixX3f centroids;
-  std::vector<float> radius;
-  FaceSpheres(faces_, posed, &centroids, &radius);
+  FaceSpheres(faces_, posed, &centroids);
   tree_->order.resize(static_cast<size_t>(faces_.rows()));
   for (Eigen::Index f = 0; f < faces_.rows(); ++f) tree_->order[static_cast<size_t>(f)] = static_cast<int>(f);
   tree_->nodes.reserve(static_cast<size_t>(4 * faces_.rows() / Tree::kLeafFaces + 1));
@@ -389,6 +390,7 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   if (o.loss == MeshLoss::kCauchy) base = std::make_unique<ceres::CauchyLoss>(o.loss_scale_m);
   double* blocks[] = {st->coefficients.data(), st->rotation.data(), st->translation.data(), &st->log_scale,
                       st->jaw.data()};
+  const int threads = std::max(1, std::min(o.threads, static_cast<int>(std::thread::hardware_concurrency())));
   if (o.batched) {
     // Fixed weights: the pair's weight times the loss's slope at the starting state.
     const double* start[] = {blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]};
@@ -407,12 +409,12 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
       point.scale = std::sqrt(c.weight * slope);
       points.push_back(point);
     }
-    // Two blocks, so that Ceres's two threads share the evaluation.
-    const size_t half = (points.size() + 1) / 2;
-    for (size_t begin = 0; begin < points.size(); begin += half) {
+    // A block per Ceres thread, so that the threads share the evaluation.
+    const size_t part_size = (points.size() + threads - 1) / threads;
+    for (size_t begin = 0; begin < points.size(); begin += part_size) {
       std::vector<SurfacePoint> part(
           points.begin() + static_cast<std::ptrdiff_t>(begin),
-          points.begin() + static_cast<std::ptrdiff_t>(std::min(points.size(), begin + half)));
+          points.begin() + static_cast<std::ptrdiff_t>(std::min(points.size(), begin + part_size)));
       problem.AddResidualBlock(new SurfacePointsCost(&basis, std::move(part)), nullptr, blocks, 5);
     }
   } else {
@@ -455,7 +457,7 @@ int SolveOnce(const MeshBasis& basis, const std::vector<Correspondence>& pairs, 
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   so.max_num_iterations = o.max_iterations;
-  so.num_threads = std::max(1, std::min(o.threads, static_cast<int>(std::thread::hardware_concurrency())));
+  so.num_threads = threads;
   so.function_tolerance = 1e-9;
   so.parameter_tolerance = 1e-10;
   ceres::Solver::Summary summary;
