@@ -1,7 +1,6 @@
 // The trainer: samples, losses, the optimiser loop, checkpoints, evaluation.
 #include "training/avatar_fit.h"
 
-#include <dlfcn.h>
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
@@ -10,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/avatar/avatar_pipeline.h"
+#include "common/avatar/compute_threads.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
@@ -58,15 +58,6 @@ void FitOptions::Check() const {
   loss.Check();
   mix.Check();
   distributed.Check();
-}
-
-void SetComputeThreads(int threads) {
-  torch::set_num_threads(threads);
-  // Debian's libtorch multiplies matrices in OpenBLAS, whose own thread pool
-  // ignores torch::set_num_threads: two single-threaded ranks on two cores
-  // then ran 1.5x slower than with OMP_NUM_THREADS=1. Its setter, when present.
-  using SetThreads = void (*)(int);
-  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(threads);
 }
 
 double FitOptions::LearningRateAt(int step) const {

@@ -115,9 +115,6 @@ struct TrainResult {
   double samples_per_s = 0;
 };
 
-// libtorch's and OpenBLAS's threads of this process.
-void SetComputeThreads(int threads);
-
 // Trains `avatar` (every parameter not frozen). `progress(info)` after each
 // step, with the avatar in its state after the step. Throws naming the file
 // when a checkpoint to resume from is corrupt or made for another avatar.

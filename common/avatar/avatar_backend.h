@@ -66,10 +66,9 @@ class AvatarBackend {
 };
 
 struct AvatarBackendOptions {
-  // libtorch intra-op (OpenMP) threads. 1 by default: on two cores OpenBLAS
-  // already threads the matrix products, and a second OpenMP thread competing
-  // with it (and with the display) made frames slower (`headcast-bench render`
-  // reports both).
+  // libtorch intra-op (OpenMP) threads (OpenBLAS gets one: SetComputeThreads).
+  // 1 by default: the receiver's other core decodes, displays and serves the
+  // network; two render faster alone (`headcast-bench render` reports both).
   int threads = 1;
   void Check() const;
 };

@@ -4,6 +4,7 @@
 #include <malloc.h>
 
 #include "common/avatar/avatar_pipeline.h"
+#include "common/avatar/compute_threads.h"
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_render.h"
@@ -175,7 +176,7 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   // fresh mmap'd pages the kernel must zero every frame (DESIGN: performance).
   mallopt(M_MMAP_THRESHOLD, 64 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
-  torch::set_num_threads(options.threads);
+  SetComputeThreads(options.threads);
   impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
   impl_->avatar.modules().eval();
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();

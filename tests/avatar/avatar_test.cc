@@ -1,5 +1,6 @@
 // The neural avatar on tiny configurations: shapes, equivalences, gradients,
 // a few optimisation steps, sampling, the avatar file and the renderer.
+#include <dlfcn.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -7,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/avatar/avatar_pipeline.h"
+#include "common/avatar/compute_threads.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
@@ -29,6 +31,19 @@ FrameParams Frontal(float jaw = 0.f) {
   p.jaw = Eigen::Vector3f(jaw, 0, 0);
   p.SetCamFromHead(FrontalCamFromHead(0.62));
   return p;
+}
+
+TEST(ComputeThreads, LibtorchGetsTheCountAndOpenBlasOne) {
+  SetComputeThreads(2);
+  EXPECT_EQ(torch::get_num_threads(), 2);
+  // Debian's libtorch links OpenBLAS (setup.sh installs it): its pool must be one thread.
+  using GetThreads = int (*)();
+  auto get = reinterpret_cast<GetThreads>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+  ASSERT_NE(get, nullptr) << "libtorch does not multiply in OpenBLAS here";
+  EXPECT_EQ(get(), 1);
+  SetComputeThreads(1);
+  EXPECT_EQ(torch::get_num_threads(), 1);
+  EXPECT_EQ(get(), 1);
 }
 
 TEST(PositionalEncoding, ShapeAndValues) {
