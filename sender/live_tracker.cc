@@ -37,7 +37,8 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   camera_->height = bgr.rows;
   const TrackedFrame t =
       tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params, frame.depth_on_demand.get());
-  return {t.fitted, t.with_depth, t.face.status, t.landmarks_ms, t.fit_ms, t.depth_ms, t.identity_frame};
+  return {t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,       t.fit_ms,
+          t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now};
 }
 
 }  // namespace headcast

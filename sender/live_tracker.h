@@ -32,6 +32,8 @@ struct LiveTrackResult {
   double fit_ms = 0;            // head-model fit
   double depth_ms = 0;          // depth made on demand (stereo in the face's box)
   bool identity_frame = false;  // RGB-D: fitted with a free shape (the first frames, before the identity is frozen)
+  bool provisional_identity = false;  // RGB-D, identity fitted beside tracking: not made yet
+  bool identity_frozen_now = false;   // RGB-D: the identity was made at this frame
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.
@@ -45,6 +47,7 @@ class LiveTracker {
   // Tracks one frame; on success *params holds the frame's expression, jaw and
   // cam_from_head (the caller stamps sequence and capture time).
   LiveTrackResult Process(const CapturedFrame& frame, FrameParams* params);
+  const Eigen::VectorXd& identity() const { return tracker_.identity(); }
 
  private:
   LiveTrackerOptions options_;

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <thread>
 
 #include "common/capture/capture_flags.h"
@@ -77,7 +78,8 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   AddCameraFlags(app, f.source, f.camera_size);
   AddDepthFlags(app, f.source);
   app.add_option("--calibration-frames", f.live.tracker.rgbd_identity_frames,
-                 "--input with depth: frames whose fitted shapes give the identity (median), then frozen")
+                 "--input with depth: frames whose fitted shapes give the identity (median), then frozen; live, "
+                 "fitted beside tracking")
       ->capture_default_str();
   AddPacingFlag(app, &f.source.realtime, {}, {"--as-fast-as-possible"});
   app.add_option("--params", f.params, "replay this parameter recording (.hcrec)");
@@ -147,6 +149,10 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   if (!f.intrinsics.empty()) f.live.camera = ParseIntrinsics(f.intrinsics, "--intrinsics");
   // The tracker first: a camera's clock (and a paced file's) starts at open,
   // and loading the landmark model must not make the first frames late.
+  // A camera (or a paced file) keeps its rate while the RGB-D identity is
+  // fitted beside it; read as fast as possible, the identity frames are
+  // tracked in turn, the same every run.
+  f.live.tracker.rgbd_identity_in_background = f.source.realtime;
   LiveTracker tracker(model, f.live);
   // Live (and paced) sources hand the tracker their newest frame: when it is
   // slower than the camera, frames are skipped rather than aged in a queue.
@@ -161,8 +167,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   clock.Restart();                  // the stream's time starts once the tracker is ready
   constexpr size_t kKept = 100000;  // a camera session may run for days
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept), depth_ms(kKept), frame_ms(kKept),
-      tracking_frame_ms(kKept);
+      tracking_frame_ms(kKept), provisional_frame_ms(kKept);
   int read = 0, fitted = 0, skipped = 0, with_depth = 0, identity_frames = 0;
+  std::optional<double> first_fit_s, identity_made_s;  // stream clock
   uint64_t sequence = 0;
   std::ofstream frames_csv;
   if (!f.frames_csv.empty()) {
@@ -190,7 +197,14 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     const LiveTrackResult r = tracker.Process(frame, &p);
     landmarks_ms.Add(r.landmarks_ms);
     with_depth += r.with_depth;
+    if (r.identity_frozen_now) {
+      identity_made_s = clock.ElapsedSeconds();
+      const Eigen::VectorXd& beta = tracker.identity();
+      spdlog::info("RGB-D identity made at frame {} (shape {:.3f} {:.3f} {:.3f} ...)", read, beta[0],
+                   beta.size() > 1 ? beta[1] : 0.0, beta.size() > 2 ? beta[2] : 0.0);
+    }
     if (!r.fitted) continue;  // no face this frame: the receiver holds the last one
+    if (!first_fit_s) first_fit_s = clock.ElapsedSeconds();
     fit_ms.Add(r.fit_ms);
     if (r.with_depth) depth_ms.Add(r.depth_ms);
     // Capture to parameters: from the capture stamp for live sources; for
@@ -199,9 +213,12 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     const double frame_to_params_ms =
         f.source.realtime ? 1e3 * (SteadyNowSeconds() - frame.capture_time_s) : read_watch.ElapsedMs();
     frame_ms.Add(frame_to_params_ms);
-    // The first RGB-D frames fit the person's shape too (far slower); after them, the tracking rate.
+    // The first RGB-D frames fit the person's shape too (far slower), or live
+    // are tracked while it is fitted beside them; after them, the tracking rate.
     if (r.identity_frame)
       ++identity_frames;
+    else if (r.provisional_identity)
+      provisional_frame_ms.Add(frame_to_params_ms);
     else
       tracking_frame_ms.Add(frame_to_params_ms);
     ++fitted;
@@ -228,6 +245,11 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"capture_to_params_ms_median", median(frame_ms)},
           {"capture_to_params_ms_p95", p95(frame_ms)},
           {"identity_frames", identity_frames},
+          {"provisional_identity_frames", provisional_frame_ms.count()},
+          {"provisional_capture_to_params_ms_median", median(provisional_frame_ms)},
+          {"provisional_capture_to_params_ms_p95", p95(provisional_frame_ms)},
+          {"identity_made_after_s",
+           identity_made_s && first_fit_s ? nlohmann::json(*identity_made_s - *first_fit_s) : nlohmann::json()},
           {"tracking_capture_to_params_ms_median", median(tracking_frame_ms)},
           {"tracking_capture_to_params_ms_p95", p95(tracking_frame_ms)}};
 }

@@ -112,14 +112,7 @@ void FrameTracker::Reset() {
 
 bool FrameTracker::FreezeRgbdIdentity() {
   if (calibration_shapes_.empty()) return false;
-  Eigen::VectorXd shape(model_.num_shape());
-  for (int k = 0; k < model_.num_shape(); ++k) {
-    std::vector<double> v;
-    for (const auto& s : calibration_shapes_) v.push_back(s[k]);
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    shape[k] = v[v.size() / 2];
-  }
-  SetIdentity(shape, true);
+  SetIdentity(MedianShape(calibration_shapes_), true);
   calibration_shapes_.clear();
   return true;
 }
@@ -172,15 +165,31 @@ TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, dou
   if (r.face.status != FaceStatus::kNoFace && !r.depth_m.empty()) {
     // RGB-D (METHOD §3): the shape is fitted on the first frames, then frozen at their median.
     r.with_depth = true;
+    if (!identity_frozen_ && options_.rgbd_identity_in_background) {
+      if (!background_) {
+        RgbdFitOptions o = RgbdOptions(true);
+        o.shape_solve_threads = 1;  // the tracking thread keeps its core
+        background_ = std::make_unique<BackgroundIdentity>(model_, o, options_.rgbd_identity_frames);
+      }
+      if (std::optional<Eigen::VectorXd> shape = background_->Identity()) {
+        SetIdentity(*shape, true);
+        r.identity_frozen_now = true;
+        background_.reset();
+      } else {
+        r.provisional_identity = true;
+        background_->Offer(r.face.landmarks, r.depth_m, camera);
+      }
+    }
+    const bool tracking = identity_frozen_ || r.provisional_identity;
     const RgbdFitResult fit =
-        identity_frozen_ ? Rgbd(false).Fit(r.face.landmarks, r.depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
-                         : Rgbd(true).Fit(r.face.landmarks, r.depth_m, camera);
+        tracking ? Rgbd(false).Fit(r.face.landmarks, r.depth_m, camera, last_rgbd_.ok ? &last_rgbd_ : nullptr)
+                 : Rgbd(true).Fit(r.face.landmarks, r.depth_m, camera);
     if (fit.ok) {
       ApplyRgbdFit(fit, &last_);
       r.fitted = true;
       r.rgbd_accuracy_m = fit.accuracy_m;
       r.contour_rejected = fit.contour_rejected;
-      if (!identity_frozen_) {
+      if (!tracking) {
         r.identity_frame = true;
         calibration_shapes_.push_back(fit.params.shape);
         if (static_cast<int>(calibration_shapes_.size()) >= options_.rgbd_identity_frames) {

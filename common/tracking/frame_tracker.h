@@ -15,6 +15,7 @@
 #include "common/capture/frame_source.h"
 #include "common/core/camera.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/background_identity.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/rgbd_fitter.h"
@@ -27,6 +28,10 @@ struct FrameTrackerOptions {
   // RGB-D without a given identity: the identity is the per-component median
   // of this many first fitted frames' shapes, then frozen.
   int rgbd_identity_frames = 15;
+  // Live: those fits run beside tracking (BackgroundIdentity) while every
+  // frame is tracked at once with the identity known so far (neutral at
+  // first), instead of each holding its frame for a free-shape fit.
+  bool rgbd_identity_in_background = false;
   void Check() const;
 };
 
@@ -38,13 +43,15 @@ struct TrackedFrame {
   // offline pass fits such frames again once the identity is frozen.
   bool identity_frame = false;
   bool identity_frozen_now = false;  // this frame completed the RGB-D identity
-  double landmarks_ms = 0;           // detection/tracking + landmarks
-  double fit_ms = 0;                 // head-model fit
-  double depth_ms = 0;               // RGB-D: depth made on demand (stereo matching in the face's box)
-  cv::Mat depth_m;                   // RGB-D: the depth the fit read
-  double rgbd_accuracy_m = 0;        // RGB-D: point-to-mesh RMS after the fit
-  int contour_rejected = 0;          // RGB-D: contour landmarks taken for background
-  std::string problem;               // why not fitted, when a fit failed
+  // Background identity: fitted with the identity not yet made (neutral shape at first).
+  bool provisional_identity = false;
+  double landmarks_ms = 0;     // detection/tracking + landmarks
+  double fit_ms = 0;           // head-model fit
+  double depth_ms = 0;         // RGB-D: depth made on demand (stereo matching in the face's box)
+  cv::Mat depth_m;             // RGB-D: the depth the fit read
+  double rgbd_accuracy_m = 0;  // RGB-D: point-to-mesh RMS after the fit
+  int contour_rejected = 0;    // RGB-D: contour landmarks taken for background
+  std::string problem;         // why not fitted, when a fit failed
 };
 
 class FrameTracker {
@@ -90,6 +97,7 @@ class FrameTracker {
   // ~100 MB each), and colour-only tracking never needs them.
   RgbdFitter& Rgbd(bool calibrating);
   std::unique_ptr<RgbdFitter> rgbd_calibrating_, rgbd_;
+  std::unique_ptr<BackgroundIdentity> background_;  // live: until the identity is made
   Eigen::VectorXd identity_;
   bool identity_frozen_ = false;
   std::vector<Eigen::VectorXd> calibration_shapes_;

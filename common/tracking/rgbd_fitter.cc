@@ -20,7 +20,8 @@ void RgbdFitOptions::Check() const {
   c.Positive("point_weight", point_weight).Positive("max_point_distance_m", max_point_distance_m);
   c.Positive("robust_scale_m", robust_scale_m).InRange("block2_rounds", block2_rounds, 1, 100);
   c.InRange("block3_rounds", block3_rounds, 0, 100).InRange("cloud_points", cloud_points, 50, 10000000);
-  c.InRange("shape_cloud_points", shape_cloud_points, 50, 10000000);
+  c.InRange("shape_cloud_points", shape_cloud_points, 50, 10000000)
+      .InRange("shape_solve_threads", shape_solve_threads, 1, 64);
   c.InRange("warm_rounds", warm_rounds, 1, 100).InRange("warm_max_iterations", warm_max_iterations, 1, 1000);
   c.NonNegative("cloud_margin_m", cloud_margin_m).Positive("head_depth_m", head_depth_m);
   c.Positive("contour_tolerance_m", contour_tolerance_m).NonNegative("shape_prior", shape_prior);
@@ -198,7 +199,7 @@ RgbdFitResult RgbdFitter::Fit(const Landmarks2d& landmarks, const cv::Mat& depth
   settings.batched = options_.batched_solve && !options_.fit_shape;
   // Tracking is one camera's work on one core (the other runs the receiver
   // of a call, or another camera); the identity's few frames may take both.
-  settings.threads = options_.fit_shape ? 2 : 1;
+  settings.threads = options_.fit_shape ? options_.shape_solve_threads : 1;
   if (previous && previous->ok) settings.max_iterations = options_.warm_max_iterations;
   const bool jaw = model_.JointIsArticulated(kJawJoint);
   // The landmarks' faces and barycentrics for the current view (the dynamic contour follows it).

@@ -57,6 +57,10 @@ struct RgbdFitOptions {
   // The accuracy is measured on every n-th cloud point (an RMS over some
   // hundreds of points estimates it as well as over all, for less).
   int accuracy_every = 2;
+  // Ceres threads of the identity's solves (tracking solves on one). 2: the
+  // synchronous identity frames may take both cores; 1 when the identity is
+  // fitted beside tracking (BackgroundIdentity), which keeps the other core.
+  int shape_solve_threads = 2;
   int max_iterations = 30;      // per solve
   int warm_max_iterations = 8;  // per solve when warm-started
   void Check() const;

@@ -30,12 +30,23 @@ def main():
     ap.add_argument("--recording", required=True)
     ap.add_argument("--truth", required=True)
     ap.add_argument("--max-translation-mm", type=float, default=float("inf"))
+    ap.add_argument("--frame-map", help="headcast-sender --frames-csv: the input frame of each sequence number "
+                    "(a live sender skips frames when it falls behind)")
+    ap.add_argument("--from-sequence", type=int, default=0, help="compare the frames from this sequence number on")
     args = ap.parse_args()
     header, frames = hcrec.read_recording(args.recording, hcrec.load_proto(args.proto_dir))
     truth = json.load(open(args.truth))
+    input_frame = {}
+    if args.frame_map:
+        with open(args.frame_map) as f:
+            next(f)
+            for line in f:
+                sequence, index = line.strip().split(",")
+                input_frame[int(sequence)] = int(index)
+    frames = [f for f in frames if f.sequence >= args.from_sequence]
     t_err, z_err, r_err = [], [], []
     for f in frames:
-        gt = truth["frames"][f.sequence]
+        gt = truth["frames"][input_frame.get(f.sequence, f.sequence) if args.frame_map else f.sequence]
         d = np.array(f.cam_translation) - np.array(gt["cam_translation"])
         t_err.append(1e3 * np.linalg.norm(d))
         z_err.append(1e3 * abs(d[2]))

@@ -5,11 +5,15 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <thread>
 
 #include "common/core/rotation.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "common/tracking/background_identity.h"
+#include "common/tracking/frame_tracker.h"
 
 namespace headcast {
 namespace {
@@ -93,6 +97,67 @@ TEST(OfflineTracker, RgbdFramesFreezeTheIdentityAndEveryFrameIsWritten) {
   EXPECT_LT((t.frames[5].cam_translation.cast<double>() - truth.translation).norm(), 0.005);
   const Eigen::Matrix3d fitted = AxisAngleToMatrix(t.frames[5].cam_rotation.cast<double>());
   EXPECT_LT(MatrixToAxisAngle(fitted.transpose() * truth.rotation).norm() * 180 / M_PI, 2.0);
+}
+
+TEST(BackgroundIdentity, MedianShapeAndOneFrameAtATime) {
+  EXPECT_TRUE(MedianShape({Eigen::Vector2d(1, 5), Eigen::Vector2d(3, 4), Eigen::Vector2d(2, 6)})
+                  .isApprox(Eigen::Vector2d(2, 5)));
+  EXPECT_THROW(MedianShape({}), std::invalid_argument);
+  FakeHeadSource source(2, true);
+  CapturedFrame frame;
+  std::string problem;
+  ASSERT_EQ(source.Read(&frame, &problem), ReadStatus::kFrame);
+  FaceTracker faces;
+  const FaceObservation face = faces.Track(frame.bgr, 0);
+  ASSERT_NE(face.status, FaceStatus::kNoFace);
+  BackgroundIdentity identity(Model(), RgbdFitOptions{}, 1);
+  ASSERT_TRUE(identity.Offer(face.landmarks, frame.depth_m, FakeHeadSource::camera()));
+  EXPECT_FALSE(identity.Offer(face.landmarks, frame.depth_m, FakeHeadSource::camera()))
+      << "one frame wanted, one taken";
+  for (int i = 0; i < 3000 && !identity.Identity(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  ASSERT_TRUE(identity.Identity().has_value());
+  EXPECT_EQ(identity.fits_done(), 1);
+  EXPECT_NEAR((*identity.Identity())[0], 0.8, 0.3);
+  EXPECT_FALSE(identity.Offer(face.landmarks, frame.depth_m, FakeHeadSource::camera())) << "made: no more fits";
+}
+
+TEST(FrameTracker, LiveRgbdIdentityIsFittedBesideTracking) {
+  FrameTrackerOptions o;
+  o.rgbd_identity_frames = 3;
+  o.rgbd_identity_in_background = true;
+  FrameTracker tracker(Model(), o);
+  const PinholeCamera camera = FakeHeadSource::camera();
+  int frames = 0, provisional = 0, made = 0, last = 0;
+  auto source = std::make_unique<FakeHeadSource>(10, true);
+  // Every frame is tracked at once, the identity's fits beside it, until it is
+  // made; then a few frames more with it.
+  for (int after = 0; frames < 5000 && after < 4; ++frames) {
+    CapturedFrame frame;
+    std::string problem;
+    if (source->Read(&frame, &problem) != ReadStatus::kFrame) {
+      source = std::make_unique<FakeHeadSource>(10, true);
+      ASSERT_EQ(source->Read(&frame, &problem), ReadStatus::kFrame);
+    }
+    FrameParams params;
+    const TrackedFrame t = tracker.Track(frame.bgr, frame.depth_m, frames / 30.0, camera, &params);
+    ASSERT_TRUE(t.fitted) << "frame " << frames << ": " << t.problem;
+    EXPECT_FALSE(t.identity_frame) << "no frame waits for a free-shape fit";
+    provisional += t.provisional_identity;
+    made += t.identity_frozen_now;
+    if (tracker.identity_frozen()) {
+      ++after;
+      EXPECT_FALSE(t.provisional_identity);
+      last = static_cast<int>(frame.index);
+      const RigidTransform truth = FakeHeadSource::CamFromHead(last);
+      EXPECT_LT((params.cam_translation.cast<double>() - truth.translation).norm(), 0.005) << "frame " << frames;
+    } else {
+      EXPECT_TRUE(t.provisional_identity);
+    }
+  }
+  EXPECT_EQ(made, 1);
+  EXPECT_GE(provisional, 1);
+  ASSERT_TRUE(tracker.identity_frozen()) << "no identity after " << frames << " frames";
+  EXPECT_NEAR(tracker.identity()[0], 0.8, 0.3) << "the identity comes from the depth";
 }
 
 TEST(OfflineTracker, ColourFramesAreFittedWithTheGivenIdentityAndCamera) {

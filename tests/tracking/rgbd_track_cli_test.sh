@@ -45,7 +45,8 @@ t = json.load(open('$tmp/$name.tx.json')); r = json.load(open('$tmp/$name.rx.jso
 k = t['tracking']
 sys.exit(0 if k['frames_with_depth'] == 12 and k['frames_fitted'] == 12 and t['frames_sent'] == 12
          and r['frames_received'] == 12 and k['capture_to_params_ms_median'] > 0 and k['identity_frames'] == 4
-         and k['tracking_capture_to_params_ms_median'] > 0 else 1)" &&
+         and k['tracking_capture_to_params_ms_median'] > 0 and k['provisional_identity_frames'] == 0
+         and k['identity_made_after_s'] is not None else 1)" &&
     ok "live $name session: 12 frames fitted with depth (4 fit the identity), sent and received" ||
     bad "live $name: $(head -30 "$tmp/$name.tx.json" 2>/dev/null) $(tail -3 "$tmp/$name.tx.log")"
   "$python" "$src/tests/tracking/compare_track_truth.py" --proto-dir "$src/proto" --recording "$tmp/$name.hcrec" \
