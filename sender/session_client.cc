@@ -26,6 +26,7 @@ void SenderOptions::Check() const {
   c.Positive("welcome_timeout_s", welcome_timeout_s).Positive("keepalive_s", keepalive_s);
   c.NonNegative("max_kbps", max_kbps).InRange("wire_overhead_bytes", wire_overhead_bytes, 0, 10000);
   c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000)
+      .InRange("session_start_bytes", session_start_bytes, 0, 1000000)
       .InRange("stats_interval_s", stats_interval_s, 0, 60);
   std::string why;
   const bool parsed = ParseHostPort(target, nullptr, &why);
@@ -76,6 +77,7 @@ struct SenderClient::Impl {
 
   // One session: returns when the stream breaks or we stop.
   void RunSession(UplinkChannel& stream) {
+    const double session_start = Seconds();
     v1::Uplink hello;
     hello.mutable_hello()->set_protocol_version(kProtocolVersion);
     hello.mutable_hello()->set_avatar_id(options.avatar_id);
@@ -162,7 +164,11 @@ struct SenderClient::Impl {
     // Capture times travel relative to the session's first frame (whole ms).
     std::optional<double> origin;
     double last_send = 0;
-    double tokens = 0, token_time = Seconds();
+    // The budget starts in debt by the session's start-up (see session_start_bytes).
+    double tokens = -static_cast<double>(options.session_start_bytes + options.wire_overhead_bytes +
+                                         static_cast<int>(hello.ByteSizeLong())),
+           token_time = session_start;
+    bool first_message = true;
     while (welcomed == 1 && !stop) {
       auto first = queue.Pop(std::chrono::milliseconds(50));
       if (!first) continue;
@@ -184,7 +190,10 @@ struct SenderClient::Impl {
           std::this_thread::sleep_for(std::chrono::duration<double>(-tokens / (budget * 125.0)));
         }
       }
-      if (options.freshest_only) {
+      // Paced to a budget, a session's first message carries the newest frame
+      // only: frames from before the link was ready would arrive late and show
+      // nothing new.
+      if (options.freshest_only || (first_message && options.max_kbps > 0)) {
         uint64_t skipped = 0;
         while (auto newer = queue.TryPop()) {
           first = std::move(newer);
@@ -204,6 +213,7 @@ struct SenderClient::Impl {
         if (!more) break;
         packets.push_back(encoder.Encode(*more, *origin));
       }
+      first_message = false;
       v1::Uplink up;
       up.mutable_frames()->set_payload(PackPackets(packets));
       if (options.max_kbps > 0) tokens -= options.wire_overhead_bytes + up.frames().payload().size();

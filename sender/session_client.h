@@ -45,6 +45,12 @@ struct SenderOptions {
   // Uplink bytes each downlink message (Stats) costs: the TCP ACK plus the HTTP/2
   // WINDOW_UPDATE gRPC answers with and its ACK (bench/DEFAULTS.md).
   int downlink_overhead_bytes = 180;
+  // Uplink bytes a session costs on the wire before its Hello: the TCP and
+  // TLS handshakes, the HTTP/2 preface and settings, the call's headers
+  // (bench/DEFAULTS.md). Charged to the link budget with the Hello, so that on
+  // a narrow link the first frames wait for the link instead of queueing
+  // behind the start-up in the network for seconds.
+  int session_start_bytes = 1400;
   // How often we want Stats, seconds (0: the receiver's choice). Narrow links
   // ask for fewer: see NarrowLinkDefaults().
   double stats_interval_s = 0;

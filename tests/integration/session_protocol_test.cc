@@ -322,6 +322,7 @@ TEST(SessionProtocol, ANarrowLinkBatchesFramesWithinTheBudget) {
   SenderOptions o = Options();
   o.max_kbps = 4;  // 500 B/s: about two messages a second with their wire overhead
   o.stats_interval_s = 5;
+  o.session_start_bytes = 0;  // in memory: no handshakes
   Client c(receiver, "secret-token", o);
   c.client->Start();
   ASSERT_TRUE(c.client->WaitStreaming(5));
@@ -348,6 +349,7 @@ TEST(SessionProtocol, FreshestOnlySendsOneNewFramePerMessageAndDropsTheRest) {
   o.max_kbps = 4;
   o.stats_interval_s = 5;
   o.freshest_only = true;
+  o.session_start_bytes = 0;
   Client c(receiver, "secret-token", o);
   c.client->Start();
   ASSERT_TRUE(c.client->WaitStreaming(5));
@@ -366,6 +368,35 @@ TEST(SessionProtocol, FreshestOnlySendsOneNewFramePerMessageAndDropsTheRest) {
   EXPECT_LT(wire_kbps, 1.3 * o.max_kbps) << "paced to the budget";
   // Every frame sent arrives (none is lost for being alone in its message).
   ASSERT_TRUE(WaitFor([&] { return receiver.counters().frames_received >= n.sent; }, 5));
+}
+
+TEST(SessionProtocol, ANarrowLinkPaysForTheSessionsStartBeforeItsFirstFrame) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Collector collector(receiver);
+  SenderOptions o = Options();
+  o.max_kbps = 8;  // 1000 B/s
+  o.stats_interval_s = 5;
+  o.session_start_bytes = 1000;  // with the Hello and a message's overhead: over 1.2 s of the budget
+  Client c(receiver, "secret-token", o);
+  const auto start = std::chrono::steady_clock::now();
+  c.client->Start();
+  std::atomic<double> first_arrival_s{-1};
+  std::thread watch([&] {
+    if (WaitFor([&] { return collector.size() > 0; }, 10))
+      first_arrival_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  });
+  for (int i = 0; i < 75; ++i) {  // 2.5 s at 30 fps
+    c.client->Submit(SyntheticTalkingHead(Model(), i));
+    std::this_thread::sleep_until(start + std::chrono::milliseconds(33 * (i + 1)));
+  }
+  watch.join();
+  const SenderCounters n = c.client->counters();
+  c.client->Stop();
+  EXPECT_GT(first_arrival_s.load(), 1.1) << "the start-up's bytes are paid for first";
+  std::lock_guard<std::mutex> lock(collector.mutex);
+  ASSERT_FALSE(collector.frames.empty());
+  EXPECT_GE(collector.frames.front().sequence, 30u) << "the first message carries the newest frame, not the oldest";
+  EXPECT_GE(n.dropped, 30u);
 }
 
 // A hand-driven session: Hello, then whatever the test writes; the receiver
