@@ -31,8 +31,9 @@ Eigen::VectorXd MedianShape(const std::vector<Eigen::VectorXd>& shapes) {
 }
 
 BackgroundIdentity::BackgroundIdentity(const HeadModel& model, RgbdFitOptions options, int shapes_wanted)
-    : fitter_(model, WithShape(std::move(options))), wanted_(shapes_wanted) {
+    : model_(model), options_(WithShape(std::move(options))), wanted_(shapes_wanted) {
   if (shapes_wanted < 1) throw std::invalid_argument("BackgroundIdentity: shapes_wanted must be at least 1");
+  options_.Check();  // here, not on the worker, where it could only terminate
   worker_ = std::thread([this] { Run(); });
 }
 
@@ -64,15 +65,11 @@ int BackgroundIdentity::fits_done() const {
   return fits_;
 }
 
-int BackgroundIdentity::shapes() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return static_cast<int>(shapes_.size());
-}
-
 void BackgroundIdentity::Run() {
   // Below the tracking thread and the camera's reader: the identity may take
   // a little longer, the frames of the call must not.
   setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+  RgbdFitter fitter(model_, options_);
   for (;;) {
     Job job;
     {
@@ -85,7 +82,7 @@ void BackgroundIdentity::Run() {
     }
     // Each fit starts cold, as the synchronous path's: a warm start would
     // carry one frame's shape errors into the next.
-    const RgbdFitResult fit = fitter_.Fit(job.landmarks, job.depth_m, job.camera);
+    const RgbdFitResult fit = fitter.Fit(job.landmarks, job.depth_m, job.camera);
     std::lock_guard<std::mutex> lock(mutex_);
     ++fits_;
     if (fit.ok) shapes_.push_back(fit.params.shape);

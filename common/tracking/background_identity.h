@@ -37,7 +37,6 @@ class BackgroundIdentity {
   // The identity, once `shapes_wanted` fits succeeded.
   std::optional<Eigen::VectorXd> Identity() const;
   int fits_done() const;  // tried, successful or not
-  int shapes() const;     // successful
 
  private:
   struct Job {
@@ -47,7 +46,10 @@ class BackgroundIdentity {
   };
   void Run();
 
-  RgbdFitter fitter_;
+  // Made on the worker: its bases are large (ICT-FaceKit: ~100 MB) and
+  // building them would stall the tracking thread's first frame.
+  const HeadModel& model_;
+  const RgbdFitOptions options_;
   const int wanted_;
   mutable std::mutex mutex_;
   std::condition_variable cv_;

@@ -46,7 +46,7 @@ def main():
     frames = [f for f in frames if f.sequence >= args.from_sequence]
     t_err, z_err, r_err = [], [], []
     for f in frames:
-        gt = truth["frames"][input_frame.get(f.sequence, f.sequence) if args.frame_map else f.sequence]
+        gt = truth["frames"][input_frame.get(f.sequence, f.sequence)]
         d = np.array(f.cam_translation) - np.array(gt["cam_translation"])
         t_err.append(1e3 * np.linalg.norm(d))
         z_err.append(1e3 * abs(d[2]))
