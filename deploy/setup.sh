@@ -20,7 +20,7 @@ packages=(
   # the stereo test pair (aloe) for the depth check
   opencv-doc
   # networking
-  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libssl-dev
   # display: real window and headless rendering (libopengl-dev: CMake's OpenGL::OpenGL target)
   libglfw3-dev libosmesa6-dev libgl-dev libopengl-dev libglvnd-dev xvfb xauth
   # utilities

@@ -65,6 +65,10 @@ void AddFlags(CLI::App& app, ReceiverFlags& f) {
   app.add_option("--evict-silent", s.evict_silent_s,
                  "when full, a new sender displaces the longest-silent session if silent this long, s (0: never)")
       ->capture_default_str();
+  app.add_option("--datagram-port", s.datagram_port,
+                 "UDP port for frames sent as datagrams (-1: the --listen port's number, 0: any free port)")
+      ->capture_default_str();
+  app.add_flag("!--no-datagrams", s.datagrams, "take frames on the gRPC stream only (offer no UDP port)");
   app.add_option("--head-model", f.head_model_spec, "head model of the avatars: builtin or .npz")
       ->capture_default_str();
   app.add_option("--avatar", f.avatars, "ID=PATH.hcavatar (repeatable); senders name the ID")->required();
@@ -132,7 +136,9 @@ nlohmann::json Report(const RenderLoopStats& stats, const ServerCounters& c) {
           {"evictions", c.evictions},
           {"frames_received", c.frames_received},
           {"frames_bad", c.frames_bad},
-          {"payload_bytes_received", c.bytes_received}};
+          {"payload_bytes_received", c.bytes_received},
+          {"datagrams_received", c.datagrams_received},
+          {"datagrams_refused", c.datagrams_refused}};
 }
 
 int Run(ReceiverFlags& f) {

@@ -14,6 +14,7 @@
 #include "common/core/log.h"
 #include "common/core/options.h"
 #include "proto/convert.h"
+#include "proto/datagram.h"
 #include "proto/protocol.h"
 
 namespace headcast {
@@ -75,6 +76,7 @@ bool SameToken(const std::string& a, const std::string& b) {
 
 // One streaming session's state: what its stats thread and its reading loop share.
 struct ReceiverSessions::Session {
+  using DatagramReply = ReceiverSessions::DatagramReply;
   explicit Session(DownlinkChannel& c) : channel(c) {}
   DownlinkChannel& channel;
   SessionView view;
@@ -86,9 +88,43 @@ struct ReceiverSessions::Session {
   std::atomic<bool> idle_ended{false};  // the watchdog cancelled the stream, or a new sender displaced it
   bool displaced = false;               // the latter (under the sessions' mutex)
 
+  // What decoding needs, one Frames message at a time whichever way it came
+  // (the stream or a datagram): under frames_mutex.
+  std::mutex frames_mutex;
+  std::optional<ParamDecoder> decoder;
+  std::optional<DatagramKey> datagram_key;  // set when the session takes datagrams
+  DatagramOrder datagram_order;
+  double last_key_request_s = -1;
+  uint64_t last_sequence = 0;     // of the last frame decoded
+  std::string failure;            // a failure while taking a datagram, which ends the session
+  std::string datagram_peer;      // where the last authenticated datagram came from
+  DatagramReply reply;            // sends a datagram back (set before datagrams are routed here)
+  uint32_t downlink_counter = 0;  // under write_mutex
+  std::atomic<uint64_t> datagrams{0}, datagrams_lost{0}, datagrams_refused{0};
+  // Asks the session's downlink thread to send a KeyFrameRequest now.
+  std::atomic<bool> want_key_frame{false};
+  std::function<void()> poke_downlink;
+
   bool Write(const v1::Downlink& d) {
     std::lock_guard<std::mutex> lock(write_mutex);
     return channel.Write(d);
+  }
+  // Stats and key frame requests: as a datagram to where the session's
+  // datagrams come from when there is such a place (a message on the stream
+  // costs a narrow uplink its ACKs), else on the stream.
+  void Send(const v1::Downlink& d) {
+    std::string peer;
+    if (datagram_key) {
+      std::lock_guard<std::mutex> lock(frames_mutex);
+      peer = datagram_peer;
+    }
+    if (!peer.empty() && reply) {
+      std::lock_guard<std::mutex> lock(write_mutex);
+      if (reply(peer,
+                SealDatagram(*datagram_key, DatagramDirection::kDownlink, ++downlink_counter, d.SerializeAsString())))
+        return;
+    }
+    Write(d);
   }
   void SendError(const std::string& message) {
     v1::Downlink d;
@@ -99,25 +135,37 @@ struct ReceiverSessions::Session {
 
 namespace {
 
-// The Stats thread of one session, owned: it stops and is joined when this
-// goes out of scope, however the session ends.
-class StatsThread {
+// The downlink thread of one session, owned: `periodic` every interval (Stats)
+// and `poked` as soon as Poke() is called (a KeyFrameRequest), so that the
+// threads which find a need never block on the stream's writes. It stops and
+// is joined when this goes out of scope, however the session ends.
+class DownlinkThread {
  public:
-  template <typename Body>
-  StatsThread(double interval_s, Body body)
-      : thread_([this, interval_s, body] {
+  template <typename Periodic, typename Poked>
+  DownlinkThread(double interval_s, Periodic periodic, Poked poked)
+      : thread_([this, interval_s, periodic, poked] {
+          using Clock = std::chrono::steady_clock;
+          const auto interval = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(interval_s));
+          auto next = Clock::now() + interval;
           std::unique_lock<std::mutex> lock(mutex_);
-          while (!cv_.wait_for(lock, std::chrono::duration<double>(interval_s), [&] { return done_; })) {
+          while (!done_) {
+            cv_.wait_until(lock, next, [&] { return done_ || poked_; });
+            if (done_) break;
+            const bool poke = poked_;
+            poked_ = false;
+            const bool due = Clock::now() >= next;
+            if (due) next = Clock::now() + interval;
             lock.unlock();
             try {
-              body();
+              if (poke) poked();
+              if (due) periodic();
             } catch (const std::exception& e) {
-              spdlog::warn("stats: {}", e.what());
+              spdlog::warn("downlink: {}", e.what());
             }
             lock.lock();
           }
         }) {}
-  ~StatsThread() {
+  ~DownlinkThread() {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       done_ = true;
@@ -125,11 +173,16 @@ class StatsThread {
     cv_.notify_all();
     thread_.join();
   }
+  void Poke() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    poked_ = true;
+    cv_.notify_all();
+  }
 
  private:
   std::mutex mutex_;
   std::condition_variable cv_;
-  bool done_ = false;
+  bool done_ = false, poked_ = false;
   std::thread thread_;  // last: started once the members it uses exist
 };
 
@@ -290,9 +343,15 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   spdlog::info("session {} started: avatar '{}', sender '{}'", view.id, view.avatar_id, view.sender_name);
   SessionEnd end;
   try {
-    end = Stream(session, layout, stats_interval_s);
+    end = Stream(session, layout, stats_interval_s, hello.datagrams());
   } catch (const std::exception& e) {
     end = {SessionEndCode::kInternal, std::string("receiver failure: ") + e.what()};
+  }
+  {
+    std::lock_guard<std::mutex> lock(session.frames_mutex);
+    if (!session.failure.empty()) end = {SessionEndCode::kInternal, session.failure};
+  }
+  if (end.code == SessionEndCode::kInternal) {
     spdlog::error("session {}: {}", view.id, end.message);
     session.SendError(end.message);
   }
@@ -319,42 +378,83 @@ SessionEnd ReceiverSessions::Serve(DownlinkChannel& channel) {
   return end;
 }
 
-SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout, double stats_interval_s) {
+SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout, double stats_interval_s,
+                                    bool datagrams) {
   const SessionView& view = session.view;
-  {
-    v1::Downlink d;
-    d.mutable_welcome()->set_protocol_version(kProtocolVersion);
-    d.mutable_welcome()->set_session_id(view.id);
-    d.mutable_welcome()->set_target_delay_s(options_.target_delay_s);
-    d.mutable_welcome()->set_stats_interval_s(stats_interval_s);
-    session.Write(d);
-  }
+  session.decoder.emplace(layout);
   // Stats go back from their own thread, so a silent sender still hears from us.
   double last_bytes = 0, last_t = Now();
-  StatsThread stats(stats_interval_s, [&] {
-    const JitterBufferStats js = view.buffer->stats();
-    v1::Downlink d;
-    auto* s = d.mutable_stats();
-    s->set_frames_received(session.decoded);
-    s->set_frames_lost(js.lost);
-    s->set_frames_late(js.late);
-    s->set_frames_bad(session.bad);
-    s->set_render_fps(render_fps_);
-    {
-      std::lock_guard<std::mutex> ll(session.latency_mutex);
-      s->set_latency_ms_p50(session.latency_ms.empty() ? -1 : session.latency_ms.Median());
-      s->set_latency_ms_p95(session.latency_ms.empty() ? -1 : session.latency_ms.Percentile(95));
-      session.latency_ms = SampleStats();
+  DownlinkThread downlink(
+      stats_interval_s,
+      [&] {
+        const JitterBufferStats js = view.buffer->stats();
+        v1::Downlink d;
+        auto* s = d.mutable_stats();
+        s->set_frames_received(session.decoded);
+        s->set_frames_lost(js.lost);
+        s->set_frames_late(js.late);
+        s->set_frames_bad(session.bad);
+        s->set_render_fps(render_fps_);
+        {
+          std::lock_guard<std::mutex> ll(session.latency_mutex);
+          s->set_latency_ms_p50(session.latency_ms.empty() ? -1 : session.latency_ms.Median());
+          s->set_latency_ms_p95(session.latency_ms.empty() ? -1 : session.latency_ms.Percentile(95));
+          session.latency_ms = SampleStats();
+        }
+        const double now = Now();
+        s->set_receive_kbps(8e-3 * (session.bytes - last_bytes) / std::max(1e-3, now - last_t));
+        s->set_datagrams_received(session.datagrams);
+        s->set_datagrams_lost(session.datagrams_lost);
+        s->set_datagrams_refused(session.datagrams_refused);
+        last_bytes = static_cast<double>(session.bytes);
+        last_t = now;
+        session.Send(d);
+      },
+      [&] {
+        if (!session.want_key_frame.exchange(false)) return;
+        v1::Downlink d;
+        {
+          std::lock_guard<std::mutex> lock(session.frames_mutex);
+          d.mutable_key_frame_request()->set_last_sequence(session.last_sequence);
+        }
+        session.Send(d);
+      });
+  session.poke_downlink = [&downlink] { downlink.Poke(); };
+  v1::Downlink welcome;
+  welcome.mutable_welcome()->set_protocol_version(kProtocolVersion);
+  welcome.mutable_welcome()->set_session_id(view.id);
+  welcome.mutable_welcome()->set_target_delay_s(options_.target_delay_s);
+  welcome.mutable_welcome()->set_stats_interval_s(stats_interval_s);
+  // Datagrams are routed to the session from here until the guard below goes,
+  // which happens before the downlink thread they poke.
+  struct DatagramRoute {
+    ReceiverSessions& sessions;
+    Session& session;
+    ~DatagramRoute() {
+      if (!session.datagram_key) return;
+      {
+        std::lock_guard<std::mutex> lock(sessions.mutex_);
+        sessions.by_connection_.erase(session.datagram_key->connection_id);
+      }
+      // A datagram taken before the erase may still be decoding: wait for it.
+      std::lock_guard<std::mutex> wait(session.frames_mutex);
     }
-    const double now = Now();
-    s->set_receive_kbps(8e-3 * (session.bytes - last_bytes) / std::max(1e-3, now - last_t));
-    last_bytes = static_cast<double>(session.bytes);
-    last_t = now;
-    session.Write(d);
-  });
-  ParamDecoder decoder(layout);
-  std::vector<std::string> packets;
-  const double origin = 0;
+  } route{*this, session};
+  const int port = datagram_port_;
+  if (datagrams && port > 0) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    DatagramKey key;
+    do key = DatagramKey::Random();
+    while (by_connection_.count(key.connection_id));
+    session.datagram_key = key;
+    session.reply = datagram_reply_;
+    by_connection_[key.connection_id] = &session;
+    auto* offer = welcome.mutable_welcome()->mutable_datagrams();
+    offer->set_port(static_cast<uint32_t>(port));
+    offer->set_connection_id(key.connection_id);
+    offer->set_key(key.key_bytes());
+  }
+  session.Write(welcome);
   v1::Uplink up;
   while (session.channel.Read(&up)) {
     session.last_message_s = Now();
@@ -367,45 +467,128 @@ SessionEnd ReceiverSessions::Stream(Session& session, const CodecLayout& layout,
       session.SendError("expected Frames or Bye after Hello");
       continue;
     }
-    session.bytes += up.frames().payload().size();
     std::string error;
-    const double first_capture = up.frames().first_capture_time_s();
-    if (!UnpackPackets(up.frames().payload(), &packets, &error)) {
-      ++session.bad;
-    } else if (packets.size() != up.frames().count()) {
-      error = "the message says " + std::to_string(up.frames().count()) + " frames and carries " +
-              std::to_string(packets.size());
-      ++session.bad;
-    } else if (!std::isfinite(first_capture) || std::abs(first_capture) > 1e12) {
-      // One absurd time would shift every later frame of the batch out of the jitter buffer's window.
-      error = "first_capture_time_s is not a time";
-      session.bad += packets.size();
-    } else {
-      std::optional<double> batch_shift;  // relative (decoded) -> sender's absolute clock
-      for (const auto& packet : packets) {
-        FrameParams f;
-        if (!decoder.Decode(packet, &f, &error, origin) || !f.IsValid(&error)) {
-          ++session.bad;
-          continue;
-        }
-        if (first_capture > 0) {
-          if (!batch_shift) batch_shift = first_capture - f.capture_time_s;
-          f.capture_time_s += *batch_shift;
-          // Same host (netlab, loopback tests): the clocks agree and arrival latency is meaningful.
-          const double latency = SteadyNowSeconds() - f.capture_time_s;
-          if (std::abs(latency) < 60) {
-            std::lock_guard<std::mutex> lock(session.latency_mutex);
-            session.latency_ms.Add(1e3 * latency);
-          }
-        }
-        view.buffer->Push(f, Now());
-        if (observer_) observer_(view.id, f);
-        ++session.decoded;
-      }
+    {
+      std::lock_guard<std::mutex> lock(session.frames_mutex);
+      error = TakeFrames(session, up.frames());
     }
     if (!error.empty()) session.SendError("bad frame: " + error);
   }
   return {};
+}
+
+std::string ReceiverSessions::TakeFrames(Session& session, const v1::Frames& frames) {
+  const SessionView& view = session.view;
+  ParamDecoder& decoder = *session.decoder;
+  session.bytes += frames.payload().size();
+  std::string error;
+  std::vector<std::string> packets;
+  const double first_capture = frames.first_capture_time_s();
+  if (!UnpackPackets(frames.payload(), &packets, &error)) {
+    ++session.bad;
+  } else if (packets.size() != frames.count()) {
+    error =
+        "the message says " + std::to_string(frames.count()) + " frames and carries " + std::to_string(packets.size());
+    ++session.bad;
+  } else if (!std::isfinite(first_capture) || std::abs(first_capture) > 1e12) {
+    // One absurd time would shift every later frame of the batch out of the jitter buffer's window.
+    error = "first_capture_time_s is not a time";
+    session.bad += packets.size();
+  } else {
+    std::optional<double> batch_shift;  // relative (decoded) -> sender's absolute clock
+    for (const auto& packet : packets) {
+      // After a lost datagram the deltas up to the next key frame have no
+      // reference: passed over (the jitter buffer counts their numbers lost).
+      const bool after_gap = session.datagram_key && decoder.waiting_for_key_frame();
+      FrameParams f;
+      std::string why;
+      if (!decoder.Decode(packet, &f, &why) || !f.IsValid(&why)) {
+        if (!after_gap) {
+          ++session.bad;
+          error = why;
+        }
+        continue;
+      }
+      if (first_capture > 0) {
+        if (!batch_shift) batch_shift = first_capture - f.capture_time_s;
+        f.capture_time_s += *batch_shift;
+        // Same host (netlab, loopback tests): the clocks agree and arrival latency is meaningful.
+        const double latency = SteadyNowSeconds() - f.capture_time_s;
+        if (std::abs(latency) < 60) {
+          std::lock_guard<std::mutex> lock(session.latency_mutex);
+          session.latency_ms.Add(1e3 * latency);
+        }
+      }
+      view.buffer->Push(f, Now());
+      if (observer_) observer_(view.id, f);
+      session.last_sequence = f.sequence;
+      ++session.decoded;
+    }
+  }
+  // A datagram session stuck behind a gap asks for a key frame, again now and
+  // then (a request can be slower than the next datagrams, or lost with the link).
+  if (session.datagram_key && decoder.waiting_for_key_frame() && session.poke_downlink &&
+      (session.last_key_request_s < 0 || Now() - session.last_key_request_s > 0.5)) {
+    session.last_key_request_s = Now();
+    session.want_key_frame = true;
+    session.poke_downlink();
+  }
+  return error;
+}
+
+void ReceiverSessions::EnableDatagrams(int port, DatagramReply reply) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  datagram_reply_ = std::move(reply);
+  datagram_port_ = port;
+}
+
+bool ReceiverSessions::TakeDatagram(const std::string& datagram, const std::string& peer) {
+  uint32_t id = 0;
+  if (!PeekDatagramConnection(datagram, DatagramDirection::kUplink, &id)) {
+    ++datagrams_refused_;
+    return false;
+  }
+  std::unique_lock<std::mutex> lock(mutex_);
+  auto it = by_connection_.find(id);
+  if (it == by_connection_.end()) {
+    ++datagrams_refused_;
+    return false;
+  }
+  Session& session = *it->second;
+  std::lock_guard<std::mutex> frames_lock(session.frames_mutex);
+  lock.unlock();
+  uint32_t counter = 0;
+  uint64_t missing = 0;
+  std::string plaintext, why;
+  v1::Frames frames;
+  if (!OpenDatagram(*session.datagram_key, DatagramDirection::kUplink, datagram, &counter, &plaintext, &why) ||
+      session.datagram_order.Take(counter, &missing) == DatagramOrder::Verdict::kStale) {
+    ++session.datagrams_refused;
+    ++datagrams_refused_;
+    return false;
+  }
+  // Authenticated and new: the sender's, whatever it carries; answers go
+  // where it came from (a sender behind a NAT whose mapping changed included).
+  session.last_message_s = Now();
+  if (!peer.empty()) session.datagram_peer = peer;
+  ++session.datagrams;
+  ++datagrams_received_;
+  if (missing > 0) {
+    session.datagrams_lost += missing;
+    session.decoder->AwaitKeyFrame();
+  }
+  if (!frames.ParseFromString(plaintext)) {
+    ++session.bad;
+    return true;
+  }
+  try {
+    TakeFrames(session, frames);
+  } catch (const std::exception& e) {
+    // The frame observer failed: this session ends, as on the stream.
+    session.failure = std::string("receiver failure: ") + e.what();
+    session.channel.Cancel();
+  }
+  return true;
 }
 
 std::vector<SessionView> ReceiverSessions::Sessions() const {
@@ -421,7 +604,10 @@ std::vector<SessionView> ReceiverSessions::Sessions() const {
 
 ServerCounters ReceiverSessions::counters() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return counters_;
+  ServerCounters c = counters_;
+  c.datagrams_received = datagrams_received_;
+  c.datagrams_refused = datagrams_refused_;
+  return c;
 }
 
 void ReceiverSessions::SetFrameObserver(std::function<void(const std::string&, const FrameParams&)> observer) {

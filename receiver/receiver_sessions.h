@@ -73,6 +73,9 @@ std::vector<SessionView> DisplayOrder(std::vector<SessionView> sessions, const S
 struct ServerCounters {
   uint64_t sessions_started = 0, sessions_rejected = 0, frames_received = 0, frames_bad = 0, bytes_received = 0;
   uint64_t hello_timeouts = 0, idle_timeouts = 0, evictions = 0;
+  // Datagrams taken, and those refused: of no live session, not
+  // authenticating, repeated or overtaken, oversized.
+  uint64_t datagrams_received = 0, datagrams_refused = 0;
 };
 
 // How a session ended, for the transport to pass on (gRPC: the call's status).
@@ -109,6 +112,17 @@ class ReceiverSessions {
   // to record the stream. Set before the first session. An exception from it
   // ends that session with kInternal.
   void SetFrameObserver(std::function<void(const std::string& session_id, const FrameParams&)> observer);
+  // Sends a datagram to a peer (as TakeDatagram was told it); false if it could not.
+  using DatagramReply = std::function<bool(const std::string& peer, const std::string& datagram)>;
+  // Offers senders that ask for it (Hello.datagrams) to send their frames as
+  // datagrams to this UDP port (0, the default: none); Stats and key frame
+  // requests then go back through `reply` to where the session's datagrams
+  // come from. Set by the transport that owns the socket, before the first session.
+  void EnableDatagrams(int port, DatagramReply reply);
+  // One datagram from the transport's socket, from `peer`: opened with its
+  // session's key, its frames decoded into that session. False (and counted)
+  // when refused. Never throws; safe beside Serve.
+  bool TakeDatagram(const std::string& datagram, const std::string& peer = {});
   // Render fps to report back in Stats (set by the render loop).
   void SetRenderFps(double fps);
   // Seconds on the receiver clock (steady, since construction).
@@ -116,7 +130,10 @@ class ReceiverSessions {
 
  private:
   struct Session;
-  SessionEnd Stream(Session& session, const CodecLayout& layout, double stats_interval_s);
+  SessionEnd Stream(Session& session, const CodecLayout& layout, double stats_interval_s, bool datagrams);
+  // Decodes one Frames message into the session (its frames_mutex held);
+  // returns what was wrong with it, if anything.
+  std::string TakeFrames(Session& session, const v1::Frames& frames);
   SessionEnd Reject(DownlinkChannel& channel, int reason, const std::string& message, SessionEndCode code);
   void Watch();  // the watchdog: Hello deadlines and idle sessions
   ReceiverSessionOptions options_;
@@ -126,6 +143,10 @@ class ReceiverSessions {
   std::map<std::string, SessionView> sessions_;
   std::map<std::string, Session*> live_;               // the streams behind sessions_, for the watchdog
   std::map<DownlinkChannel*, double> awaiting_hello_;  // streams not yet past Hello, since when
+  std::map<uint32_t, Session*> by_connection_;         // sessions that take datagrams, by connection id
+  std::atomic<int> datagram_port_{0};
+  DatagramReply datagram_reply_;
+  std::atomic<uint64_t> datagrams_received_{0}, datagrams_refused_{0};
   std::condition_variable watch_cv_;
   bool stopping_ = false;
   ServerCounters counters_;

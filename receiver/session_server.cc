@@ -7,10 +7,15 @@
 #include <grpcpp/resource_quota.h>
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <chrono>
+#include <optional>
+#include <thread>
 
 #include "common/core/options.h"
+#include "common/core/udp_socket.h"
 #include "common/core/zip_archive.h"
+#include "proto/datagram.h"
 #include "proto/headcast.grpc.pb.h"
 #include "proto/protocol.h"
 
@@ -27,6 +32,7 @@ void ReceiverServerOptions::Check() const {
          "plaintext is only allowed on a loopback address (got " + listen + "); configure TLS");
   c.That(plaintext || (!tls_cert.empty() && !tls_key.empty()),
          "TLS needs tls_cert and tls_key (or plaintext on loopback)");
+  c.InRange("datagram_port", datagram_port, -1, 65535);
   c.That(!tokens.empty() || (allow_no_token && plaintext),
          "bearer tokens are required (allow_no_token only with plaintext on loopback)");
   c.ThrowIfErrors();
@@ -89,6 +95,9 @@ struct ReceiverServer::Impl final : public v1::Headcast::Service {
   ReceiverSessions& sessions;
   std::unique_ptr<grpc::Server> server;
   int port = 0;
+  std::optional<UdpSocket> udp;
+  std::thread udp_thread;
+  std::atomic<bool> udp_stop{false};
 
   grpc::Status Session(grpc::ServerContext* context,
                        grpc::ServerReaderWriter<v1::Downlink, v1::Uplink>* stream) override {
@@ -148,9 +157,57 @@ void ReceiverServer::Start() {
   if (!impl_->server || impl_->port == 0)
     throw std::runtime_error("receiver: cannot listen on " + o.listen + " (in use?)");
   spdlog::info("receiver listening on {} (port {}, {})", o.listen, impl_->port, o.plaintext ? "plaintext" : "TLS");
+  if (o.datagrams) StartDatagrams();
+}
+
+void ReceiverServer::StartDatagrams() {
+  const auto& o = options_;
+  HostPort where;
+  std::string why;
+  ParseHostPort(o.listen, &where, &why);  // checked in Check()
+  if (o.datagram_port >= 0) {
+    impl_->udp = UdpSocket::Bind(where.host, o.datagram_port);
+  } else {
+    try {  // the gRPC port's number first: one number for a firewall rule
+      impl_->udp = UdpSocket::Bind(where.host, impl_->port);
+    } catch (const std::runtime_error& e) {
+      spdlog::warn("receiver: {}; datagrams on another port", e.what());
+      impl_->udp = UdpSocket::Bind(where.host, 0);
+    }
+  }
+  const int udp_port = impl_->udp->port();
+  // The socket outlives every session that may answer through it: Shutdown
+  // joins this thread, and sessions end with the server before it is closed.
+  sessions_.EnableDatagrams(udp_port, [udp = &*impl_->udp](const std::string& peer, const std::string& datagram) {
+    return udp->SendTo(peer, datagram);
+  });
+  impl_->udp_thread = std::thread([this] {
+    std::string datagram, peer;
+    while (!impl_->udp_stop) {
+      // Short waits: Shutdown is prompt without a wake-up socket.
+      switch (impl_->udp->Receive(&datagram, kMaxDatagramBytes, 100, &peer)) {
+        case UdpSocket::Received::kDatagram:
+          sessions_.TakeDatagram(datagram, peer);
+          break;
+        case UdpSocket::Received::kTooLarge:
+          sessions_.TakeDatagram({});  // counted as refused
+          break;
+        case UdpSocket::Received::kTimeout:
+          break;
+        case UdpSocket::Received::kError:
+          std::this_thread::sleep_for(std::chrono::milliseconds(10));  // never a busy loop
+          break;
+      }
+    }
+  });
+  spdlog::info("receiver takes frames as datagrams on UDP port {}", udp_port);
 }
 
 void ReceiverServer::Shutdown() {
+  if (impl_ && impl_->udp_thread.joinable()) {
+    impl_->udp_stop = true;
+    impl_->udp_thread.join();
+  }
   if (impl_ && impl_->server) {
     impl_->server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(500));
     impl_->server->Wait();
@@ -159,6 +216,7 @@ void ReceiverServer::Shutdown() {
 }
 
 int ReceiverServer::port() const { return impl_->port; }
+int ReceiverServer::datagram_port() const { return impl_->udp ? impl_->udp->port() : 0; }
 
 int MaxServerThreads(const ReceiverServerOptions& o) { return 2 * o.max_sessions + 16; }
 

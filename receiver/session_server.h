@@ -19,7 +19,12 @@ struct ReceiverServerOptions : ReceiverSessionOptions {
   bool plaintext = false;                  // TLS off: only allowed when listening on loopback
   std::string tls_cert, tls_key;           // PEM files: server certificate chain and key
   std::string tls_client_ca;               // PEM: if set, clients must present a certificate signed by it
-  void Check() const;                      // throws std::invalid_argument, e.g. plaintext on a non-loopback address
+  // Take frames as UDP datagrams from senders that ask (proto DatagramOffer):
+  // on `datagram_port` of the listening address; -1: the gRPC port's number
+  // (any free port when that is taken), 0: any free port.
+  bool datagrams = true;
+  int datagram_port = -1;
+  void Check() const;  // throws std::invalid_argument, e.g. plaintext on a non-loopback address
 };
 
 // gRPC's thread quota for the server: every session's stream, as many again
@@ -34,7 +39,8 @@ class ReceiverServer {
   // or TLS files cannot be read.
   void Start();
   void Shutdown();
-  int port() const;  // the bound port (after Start)
+  int port() const;           // the bound port (after Start)
+  int datagram_port() const;  // the bound UDP port (after Start; 0: no datagrams)
 
   // The sessions behind the server (what is streaming, counters, the frame observer).
   ReceiverSessions& sessions() { return sessions_; }
@@ -48,6 +54,7 @@ class ReceiverServer {
   double Now() const { return sessions_.Now(); }
 
  private:
+  void StartDatagrams();
   struct Impl;
   ReceiverServerOptions options_;
   ReceiverSessions sessions_;

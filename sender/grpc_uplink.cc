@@ -3,9 +3,12 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/core/udp_socket.h"
 #include "common/core/zip_archive.h"
+#include "proto/datagram.h"
 #include "proto/headcast.grpc.pb.h"
 #include "proto/health.grpc.pb.h"
+#include "proto/protocol.h"
 
 namespace headcast {
 namespace {
@@ -66,6 +69,18 @@ class GrpcUplinkChannel final : public UplinkChannel {
   bool finished_ = false;
 };
 
+class UdpDatagramPath final : public DatagramPath {
+ public:
+  explicit UdpDatagramPath(UdpSocket socket) : socket_(std::move(socket)) {}
+  bool Send(const std::string& datagram) override { return socket_.Send(datagram); }
+  bool Receive(std::string* datagram, int timeout_ms) override {
+    return socket_.Receive(datagram, kMaxDatagramBytes, timeout_ms) == UdpSocket::Received::kDatagram;
+  }
+
+ private:
+  UdpSocket socket_;
+};
+
 class GrpcUplinkConnector final : public UplinkConnector {
  public:
   explicit GrpcUplinkConnector(SenderOptions options) : options_(std::move(options)) {}
@@ -89,6 +104,17 @@ class GrpcUplinkConnector final : public UplinkConnector {
     return std::make_unique<GrpcUplinkChannel>(*stub_, options_.token);
   }
   std::string Describe() const override { return options_.target; }
+  // To the host the stream dialled: the receiver's UDP socket listens on the same address.
+  std::unique_ptr<DatagramPath> OpenDatagrams(int port, std::string* error) override {
+    HostPort target;
+    if (!ParseHostPort(options_.target, &target, error)) return nullptr;
+    try {
+      return std::make_unique<UdpDatagramPath>(UdpSocket::Connect(target.host, port));
+    } catch (const std::exception& e) {
+      *error = e.what();
+      return nullptr;
+    }
+  }
 
  private:
   SenderOptions options_;

@@ -98,6 +98,10 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       ->capture_default_str();
   app.add_option("--max-kbps", o.max_kbps, "link budget on the wire, kbit/s (0: none); adapted down on backlog")
       ->capture_default_str();
+  app.add_option("--datagrams", o.datagrams,
+                 "frames as encrypted UDP datagrams when the receiver offers them: auto (under a 32 kbit/s budget), "
+                 "on, off")
+      ->capture_default_str();
   f.stats_interval = app.add_option("--stats-interval", o.stats_interval_s,
                                     "ask for receiver Stats this often, seconds (0: the receiver's choice; "
                                     "default 5 under a 32 kbit/s budget)");
@@ -292,6 +296,11 @@ nlohmann::json Report(const SenderCounters& c, double seconds) {
           {"last_error", c.last_error},
           {"receiver_frames", c.receiver_frames},
           {"receiver_bad", c.receiver_bad},
+          {"datagrams", c.datagrams},
+          {"datagrams_unsent", c.datagrams_unsent},
+          {"datagrams_active", c.datagrams_active},
+          {"receiver_datagrams_lost", c.receiver_datagrams_lost},
+          {"key_frame_requests", c.key_frame_requests},
           {"budget_kbps_final", c.budget_kbps}};
 }
 

@@ -11,6 +11,7 @@
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "proto/convert.h"
+#include "proto/datagram.h"
 #include "proto/headcast.pb.h"
 #include "proto/protocol.h"
 #include "sender/grpc_uplink.h"
@@ -28,6 +29,9 @@ void SenderOptions::Check() const {
   c.InRange("downlink_overhead_bytes", downlink_overhead_bytes, 0, 10000)
       .InRange("session_start_bytes", session_start_bytes, 0, 1000000)
       .InRange("stats_interval_s", stats_interval_s, 0, 60);
+  c.That(datagrams == "auto" || datagrams == "on" || datagrams == "off",
+         "datagrams must be auto, on or off (got '" + datagrams + "')");
+  c.InRange("datagram_overhead_bytes", datagram_overhead_bytes, 0, 10000);
   std::string why;
   const bool parsed = ParseHostPort(target, nullptr, &why);
   c.That(parsed, "target: " + why);
@@ -43,8 +47,44 @@ void SenderOptions::Check() const {
   c.ThrowIfErrors();
 }
 
+bool SenderOptions::WantsDatagrams() const {
+  return datagrams == "on" || (datagrams == "auto" && max_kbps > 0 && max_kbps < kNarrowLinkKbps);
+}
+
 namespace {
 double Seconds() { return SteadyNowSeconds(); }
+
+// A batch's packets in datagram-sized Frames messages, in order.
+std::vector<v1::Frames> SplitForDatagrams(const std::vector<std::string>& packets,
+                                          const std::vector<double>& capture_times) {
+  std::vector<v1::Frames> out;
+  std::vector<std::string> chunk;
+  double chunk_capture = 0;
+  auto flush = [&] {
+    if (chunk.empty()) return;
+    v1::Frames f;
+    f.set_payload(PackPackets(chunk));
+    f.set_count(static_cast<uint32_t>(chunk.size()));
+    f.set_first_capture_time_s(chunk_capture);
+    out.push_back(std::move(f));
+    chunk.clear();
+  };
+  size_t bytes = 0;
+  // The Frames fields around the payload: count, time, the payload's tag and length.
+  constexpr size_t kFieldBytes = 24;
+  for (size_t i = 0; i < packets.size(); ++i) {
+    const size_t cost = packets[i].size() + 3;  // with its length prefix
+    if (!chunk.empty() && bytes + cost + kFieldBytes > kMaxDatagramPlaintext) flush();
+    if (chunk.empty()) {
+      chunk_capture = capture_times[i];
+      bytes = 0;
+    }
+    chunk.push_back(packets[i]);
+    bytes += cost;
+  }
+  flush();
+  return out;
+}
 }  // namespace
 
 struct SenderClient::Impl {
@@ -63,6 +103,13 @@ struct SenderClient::Impl {
 
   uint64_t sent_before_session = 0;
   v1::Reject::Reason session_rejection = v1::Reject::UNSPECIFIED;  // this session's Reject, if any
+  v1::DatagramOffer offer;                                         // this session's Welcome offer, if any
+  std::atomic<bool> key_frame_wanted{false};                       // the receiver asked for one
+  // Datagrams sent this session, and when the first went: if the receiver's
+  // Stats say none arrived a while later (a firewall), frames go back to the stream.
+  uint64_t session_datagrams = 0;
+  double first_datagram_s = -1;
+  std::atomic<bool> datagrams_blocked{false};
 
   Impl(SenderOptions o, CodecLayout l, std::unique_ptr<UplinkConnector> c)
       : options(std::move(o)), layout(std::move(l)), connector(std::move(c)), queue(options.queue_frames) {
@@ -75,6 +122,48 @@ struct SenderClient::Impl {
     counters.last_error = e;
   }
 
+  // Stats, KeyFrameRequest and Error, from the stream or a datagram (mutex held).
+  void TakeDownlink(const v1::Downlink& d, bool on_stream) {
+    if (d.has_stats()) {
+      if (options.max_kbps > 0) {
+        // A message on the stream costs the uplink its ACKs; a datagram nothing.
+        if (on_stream) downlink_debt_bytes += options.downlink_overhead_bytes;
+        // Frames sent but not yet decoded by the receiver: a backlog in the
+        // network. More than ~0.3 s of frames: back off; otherwise recover.
+        // Datagrams the network lost never arrive, so for them the backlog is
+        // the datagrams neither received nor known lost, in frames.
+        const double session_sent = static_cast<double>(counters.sent - sent_before_session);
+        const double backlog =
+            counters.datagrams_active && session_datagrams > 0
+                ? (static_cast<double>(session_datagrams) - static_cast<double>(d.stats().datagrams_received()) -
+                   static_cast<double>(d.stats().datagrams_lost())) *
+                      session_sent / static_cast<double>(session_datagrams)
+                : session_sent - static_cast<double>(d.stats().frames_received());
+        const double budget = budget_kbps.load();
+        budget_kbps =
+            backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7) : std::min(options.max_kbps, budget * 1.05);
+        counters.budget_kbps = budget_kbps;
+      }
+      counters.receiver_render_fps = d.stats().render_fps();
+      counters.receiver_kbps = d.stats().receive_kbps();
+      counters.receiver_frames = d.stats().frames_received();
+      counters.receiver_bad = d.stats().frames_bad();
+      counters.receiver_lost = d.stats().frames_lost();
+      counters.receiver_late = d.stats().frames_late();
+      counters.receiver_datagrams_lost = d.stats().datagrams_lost();
+      if (counters.datagrams_active && d.stats().datagrams_received() == 0 && session_datagrams >= 3 &&
+          first_datagram_s >= 0 && Seconds() - first_datagram_s > 2) {
+        datagrams_blocked = true;
+        key_frame_wanted = true;  // the stream's decoder must not follow a broken chain
+      }
+    } else if (d.has_key_frame_request()) {
+      ++counters.key_frame_requests;
+      key_frame_wanted = true;
+    } else if (d.has_error()) {
+      counters.last_error = d.error().message();
+    }
+  }
+
   // One session: returns when the stream breaks or we stop.
   void RunSession(UplinkChannel& stream) {
     const double session_start = Seconds();
@@ -83,6 +172,12 @@ struct SenderClient::Impl {
     hello.mutable_hello()->set_avatar_id(options.avatar_id);
     hello.mutable_hello()->set_sender_name(options.sender_name);
     hello.mutable_hello()->set_stats_interval_s(options.stats_interval_s);
+    hello.mutable_hello()->set_datagrams(options.WantsDatagrams());
+    offer.Clear();
+    session_datagrams = 0;
+    first_datagram_s = -1;
+    datagrams_blocked = false;
+    key_frame_wanted = false;
     ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
     session_rejection = v1::Reject::UNSPECIFIED;
     if (!stream.Write(hello)) {
@@ -101,6 +196,7 @@ struct SenderClient::Impl {
       while (stream.Read(&d)) {
         std::lock_guard<std::mutex> lock(mutex);
         if (d.has_welcome()) {
+          offer = d.welcome().datagrams();
           welcomed = 1;
           ++counters.connects;  // counted here: a session may end before the sending side looks
           counters.streaming = true;
@@ -112,27 +208,8 @@ struct SenderClient::Impl {
           ++counters.rejections;
           welcomed = -1;
           cv.notify_all();
-        } else if (d.has_stats()) {
-          if (options.max_kbps > 0) {
-            downlink_debt_bytes += options.downlink_overhead_bytes;
-            // Frames sent but not yet decoded by the receiver: a backlog in the
-            // network. More than ~0.3 s of frames: back off; otherwise recover.
-            const double backlog = static_cast<double>(counters.sent) -
-                                   static_cast<double>(d.stats().frames_received()) -
-                                   static_cast<double>(sent_before_session);
-            const double budget = budget_kbps.load();
-            budget_kbps =
-                backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7) : std::min(options.max_kbps, budget * 1.05);
-            counters.budget_kbps = budget_kbps;
-          }
-          counters.receiver_render_fps = d.stats().render_fps();
-          counters.receiver_kbps = d.stats().receive_kbps();
-          counters.receiver_frames = d.stats().frames_received();
-          counters.receiver_bad = d.stats().frames_bad();
-          counters.receiver_lost = d.stats().frames_lost();
-          counters.receiver_late = d.stats().frames_late();
-        } else if (d.has_error()) {
-          counters.last_error = d.error().message();
+        } else {
+          TakeDownlink(d, /*on_stream=*/true);
         }
       }
       std::lock_guard<std::mutex> lock(mutex);
@@ -156,6 +233,61 @@ struct SenderClient::Impl {
                   [&] { return welcomed != 0 || stop; });
     }
     if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", connector->Describe(), options.avatar_id);
+    // Frames as datagrams when both ends want them; otherwise on the stream.
+    std::unique_ptr<DatagramPath> path;
+    DatagramKey key;
+    if (welcomed == 1 && options.WantsDatagrams()) {
+      std::string why;
+      v1::DatagramOffer o;
+      {
+        std::lock_guard<std::mutex> lock(mutex);
+        o = offer;
+      }
+      if (o.port() == 0) {
+        why = "the receiver offers none";
+      } else if (o.port() <= 65535 && DatagramKey::FromBytes(o.connection_id(), o.key(), &key, &why)) {
+        path = connector->OpenDatagrams(static_cast<int>(o.port()), &why);
+      } else if (why.empty()) {
+        why = "port " + std::to_string(o.port()) + " out of range";
+      }
+      if (path) {
+        spdlog::info("sender: frames go as datagrams to UDP port {}", o.port());
+      } else {
+        spdlog::warn("sender: no datagrams ({}); frames go on the stream", why);
+      }
+      std::lock_guard<std::mutex> lock(mutex);
+      counters.datagrams_active = path != nullptr;
+    }
+    // Stats and key frame requests come back as datagrams too: read beside
+    // the stream's reader, joined before the path goes.
+    std::atomic<bool> datagram_reader_stop{false};
+    std::thread datagram_reader;
+    if (path)
+      datagram_reader = std::thread([&] {
+        DatagramOrder order;
+        std::string bytes, plaintext, why;
+        while (!datagram_reader_stop) {
+          uint32_t counter = 0;
+          v1::Downlink d;
+          if (!path->Receive(&bytes, 100) ||
+              !OpenDatagram(key, DatagramDirection::kDownlink, bytes, &counter, &plaintext, &why) ||
+              order.Take(counter) == DatagramOrder::Verdict::kStale || !d.ParseFromString(plaintext) ||
+              d.has_welcome() || d.has_reject())
+            continue;
+          std::lock_guard<std::mutex> lock(mutex);
+          TakeDownlink(d, /*on_stream=*/false);
+        }
+      });
+    struct JoinDatagramReader {
+      std::atomic<bool>& stop;
+      std::thread& thread;
+      ~JoinDatagramReader() {
+        stop = true;
+        if (thread.joinable()) thread.join();
+      }
+    } join_datagram_reader{datagram_reader_stop, datagram_reader};
+    bool send_datagrams = path != nullptr;
+    uint32_t datagram_counter = 0;
     ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame
     {
       std::lock_guard<std::mutex> lock(mutex);
@@ -204,29 +336,61 @@ struct SenderClient::Impl {
           counters.dropped += skipped;
         }
       }
+      if (send_datagrams && datagrams_blocked) {
+        spdlog::warn("sender: the receiver got none of {} datagrams (UDP blocked?); frames go on the stream",
+                     session_datagrams);
+        send_datagrams = false;
+        std::lock_guard<std::mutex> lock(mutex);
+        counters.datagrams_active = false;
+      }
+      if (key_frame_wanted.exchange(false)) encoder.ForceKeyFrame();
       if (!origin) origin = first->capture_time_s;
-      const double first_capture = first->capture_time_s;
       std::vector<std::string> packets;
+      std::vector<double> capture_times;
       packets.push_back(encoder.Encode(*first, *origin));
+      capture_times.push_back(first->capture_time_s);
       while (!options.freshest_only && static_cast<int>(packets.size()) < options.max_batch) {
         auto more = queue.TryPop();
         if (!more) break;
         packets.push_back(encoder.Encode(*more, *origin));
+        capture_times.push_back(more->capture_time_s);
       }
       first_message = false;
-      v1::Uplink up;
-      up.mutable_frames()->set_payload(PackPackets(packets));
-      if (options.max_kbps > 0) tokens -= options.wire_overhead_bytes + up.frames().payload().size();
-      up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
-      up.mutable_frames()->set_first_capture_time_s(first_capture);
       last_send = Seconds();
-      const bool ok = stream.Write(up);
+      bool ok = true;
+      uint64_t messages = 0, payload_bytes = 0, unsent = 0;
+      if (send_datagrams) {
+        // Each datagram stands alone on the wire; one the system refuses is
+        // lost like one the network drops, and the receiver asks for a key frame.
+        for (const v1::Frames& f : SplitForDatagrams(packets, capture_times)) {
+          if (!path->Send(SealDatagram(key, DatagramDirection::kUplink, ++datagram_counter, f.SerializeAsString())))
+            ++unsent;
+          ++messages;
+          payload_bytes += f.payload().size();
+          if (options.max_kbps > 0) tokens -= options.datagram_overhead_bytes + f.payload().size();
+        }
+      } else {
+        v1::Uplink up;
+        up.mutable_frames()->set_payload(PackPackets(packets));
+        up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
+        up.mutable_frames()->set_first_capture_time_s(capture_times.front());
+        messages = 1;
+        payload_bytes = up.frames().payload().size();
+        if (options.max_kbps > 0) tokens -= options.wire_overhead_bytes + payload_bytes;
+        ok = stream.Write(up);
+      }
       {
         std::lock_guard<std::mutex> lock(mutex);
         if (ok) {
           counters.sent += packets.size();
-          counters.messages += 1;
-          counters.payload_bytes += up.frames().payload().size();
+          counters.messages += messages;
+          counters.payload_bytes += payload_bytes;
+          if (send_datagrams) {
+            counters.datagrams += messages;
+            counters.datagrams_unsent += unsent;
+            session_datagrams += messages;
+            if (first_datagram_s < 0) first_datagram_s = last_send;
+          }
         }
         cv.notify_all();
       }

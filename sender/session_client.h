@@ -51,6 +51,13 @@ struct SenderOptions {
   // a narrow link the first frames wait for the link instead of queueing
   // behind the start-up in the network for seconds.
   int session_start_bytes = 1400;
+  // Frames as UDP datagrams when the receiver offers them (proto
+  // DatagramOffer): "auto" on narrow links (a budget below kNarrowLinkKbps),
+  // "on" always, "off" never. The stream stays for Hello, Stats and Bye.
+  std::string datagrams = "auto";
+  // Bytes per datagram on the wire beyond the payload: Ethernet, IP and UDP
+  // headers, the datagram's header and tag, the Frames fields (bench/DEFAULTS.md).
+  int datagram_overhead_bytes = 80;
   // How often we want Stats, seconds (0: the receiver's choice). Narrow links
   // ask for fewer: see NarrowLinkDefaults().
   double stats_interval_s = 0;
@@ -58,6 +65,7 @@ struct SenderOptions {
   double welcome_timeout_s = 3;                             // Hello -> Welcome deadline
   double keepalive_s = 10;                                  // HTTP/2 ping interval while idle
   void Check() const;
+  bool WantsDatagrams() const;  // what `datagrams` means for this budget
 };
 
 // Below this budget (kbit/s) the sender defaults to the narrow-link settings:
@@ -84,6 +92,20 @@ struct SenderCounters {
   double receiver_render_fps = 0, receiver_kbps = 0;
   double budget_kbps = 0;  // the current pacing budget (max_kbps after adaptation)
   uint64_t receiver_frames = 0, receiver_bad = 0, receiver_lost = 0, receiver_late = 0;
+  // Messages sent as datagrams (also in `messages`), those the system refused
+  // to send, the receiver's count of datagrams lost and its key frame requests.
+  uint64_t datagrams = 0, datagrams_unsent = 0, receiver_datagrams_lost = 0, key_frame_requests = 0;
+  bool datagrams_active = false;  // this session's frames go as datagrams
+};
+
+// One session's datagram path to the receiver: sends sealed datagrams, never blocks.
+class DatagramPath {
+ public:
+  virtual ~DatagramPath() = default;
+  // False when the datagram could not be handed to the network (it is lost).
+  virtual bool Send(const std::string& datagram) = 0;
+  // Waits up to timeout_ms for a datagram from the receiver; false if none came.
+  virtual bool Receive(std::string* datagram, int timeout_ms) = 0;
 };
 
 // Opens one session's channel to the receiver, once per connection attempt.
@@ -94,6 +116,13 @@ class UplinkConnector {
   // (unreadable TLS material, say) after which the client stops trying.
   virtual std::unique_ptr<UplinkChannel> Open(std::string* error) = 0;
   virtual std::string Describe() const = 0;  // where it connects, for messages
+  // A datagram path to `port` on the receiver's host, or nullptr with *error
+  // (this transport has none, the address cannot be used).
+  virtual std::unique_ptr<DatagramPath> OpenDatagrams(int port, std::string* error) {
+    (void)port;
+    *error = "this transport carries no datagrams";
+    return nullptr;
+  }
 };
 
 class SenderClient {

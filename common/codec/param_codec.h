@@ -81,6 +81,9 @@ class ParamDecoder {
   bool Decode(const std::string& packet, FrameParams* out, std::string* why, double time_origin_s = 0);
   const CodecLayout& layout() const { return layout_; }
   bool waiting_for_key_frame() const { return !have_reference_; }
+  // Packets were lost since the last one decoded (a datagram gap): the next
+  // delta frames would decode against the wrong reference, so wait for a key frame.
+  void AwaitKeyFrame() { have_reference_ = false; }
 
  private:
   CodecLayout layout_;

@@ -53,6 +53,10 @@ def main():
         summary["messages"] = sender.get("messages")
         summary["frames_per_message"] = (sender["frames_sent"] / sender["messages"]) if sender.get("messages") else None
         summary["reconnects"] = max(0, sender.get("connects", 1) - 1)
+        summary["frames_as"] = "datagrams" if sender.get("datagrams", 0) > 0 else "stream"
+        summary["datagrams"] = sender.get("datagrams", 0)
+        summary["datagrams_lost"] = sender.get("receiver_datagrams_lost", 0)
+        summary["key_frame_requests"] = sender.get("key_frame_requests", 0)
     if receiver:
         summary["frames_received"] = receiver.get("frames_received")
         summary["frames_bad"] = receiver.get("frames_bad")
@@ -65,6 +69,11 @@ def main():
         summary["latency_ms_median_first_fifth"] = statistics.median(lat[:n])
         summary["latency_ms_median_last_fifth"] = statistics.median(lat[-n:])
         summary["latency_growth_ms"] = summary["latency_ms_median_last_fifth"] - summary["latency_ms_median_first_fifth"]
+        # Once streaming: the frames after the first arrival over the time to the last
+        # (the call's start-up, handshakes on a narrow link, excluded).
+        t_first, t_last = latency[0][0], latency[-1][0]
+        after_first = sum(1 for t, _ in latency if t > t_first)
+        summary["fps_delivered_streaming"] = after_first / (t_last - t_first) if t_last > t_first else None
     summary["what_latency_means"] = ("capture on the sender to arrival (decoded) at the receiver, same host clock; "
                                      "includes batching, queueing in the rate limiter and the network")
     json.dump(summary, open(os.path.join(d, "netlab.json"), "w"), indent=2)

@@ -3,13 +3,14 @@
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
 #                           [--recording REC [--head-model M]] [--out DIR] [--min-send-interval S] [--max-batch N]
-#                           [--max-kbps K] [--freshest] [--pcap FILE]
+#                           [--max-kbps K] [--freshest] [--datagrams auto|on|off] [--pcap FILE]
 #
 # --recording replays a parameter recording (e.g. a real person tracked with
 # ICT-FaceKit by headcast-track); --head-model is the model .npz it was made
 # with (the receiver's avatar is made for that model). Default: the built-in
 # head's synthetic talking sequence. --freshest: the sender's newest-frame-only
-# mode (one frame per message, the receiver interpolates).
+# mode (one frame per message, the receiver interpolates). --datagrams: the
+# sender's choice of frames as UDP datagrams (default auto: under 32 kbit/s).
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -24,7 +25,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" freshest=() pcap="" min_interval=0 max_batch=16 max_kbps="" python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" freshest=() pcap="" min_interval=0 max_batch=16 max_kbps="" datagrams=auto python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -39,6 +40,7 @@ while [ $# -gt 0 ]; do
     --max-batch) max_batch=$2; shift 2 ;;
     --max-kbps) max_kbps=$2; shift 2 ;;
     --pcap) pcap=$2; shift 2 ;;
+    --datagrams) datagrams=$2; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/{/^#/p}' "$0"; exit 0 ;;
     *) echo "netlab: unknown option $1" >&2; exit 2 ;;
   esac
@@ -125,13 +127,13 @@ if [ -n "$pcap" ]; then
   # Packet capture on the sender's side of the link, for looking at per-message overheads.
   command -v tcpdump > /dev/null || { echo "netlab: --pcap needs tcpdump (apt-get install tcpdump)" >&2; exit 1; }
   if [ "$mode" = netns ]; then dev=veth_tx_$$; else dev=lo; fi
-  "${run_tx[@]}" tcpdump -i "$dev" -s 200 -w "$pcap" tcp 2> /dev/null &
+  "${run_tx[@]}" tcpdump -i "$dev" -s 200 -w "$pcap" tcp or udp 2> /dev/null &
   dpid=$!
   sleep 0.5
 fi
 "${run_tx[@]}" "$bin/headcast-sender" --target "$listen" "${tx_tls[@]}" --token "$token" --avatar-id demo \
   --head-model "$head_model" --params "$recording" --loop --duration "$duration" --min-send-interval "$min_interval" --max-batch "$max_batch" \
-  --max-kbps "$max_kbps" "${freshest[@]}" \
+  --max-kbps "$max_kbps" "${freshest[@]}" --datagrams "$datagrams" \
   --json "$out/sender.json" > /dev/null 2> "$work/sender.log" &
 spid=$!
 echo "t,up_bytes,down_bytes,up_packets,down_packets" > "$out/timeline.csv"
