@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <mutex>
@@ -13,6 +14,7 @@
 
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
+#include "proto/datagram.h"
 #include "proto/protocol.h"
 #include "receiver/receiver_sessions.h"
 #include "sender/session_client.h"
@@ -47,11 +49,78 @@ SenderOptions Options() {
 
 using testing::WaitFor;
 
+// A datagram network in memory between senders and `receiver`: uplink
+// datagrams go straight into TakeDatagram unless `lose` says the network lost
+// them; the receiver's answers queue for the path they are addressed to.
+class InMemoryDatagrams {
+ public:
+  explicit InMemoryDatagrams(ReceiverSessions& receiver) : receiver_(receiver) {
+    receiver.EnableDatagrams(4242, [this](const std::string& peer, const std::string& d) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      inbox_[peer].push_back(d);
+      ++answers_;
+      cv_.notify_all();
+      return true;
+    });
+  }
+  // Given the uplink datagram's index (from 0, over every path): true to lose it.
+  std::function<bool(int)> lose = [](int) { return false; };
+
+  class Path : public DatagramPath {
+   public:
+    Path(InMemoryDatagrams& net, std::string name) : net_(net), name_(std::move(name)) {}
+    bool Send(const std::string& d) override {
+      int index = 0;
+      {
+        std::lock_guard<std::mutex> lock(net_.mutex_);
+        index = net_.sent_++;
+        net_.uplink_.push_back(d);
+      }
+      if (!net_.lose(index)) net_.receiver_.TakeDatagram(d, name_);
+      return true;
+    }
+    bool Receive(std::string* d, int timeout_ms) override {
+      std::unique_lock<std::mutex> lock(net_.mutex_);
+      auto& q = net_.inbox_[name_];
+      if (!net_.cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), [&] { return !q.empty(); })) return false;
+      *d = q.front();
+      q.pop_front();
+      return true;
+    }
+
+   private:
+    InMemoryDatagrams& net_;
+    std::string name_;
+  };
+  std::unique_ptr<DatagramPath> Open(int port) {
+    EXPECT_EQ(port, 4242);
+    std::lock_guard<std::mutex> lock(mutex_);
+    return std::make_unique<Path>(*this, "peer" + std::to_string(paths_++));
+  }
+  std::vector<std::string> uplink() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return uplink_;
+  }
+  int answers() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return answers_;
+  }
+
+ private:
+  ReceiverSessions& receiver_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::map<std::string, std::deque<std::string>> inbox_;
+  std::vector<std::string> uplink_;
+  int sent_ = 0, paths_ = 0, answers_ = 0;
+};
+
 // Each Open makes a channel pair and serves the receiver's end on its own
 // thread, as a transport adapter would. Break() cuts the current link.
 class InMemoryConnector : public UplinkConnector {
  public:
-  InMemoryConnector(ReceiverSessions& receiver, std::string token) : receiver_(receiver), token_(std::move(token)) {}
+  InMemoryConnector(ReceiverSessions& receiver, std::string token, InMemoryDatagrams* datagrams = nullptr)
+      : receiver_(receiver), token_(std::move(token)), datagrams_(datagrams) {}
   ~InMemoryConnector() override {
     for (auto& t : threads_) t.join();
   }
@@ -72,6 +141,10 @@ class InMemoryConnector : public UplinkConnector {
     return std::move(pair.sender);
   }
   std::string Describe() const override { return "in-memory"; }
+  std::unique_ptr<DatagramPath> OpenDatagrams(int port, std::string* error) override {
+    if (!datagrams_) return UplinkConnector::OpenDatagrams(port, error);
+    return datagrams_->Open(port);
+  }
   void Break() {
     std::lock_guard<std::mutex> lock(mutex_);
     if (current_) current_->Cancel();
@@ -88,6 +161,7 @@ class InMemoryConnector : public UplinkConnector {
  private:
   ReceiverSessions& receiver_;
   std::string token_;
+  InMemoryDatagrams* datagrams_;
   std::mutex mutex_;
   std::shared_ptr<DownlinkChannel> current_;
   std::vector<SessionEnd> ends_;
@@ -96,10 +170,11 @@ class InMemoryConnector : public UplinkConnector {
 };
 
 struct Client {
-  Client(ReceiverSessions& receiver, const std::string& token, const SenderOptions& o = Options()) {
-    auto c = std::make_unique<InMemoryConnector>(receiver, token);
+  Client(ReceiverSessions& receiver, const std::string& token, const SenderOptions& o = Options(),
+         InMemoryDatagrams* datagrams = nullptr, const CodecLayout& layout = Layout()) {
+    auto c = std::make_unique<InMemoryConnector>(receiver, token, datagrams);
     connector = c.get();
-    client = std::make_unique<SenderClient>(o, Layout(), std::move(c));
+    client = std::make_unique<SenderClient>(o, layout, std::move(c));
   }
   InMemoryConnector* connector;  // owned by the client
   std::unique_ptr<SenderClient> client;
@@ -502,6 +577,212 @@ TEST(SessionProtocol, AFailingObserverEndsOnlyItsSession) {
   c.client->Stop();
   EXPECT_TRUE(WaitFor([&] { return receiver.Sessions().empty(); }, 5));
   EXPECT_GE(receiver.counters().frames_received, 1u);
+}
+
+// Frames submitted a few milliseconds apart, so that most go alone (one per datagram).
+void SubmitSpaced(SenderClient& client, int first, int count) {
+  for (int i = first; i < first + count; ++i) {
+    FrameParams f = SyntheticTalkingHead(Model(), i);
+    f.sequence = static_cast<uint64_t>(i);
+    client.Submit(f);
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+  }
+}
+
+// Every decoded frame is the frame of its sequence number, within half a
+// quantisation step, and no number comes twice: never garbage.
+void ExpectTrueFrames(Collector& got) {
+  const CodecLayout& l = Layout();
+  std::lock_guard<std::mutex> lock(got.mutex);
+  for (size_t i = 0; i < got.frames.size(); ++i) {
+    const FrameParams& f = got.frames[i];
+    if (i > 0) EXPECT_GT(f.sequence, got.frames[i - 1].sequence);
+    const FrameParams truth = SyntheticTalkingHead(Model(), static_cast<int>(f.sequence));
+    for (size_t k = 0; k < l.expression_components.size(); ++k)
+      EXPECT_LE(std::abs(f.expression[k] - truth.expression[k]), 0.5f * l.steps[k] + 1e-6f)
+          << "frame " << f.sequence << " component " << k;
+    EXPECT_LE((f.cam_translation - truth.cam_translation).cwiseAbs().maxCoeff(), 0.5f * l.steps.back() + 1e-6f)
+        << "frame " << f.sequence;
+  }
+}
+
+SenderOptions DatagramOptions() {
+  SenderOptions o = Options();
+  o.datagrams = "on";
+  return o;
+}
+
+TEST(SessionDatagrams, FramesGoAsDatagramsAndStatsComeBackTheSameWay) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  InMemoryDatagrams net(receiver);
+  Collector got(receiver);
+  Client c(receiver, "secret-token", DatagramOptions(), &net);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5)) << c.client->counters().last_error;
+  SubmitSpaced(*c.client, 0, 60);
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 60; }, 5)) << got.size();
+  ExpectTrueFrames(got);
+  for (size_t i = 0; i < 60; ++i) EXPECT_EQ(got.frames[i].sequence, i);
+  EXPECT_TRUE(WaitFor([&] { return c.client->counters().receiver_frames == 60; }, 5));
+  const SenderCounters n = c.client->counters();
+  EXPECT_TRUE(n.datagrams_active);
+  EXPECT_EQ(n.datagrams, n.messages);
+  EXPECT_EQ(receiver.counters().datagrams_received, n.datagrams);
+  EXPECT_GT(net.answers(), 0) << "Stats came back as datagrams";
+  c.client->Stop();
+}
+
+// A lost datagram breaks the delta chain: the frames after it are passed
+// over (never decoded against the wrong reference) until the key frame the
+// receiver asks for, and then every frame comes again.
+TEST(SessionDatagrams, ALostDatagramCostsFramesUntilTheKeyFrameItAsksFor) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  InMemoryDatagrams net(receiver);
+  net.lose = [](int i) { return i == 10 || i == 11; };
+  Collector got(receiver);
+  CodecLayout layout = Layout();
+  layout.key_frame_interval = 100000;  // no periodic key frame comes to the rescue
+  Client c(receiver, "secret-token", DatagramOptions(), &net, layout);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  SubmitSpaced(*c.client, 0, 80);
+  ASSERT_TRUE(WaitFor([&] { return got.size() > 0 && got.frames.back().sequence == 79; }, 5));
+  ASSERT_TRUE(WaitFor([&] { return c.client->counters().key_frame_requests >= 1; }, 5));
+  ExpectTrueFrames(got);
+  const size_t n = got.size();
+  EXPECT_LT(n, 78u) << "frames after the gap waited for a key frame";
+  EXPECT_GT(n, 40u) << "and then came again";
+  EXPECT_TRUE(WaitFor([&] { return c.client->counters().receiver_datagrams_lost == 2; }, 5));
+  EXPECT_EQ(receiver.counters().frames_bad, 0u) << "a gap is not corruption";
+  c.client->Stop();
+}
+
+TEST(SessionDatagrams, ReplayedForgedAndForeignDatagramsAreRefusedAndTheSessionGoesOn) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  InMemoryDatagrams net(receiver);
+  Collector got(receiver);
+  Client c(receiver, "secret-token", DatagramOptions(), &net);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  SubmitSpaced(*c.client, 0, 10);
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 10; }, 5));
+  const std::vector<std::string> seen = net.uplink();
+  ASSERT_FALSE(seen.empty());
+  EXPECT_FALSE(receiver.TakeDatagram(seen.front(), "attacker")) << "a replay";
+  std::string forged = seen.back();
+  forged[forged.size() / 2] ^= 0x10;
+  EXPECT_FALSE(receiver.TakeDatagram(forged, "attacker"));
+  // Well formed, under a key of its own: an unknown connection.
+  EXPECT_FALSE(
+      receiver.TakeDatagram(SealDatagram(DatagramKey::Random(), DatagramDirection::kUplink, 1000, "x"), "attacker"));
+  EXPECT_FALSE(receiver.TakeDatagram(std::string(5, '\x01'), "attacker"));
+  EXPECT_FALSE(receiver.TakeDatagram({}, "attacker"));
+  EXPECT_EQ(receiver.counters().datagrams_refused, 5u);
+  SubmitSpaced(*c.client, 10, 10);
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 20; }, 5)) << "the session goes on";
+  ExpectTrueFrames(got);
+  EXPECT_EQ(receiver.counters().frames_bad, 0u);
+  c.client->Stop();
+}
+
+// UDP blocked on the way (a firewall): the receiver's Stats, which still come
+// on the stream, say nothing arrived, and the frames go back to the stream.
+TEST(SessionDatagrams, WhenNoDatagramArrivesFramesGoBackToTheStream) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  InMemoryDatagrams net(receiver);
+  net.lose = [](int) { return true; };
+  Collector got(receiver);
+  Client c(receiver, "secret-token", DatagramOptions(), &net);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        SubmitSpaced(*c.client, 0, 5);
+        return !c.client->counters().datagrams_active;
+      },
+      6));
+  const size_t before = got.size();
+  SubmitSpaced(*c.client, 100, 10);
+  ASSERT_TRUE(WaitFor([&] { return got.size() >= before + 10; }, 5)) << got.size();
+  ExpectTrueFrames(got);
+  EXPECT_EQ(receiver.counters().datagrams_received, 0u);
+  c.client->Stop();
+}
+
+// The codec's chain bits wrap after 32 packets; the datagram counter sees a
+// gap of any length: the frames after it wait for a key frame (asked for as a
+// datagram to where the session's datagrams come from) and are never decoded
+// against the wrong reference.
+TEST(SessionDatagrams, AGapOfAWholeChainWaitsForTheKeyFrameItAsksFor) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  std::mutex mutex;
+  std::vector<std::string> answers;
+  receiver.EnableDatagrams(4242, [&](const std::string&, const std::string& d) {
+    std::lock_guard<std::mutex> lock(mutex);
+    answers.push_back(d);
+    return true;
+  });
+  Collector got(receiver);
+  v1::Uplink hello = RawSession::Hello();
+  hello.mutable_hello()->set_datagrams(true);
+  RawSession raw(receiver, hello);
+  ASSERT_TRUE(raw.first_reply.has_welcome());
+  const v1::DatagramOffer& offer = raw.first_reply.welcome().datagrams();
+  EXPECT_EQ(offer.port(), 4242u);
+  DatagramKey key;
+  std::string why;
+  ASSERT_TRUE(DatagramKey::FromBytes(offer.connection_id(), offer.key(), &key, &why)) << why;
+  CodecLayout layout = Layout();
+  layout.key_frame_interval = 100000;
+  ParamEncoder encoder(layout);
+  auto datagram = [&](int frame) {
+    FrameParams f = SyntheticTalkingHead(Model(), frame);
+    f.sequence = static_cast<uint64_t>(frame);
+    v1::Frames m;
+    m.set_payload(PackPackets({encoder.Encode(f)}));
+    m.set_count(1);
+    return SealDatagram(key, DatagramDirection::kUplink, static_cast<uint32_t>(frame + 1), m.SerializeAsString());
+  };
+  EXPECT_TRUE(receiver.TakeDatagram(datagram(0), "peer"));
+  for (int i = 1; i <= 32; ++i) datagram(i);  // 32 datagrams lost: the chain bits wrap around
+  EXPECT_TRUE(receiver.TakeDatagram(datagram(33), "peer")) << "authentic, so taken";
+  EXPECT_TRUE(receiver.TakeDatagram(datagram(34), "peer"));
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        return !answers.empty();
+      },
+      5));
+  v1::Downlink request;
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    uint32_t counter = 0;
+    std::string plaintext;
+    ASSERT_TRUE(OpenDatagram(key, DatagramDirection::kDownlink, answers.front(), &counter, &plaintext, &why)) << why;
+    ASSERT_TRUE(request.ParseFromString(plaintext));
+  }
+  ASSERT_TRUE(request.has_key_frame_request()) << "the answer went to the datagram's peer";
+  EXPECT_EQ(request.key_frame_request().last_sequence(), 0u);
+  EXPECT_EQ(got.size(), 1u) << "frames 33 and 34 were not decoded against frame 0";
+  encoder.ForceKeyFrame();
+  EXPECT_TRUE(receiver.TakeDatagram(datagram(35), "peer"));
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 2; }, 5));
+  ExpectTrueFrames(got);
+}
+
+// A receiver that offers no datagrams (none enabled): frames stay on the stream.
+TEST(SessionDatagrams, WithoutAnOfferFramesStayOnTheStream) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  Collector got(receiver);
+  InMemoryDatagrams* none = nullptr;
+  Client c(receiver, "secret-token", DatagramOptions(), none);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  SubmitSpaced(*c.client, 0, 10);
+  ASSERT_TRUE(WaitFor([&] { return got.size() == 10; }, 5));
+  EXPECT_FALSE(c.client->counters().datagrams_active);
+  EXPECT_EQ(c.client->counters().datagrams, 0u);
+  c.client->Stop();
 }
 
 }  // namespace

@@ -114,8 +114,10 @@ class SessionTest : public ::testing::Test {
   Collector collector_;
 };
 
-TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
-  SenderClient client(ClientOptions(server_->port()), Layout());
+// Streams 120 frames (and two invalid ones) with `options` and checks that
+// every valid frame arrived once, in order, within the quantisation step.
+void StreamAndCheck(Collector& collector, const SenderOptions& options, SenderCounters* counters) {
+  SenderClient client(options, Layout());
   client.Start();
   ASSERT_TRUE(client.WaitStreaming(5)) << client.counters().last_error;
   std::vector<FrameParams> sent;
@@ -131,12 +133,13 @@ TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
   client.Submit(nan_frame);
   client.Submit(inf_frame);
   ASSERT_TRUE(client.Flush(10));
-  ASSERT_TRUE(WaitFor([&] { return collector_.Total() >= 120; }, 10));
+  ASSERT_TRUE(WaitFor([&] { return collector.Total() >= 120; }, 10));
   EXPECT_EQ(client.counters().invalid, 2u);
+  const SenderCounters c = client.counters();
   client.Stop("test done");
-  std::lock_guard<std::mutex> lock(collector_.mutex);
-  ASSERT_EQ(collector_.frames.size(), 1u);
-  const auto& got = collector_.frames.begin()->second;
+  std::lock_guard<std::mutex> lock(collector.mutex);
+  ASSERT_EQ(collector.frames.size(), 1u);
+  const auto& got = collector.frames.begin()->second;
   ASSERT_EQ(got.size(), 120u);
   const CodecLayout& l = Layout();
   for (size_t i = 0; i < got.size(); ++i) {
@@ -148,10 +151,54 @@ TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
     EXPECT_LE((got[i].cam_translation - sent[i].cam_translation).cwiseAbs().maxCoeff(), 0.5f * l.steps.back() + 1e-6f);
     EXPECT_LE((got[i].jaw - sent[i].jaw).cwiseAbs().maxCoeff(), 0.5f * l.steps[l.expression_components.size()] + 1e-6f);
   }
-  const SenderCounters c = client.counters();
   EXPECT_EQ(c.sent, 120u);
   EXPECT_EQ(c.dropped, 0u);
   EXPECT_LE(c.messages, 120u);
+  *counters = c;
+}
+
+TEST_F(SessionTest, EveryFrameArrivesInOrderWithinTheStep) {
+  SenderOptions o = ClientOptions(server_->port());
+  o.datagrams = "off";
+  SenderCounters c;
+  StreamAndCheck(collector_, o, &c);
+  EXPECT_EQ(c.datagrams, 0u);
+}
+
+// The same over UDP beside the stream: the receiver's datagram port (the
+// gRPC port's number when free), sealed datagrams, Stats back as datagrams.
+TEST_F(SessionTest, EveryFrameArrivesAsDatagramsOnTheirOwnSocket) {
+  ASSERT_GT(server_->datagram_port(), 0);
+  SenderOptions o = ClientOptions(server_->port());
+  o.datagrams = "on";
+  SenderCounters c;
+  StreamAndCheck(collector_, o, &c);
+  EXPECT_TRUE(c.datagrams_active);
+  EXPECT_GT(c.datagrams, 0u);
+  EXPECT_EQ(c.datagrams_unsent, 0u);
+  EXPECT_EQ(server_->counters().datagrams_received, c.datagrams);
+  EXPECT_EQ(server_->counters().datagrams_refused, 0u);
+}
+
+// A receiver without datagrams (--no-datagrams, or an older one) offers none:
+// the sender keeps its frames on the stream.
+TEST(ReceiverServer, WithoutDatagramsFramesStayOnTheStream) {
+  ReceiverServerOptions so = ServerOptions();
+  so.datagrams = false;
+  ReceiverServer server(so, Avatars());
+  server.Start();
+  EXPECT_EQ(server.datagram_port(), 0);
+  SenderOptions o = ClientOptions(server.port());
+  o.datagrams = "on";
+  SenderClient client(o, Layout());
+  client.Start();
+  ASSERT_TRUE(client.WaitStreaming(5)) << client.counters().last_error;
+  for (int i = 0; i < 10; ++i) client.Submit(SyntheticTalkingHead(Model(), i));
+  ASSERT_TRUE(client.Flush(5));
+  EXPECT_TRUE(WaitFor([&] { return client.counters().receiver_frames == 10; }, 5));
+  EXPECT_FALSE(client.counters().datagrams_active);
+  EXPECT_EQ(client.counters().datagrams, 0u);
+  client.Stop();
 }
 
 // Narrow links ask for fewer Stats: the receiver takes the larger interval
