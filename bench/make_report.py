@@ -86,7 +86,7 @@ def main():
     if os.path.exists(os.path.join(r, "narrow_links.md")):
         L += [f"Real people's tracks and the narrow links: [{rel}/narrow_links.md]({rel}/narrow_links.md) "
               "(the codec on ICT-FaceKit tracks of the shared clips, netlab at 4, 8 and 16 kbit/s, synthetic and real "
-              "side by side).", ""]
+              "side by side, frames on the gRPC stream and as datagrams).", ""]
 
     d = load(os.path.join(r, "demo"), "report.json")
     if d:

@@ -2,7 +2,7 @@
 # Builds headcast's libFuzzer targets with clang (ASan + UBSan) and runs each.
 #   tests/fuzz/run_fuzz.sh SECONDS [OUT_DIR] [TARGET...]
 # Targets: frame_decoder (a Frames payload's packets), session_messages
-# (Uplink messages: Hello and its layout, Frames), files (npy, npz/zip,
+# (Uplink messages: Hello and its layout, Frames; the bytes as a datagram), files (npy, npz/zip,
 # .hcrec, token files, avatar manifests, config files). Default: all, each for
 # SECONDS. Prints each target's executions, and fails if any crashed.
 set -euo pipefail
@@ -22,8 +22,8 @@ codec=(common/codec/param_codec.cc common/codec/range_coder.cc common/codec/vari
 proto=("$out/gen/proto/headcast.pb.cc" proto/convert.cc)
 declare -A sources libs
 sources[frame_decoder]="tests/fuzz/frame_decoder_fuzzer.cc ${codec[*]}"
-sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${proto[*]}"
-libs[session_messages]="-lprotobuf"
+sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${proto[*]} proto/datagram.cc"
+libs[session_messages]="-lprotobuf -lcrypto"
 sources[files]="tests/fuzz/files_fuzzer.cc ${codec[*]} ${proto[*]} proto/recording.cc proto/protocol.cc
   common/core/npy.cc common/core/zip_archive.cc common/core/check.cc common/core/log.cc
   common/avatar/avatar_config.cc"

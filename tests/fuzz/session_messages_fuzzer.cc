@@ -1,8 +1,10 @@
 // libFuzzer target: what a receiver reads from a peer before and during a
 // session. The bytes are parsed as an Uplink message; a Hello's parameter
 // layout goes through FromProto (and, when accepted, a decoder is made for
-// it), a Frames payload through UnpackPackets and the decoder. Nothing may
-// crash, hang or read out of bounds; an accepted layout must pass its Check.
+// it), a Frames payload through UnpackPackets and the decoder. The same bytes
+// are opened as a datagram (under a key with their own connection id, so the
+// authentication runs). Nothing may crash, hang or read out of bounds; an
+// accepted layout must pass its Check; no forged datagram may open.
 #include <cstdint>
 #include <cstdlib>
 #include <string>
@@ -10,9 +12,21 @@
 
 #include "common/codec/param_codec.h"
 #include "proto/convert.h"
+#include "proto/datagram.h"
 #include "proto/headcast.pb.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  {
+    const std::string bytes(reinterpret_cast<const char*>(data), size);
+    static headcast::DatagramKey key = headcast::DatagramKey::Random();
+    uint32_t id = 0, counter = 0;
+    std::string plaintext, why;
+    if (headcast::PeekDatagramConnection(bytes, headcast::DatagramDirection::kUplink, &id)) {
+      key.connection_id = id;
+      if (headcast::OpenDatagram(key, headcast::DatagramDirection::kUplink, bytes, &counter, &plaintext, &why))
+        std::abort();  // a forgery opened
+    }
+  }
   headcast::v1::Uplink up;
   if (!up.ParseFromArray(data, static_cast<int>(size))) return 0;
   if (up.has_hello()) {
