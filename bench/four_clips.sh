@@ -4,7 +4,8 @@
 # the default subject settings; per clip the test PSNR/SSIM, the worst 5 % of
 # test frames, the landmark error by region and the blink correlation (dlib on
 # avatar and true frames), the frames whose fit the tracker lost, and the
-# avatar's creation time (prep + fine-tune); then the receiver's frame rate at
+# avatar's creation time (prep + fine-tune), the frames whose brow or mouth
+# landmarks the tracker disputed and repaired; then the receiver's frame rate at
 # 256² and 512² (headcast-bench render, default subject configuration).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N] [--ict DIR] [--clips "d9 d10 ..."]
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
@@ -77,6 +78,8 @@ for c in clips:
     worst = psnr[:max(1, len(psnr) // 20)]
     ds = json.load(open(os.path.join(out, f"ds_{c}", "dataset.json")))
     t = json.load(open(os.path.join(out, f"time_{c}.json")))
+    track = json.load(open(os.path.join(out, f"ds_{c}", "track_report.json")))
+    checks = track.get("landmark_checks") or {}
     rows.append({"clip": f"talking_{c}", "test_psnr_db": e["psnr_db"], "test_ssim": e["ssim"],
                  "worst_5pct_psnr_db": sum(worst) / len(worst), "test_frames": e["frames"],
                  "landmark_error_iod": fid.get("error_iod"), "landmarks_found": fid.get("found_in_both"),
@@ -84,6 +87,8 @@ for c in clips:
                  "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x"),
                  "gaze_correlation_y": (fid.get("gaze") or {}).get("correlation_y"),
                  "frames_read": ds.get("frames_read"), "frames_fitted": ds.get("frames_fitted"), "split": ds.get("split"),
+                 "landmark_disputed_frames": checks.get("disputed_frames"),
+                 "landmark_disputed": checks.get("disputed"), "landmark_repaired_frames": checks.get("repaired_frames"),
                  "prep_s": t["prep_s"], "fine_tune_s": t["fine_tune_s"],
                  "creation_min": (t["prep_s"] + t["fine_tune_s"]) / 60})
 render = {}
@@ -100,11 +105,12 @@ def f(v, fmt):
 L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
      "frames, over the true eye distance.", "",
-     "| clip | fitted / read | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
-     "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
-    L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
+    L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | "
+             f"{f(x['landmark_disputed_frames'], 'd')} / {f(x['landmark_repaired_frames'], 'd')} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
              f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} |")

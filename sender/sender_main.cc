@@ -73,6 +73,9 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       ->capture_default_str();
   app.add_option("--predictor", f.live.tracker.face.predictor_path, "--input: dlib 68-point shape predictor (.dat)")
       ->capture_default_str();
+  app.add_flag("!--no-landmark-repair", f.live.tracker.face.repair.repair,
+               "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
+               "frame (no repair; as the avatar's prep did)");
   app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
                "--input: do not locate the irises (the eyes look straight ahead)");
   AddCameraFlags(app, f.source, f.camera_size);

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <functional>
 #include <optional>
 #include <thread>
 
@@ -85,6 +86,35 @@ std::vector<v1::Frames> SplitForDatagrams(const std::vector<std::string>& packet
   flush();
   return out;
 }
+
+// Stats and key frame requests that come back as datagrams, read on a thread
+// of its own (beside the stream's reader) until destroyed; only what opens
+// under the session's key, in order, reaches `take`.
+class DatagramDownlinkReader {
+ public:
+  DatagramDownlinkReader(DatagramPath& path, const DatagramKey& key, std::function<void(const v1::Downlink&)> take)
+      : thread_([this, &path, key, take] {
+          DatagramOrder order;
+          std::string bytes, plaintext, why;
+          while (!stop_) {
+            uint32_t counter = 0;
+            v1::Downlink d;
+            if (path.Receive(&bytes, 100) &&
+                OpenDatagram(key, DatagramDirection::kDownlink, bytes, &counter, &plaintext, &why) &&
+                order.Take(counter) != DatagramOrder::Verdict::kStale && d.ParseFromString(plaintext) &&
+                (d.has_stats() || d.has_key_frame_request()))
+              take(d);
+          }
+        }) {}
+  ~DatagramDownlinkReader() {
+    stop_ = true;
+    thread_.join();
+  }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::thread thread_;  // last: started once stop_ exists
+};
 }  // namespace
 
 struct SenderClient::Impl {
@@ -109,6 +139,7 @@ struct SenderClient::Impl {
   // Stats say none arrived a while later (a firewall), frames go back to the stream.
   uint64_t session_datagrams = 0;
   double first_datagram_s = -1;
+  uint64_t stats_datagrams_received = 0, stats_datagrams_lost = 0;  // as the last Stats said
   std::atomic<bool> datagrams_blocked{false};
 
   Impl(SenderOptions o, CodecLayout l, std::unique_ptr<UplinkConnector> c)
@@ -139,9 +170,18 @@ struct SenderClient::Impl {
                    static_cast<double>(d.stats().datagrams_lost())) *
                       session_sent / static_cast<double>(session_datagrams)
                 : session_sent - static_cast<double>(d.stats().frames_received());
+        // Datagrams are not queued but dropped where a link is overrun: more
+        // than 5 % of them lost since the last Stats is congestion too (a few
+        // lost on a noisy radio link are not).
+        const uint64_t lost = d.stats().datagrams_lost() - std::min(d.stats().datagrams_lost(), stats_datagrams_lost);
+        const uint64_t received =
+            d.stats().datagrams_received() - std::min(d.stats().datagrams_received(), stats_datagrams_received);
+        stats_datagrams_lost = d.stats().datagrams_lost();
+        stats_datagrams_received = d.stats().datagrams_received();
+        const bool lossy = lost > 0 && 20 * lost > lost + received;
         const double budget = budget_kbps.load();
-        budget_kbps =
-            backlog > 0.3 * options.fps ? std::max(1.0, budget * 0.7) : std::min(options.max_kbps, budget * 1.05);
+        budget_kbps = backlog > 0.3 * options.fps || lossy ? std::max(1.0, budget * 0.7)
+                                                           : std::min(options.max_kbps, budget * 1.05);
         counters.budget_kbps = budget_kbps;
       }
       counters.receiver_render_fps = d.stats().render_fps();
@@ -164,6 +204,34 @@ struct SenderClient::Impl {
     }
   }
 
+  // The datagram path the receiver offered in this session's Welcome, when the
+  // options want one and it opens (with its key in *key); nullptr (and a
+  // warning saying why) otherwise.
+  std::unique_ptr<DatagramPath> OpenDatagramPath(DatagramKey* key) {
+    if (!options.WantsDatagrams()) return nullptr;
+    v1::DatagramOffer o;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      o = offer;
+    }
+    std::string why;
+    std::unique_ptr<DatagramPath> path;
+    if (o.port() == 0) {
+      why = "the receiver offers none";
+    } else if (o.port() > 65535) {
+      why = "port " + std::to_string(o.port()) + " out of range";
+    } else if (DatagramKey::FromBytes(o.connection_id(), o.key(), key, &why)) {
+      path = connector->OpenDatagrams(static_cast<int>(o.port()), &why);
+    }
+    if (path)
+      spdlog::info("sender: frames go as datagrams to UDP port {}", o.port());
+    else
+      spdlog::warn("sender: no datagrams ({}); frames go on the stream", why);
+    std::lock_guard<std::mutex> lock(mutex);
+    counters.datagrams_active = path != nullptr;
+    return path;
+  }
+
   // One session: returns when the stream breaks or we stop.
   void RunSession(UplinkChannel& stream) {
     const double session_start = Seconds();
@@ -176,6 +244,7 @@ struct SenderClient::Impl {
     offer.Clear();
     session_datagrams = 0;
     first_datagram_s = -1;
+    stats_datagrams_received = stats_datagrams_lost = 0;
     datagrams_blocked = false;
     key_frame_wanted = false;
     ToProto(layout, options.fps, hello.mutable_hello()->mutable_layout());
@@ -234,58 +303,14 @@ struct SenderClient::Impl {
     }
     if (welcomed == 1) spdlog::info("sender: streaming to {} (avatar '{}')", connector->Describe(), options.avatar_id);
     // Frames as datagrams when both ends want them; otherwise on the stream.
-    std::unique_ptr<DatagramPath> path;
     DatagramKey key;
-    if (welcomed == 1 && options.WantsDatagrams()) {
-      std::string why;
-      v1::DatagramOffer o;
-      {
-        std::lock_guard<std::mutex> lock(mutex);
-        o = offer;
-      }
-      if (o.port() == 0) {
-        why = "the receiver offers none";
-      } else if (o.port() <= 65535 && DatagramKey::FromBytes(o.connection_id(), o.key(), &key, &why)) {
-        path = connector->OpenDatagrams(static_cast<int>(o.port()), &why);
-      } else if (why.empty()) {
-        why = "port " + std::to_string(o.port()) + " out of range";
-      }
-      if (path) {
-        spdlog::info("sender: frames go as datagrams to UDP port {}", o.port());
-      } else {
-        spdlog::warn("sender: no datagrams ({}); frames go on the stream", why);
-      }
-      std::lock_guard<std::mutex> lock(mutex);
-      counters.datagrams_active = path != nullptr;
-    }
-    // Stats and key frame requests come back as datagrams too: read beside
-    // the stream's reader, joined before the path goes.
-    std::atomic<bool> datagram_reader_stop{false};
-    std::thread datagram_reader;
+    std::unique_ptr<DatagramPath> path = welcomed == 1 ? OpenDatagramPath(&key) : nullptr;
+    std::optional<DatagramDownlinkReader> datagram_reader;
     if (path)
-      datagram_reader = std::thread([&] {
-        DatagramOrder order;
-        std::string bytes, plaintext, why;
-        while (!datagram_reader_stop) {
-          uint32_t counter = 0;
-          v1::Downlink d;
-          if (!path->Receive(&bytes, 100) ||
-              !OpenDatagram(key, DatagramDirection::kDownlink, bytes, &counter, &plaintext, &why) ||
-              order.Take(counter) == DatagramOrder::Verdict::kStale || !d.ParseFromString(plaintext) ||
-              d.has_welcome() || d.has_reject())
-            continue;
-          std::lock_guard<std::mutex> lock(mutex);
-          TakeDownlink(d, /*on_stream=*/false);
-        }
+      datagram_reader.emplace(*path, key, [this](const v1::Downlink& d) {
+        std::lock_guard<std::mutex> lock(mutex);
+        TakeDownlink(d, /*on_stream=*/false);
       });
-    struct JoinDatagramReader {
-      std::atomic<bool>& stop;
-      std::thread& thread;
-      ~JoinDatagramReader() {
-        stop = true;
-        if (thread.joinable()) thread.join();
-      }
-    } join_datagram_reader{datagram_reader_stop, datagram_reader};
     bool send_datagrams = path != nullptr;
     uint32_t datagram_counter = 0;
     ParamEncoder encoder(layout);  // a fresh chain per session: the first frame is a key frame

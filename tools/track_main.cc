@@ -42,6 +42,9 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--predictor", t.tracker.face.predictor_path, "dlib 68-point shape predictor (.dat)")
       ->capture_default_str();
   app.add_flag("!--no-gaze", t.tracker.face.locate_irises, "do not locate the irises: the eyes look straight ahead");
+  app.add_flag("!--no-landmark-repair", t.tracker.face.repair.repair,
+               "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
+               "frame (no repair)");
   SourceOptions& s = t.source;
   AddDepthFlags(app, s);
   AddPacingFlag(app, &s.realtime, {"--realtime"});

@@ -153,6 +153,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
   prep->add_flag("!--no-gaze", p.gaze, "do not locate the irises: the eyes look straight ahead");
+  prep->add_flag("!--no-landmark-repair", p.landmark_repair,
+                 "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
+                 "frame (no repair; drive the avatar the same way)");
   prep->add_option("--interpolate", p.interpolate,
                    "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();

@@ -185,6 +185,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.calibrate = o.calibrate;
   track.tracker.fit.shape_prior = o.shape_prior;
   track.tracker.face.locate_irises = o.gaze;
+  track.tracker.face.repair.repair = o.landmark_repair;
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
   if (!o.identity_from.empty()) {
     track.identity = ReadTrackingIdentity(o.identity_from, model);

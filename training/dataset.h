@@ -57,7 +57,8 @@ struct PrepOptions {
   // Keep what GrabCut finds below the jaw line (the neck). Off by default: it
   // finds the neck in some frames only, which no avatar can learn.
   bool keep_neck = false;
-  bool gaze = true;  // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
+  bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
+  bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

@@ -24,7 +24,8 @@ Eigen::Vector2d Mean(const Landmarks2d& l, int first, int last) {
 FaceTrackerOptions StillImages(const std::string& predictor_path) {
   FaceTrackerOptions o;
   o.predictor_path = predictor_path;
-  o.redetect_interval = 1;  // every picture on its own: no box carried over
+  o.redetect_interval = 1;   // every picture on its own: no box carried over
+  o.repair.enabled = false;  // nor landmarks: there is no motion between two pictures to follow
   return o;
 }
 

@@ -25,6 +25,7 @@ void FaceTrackerOptions::Check() const {
   c.Positive("filter_min_cutoff", filter_min_cutoff).NonNegative("filter_beta", filter_beta);
   c.ThrowIfErrors();
   iris.Check();
+  repair.Check();
 }
 
 const char* FaceStatusName(FaceStatus s) {
@@ -71,6 +72,8 @@ struct FaceTracker::Impl {
   Landmarks2d previous{};
   cv::Size2d detected;  // the landmarks' extent at the last detection, pixels
   std::vector<OneEuroFilter> filters;
+  std::unique_ptr<LandmarkRepair> repair;
+  cv::Mat previous_gray;  // the frame `previous` was found in
 
   // The box around landmarks as fractions of their bounding box's width and
   // height beyond each side (negative: inside). The fixed values are a rough
@@ -114,6 +117,7 @@ struct FaceTracker::Impl {
 FaceTracker::FaceTracker(const FaceTrackerOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
   impl_->options = options;
+  impl_->repair = std::make_unique<LandmarkRepair>(options.repair);
   if (!std::filesystem::exists(options.predictor_path))
     throw std::runtime_error(options.predictor_path +
                              ": no such shape predictor (install libdlib-data, or give its path)");
@@ -131,6 +135,7 @@ FaceTracker::~FaceTracker() = default;
 
 void FaceTracker::Reset() {
   impl_->tracking = false;
+  impl_->repair->Reset();
   for (auto& f : impl_->filters) f.Reset();
 }
 
@@ -214,8 +219,14 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
       return again;
     }
   }
-  if (detect && !m.tracking)
+  if (detect && !m.tracking) {
     for (auto& f : m.filters) f.Reset();  // a new face: do not smooth from the old one
+    m.repair->Reset();
+  } else {
+    const LandmarkRepair::Regions regions = m.repair->Check(m.previous_gray, m.previous, gray, &obs.raw);
+    obs.disputed = regions.disputed;
+    obs.repaired = regions.repaired;
+  }
   for (int l = 0; l < kNumLandmarks; ++l)
     obs.landmarks[l] = Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
                                        m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
@@ -237,6 +248,7 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   if (detect) m.detected = Impl::Bounds(obs.raw).size();
   obs.box = found;
   m.previous = obs.raw;
+  m.previous_gray = gray;
   m.tracking = true;
   return obs;
 }

@@ -10,6 +10,7 @@
 
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/iris_locator.h"
+#include "common/tracking/landmark_repair.h"
 
 namespace headcast {
 
@@ -38,6 +39,7 @@ struct FaceTrackerOptions {
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
   bool locate_irises = true;       // the irises in the eyes the landmarks give (gaze), filtered like them
   IrisLocatorOptions iris;
+  LandmarkRepairOptions repair;  // predictor jumps caught by flow from the previous frame
   void Check() const;
 };
 
@@ -52,6 +54,10 @@ struct FaceObservation {
   cv::Rect box;
   int faces_detected = 0;  // faces the detector saw (when it ran)
   bool recovered = false;  // tracking slipped in this frame and the detector found the face again
+  // A bit (1 << LandmarkRegion) per region whose predicted points disagreed
+  // with the flow from the previous frame, and per region whose points were
+  // then carried by it (`raw` holds the carried ones; LandmarkRepairOptions::repair).
+  unsigned disputed = 0, repaired = 0;
 };
 
 class FaceTracker {

@@ -217,6 +217,9 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0, gaze_frames = 0;
   std::map<std::string, int> statuses;
   int recovered = 0;  // frames where the followed box slipped and the detector found the face again
+  // Frames whose region's landmarks disagreed with the flow, and were carried by it.
+  std::array<int, kNumRepairRegions> disputes{}, repairs{};
+  int disputed_frames = 0, repaired_frames = 0;
   Stopwatch watch;
   for (;;) {
     if (o.max_frames > 0 && frames >= o.max_frames) break;
@@ -256,6 +259,12 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     if (!t.fitted && !t.problem.empty()) spdlog::debug("frame {}: {}", index, t.problem);
     ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];
     recovered += t.face.recovered;
+    disputed_frames += t.face.disputed != 0;
+    repaired_frames += t.face.repaired != 0;
+    for (int r = 0; r < kNumRepairRegions; ++r) {
+      disputes[r] += (t.face.disputed >> r) & 1;
+      repairs[r] += (t.face.repaired >> r) & 1;
+    }
     OfflineFrame seen{index, &frame, t.fitted, cv::Mat()};
     Landmarks2d model_landmarks{};
     std::array<Eigen::Vector2d, 2> model_pupils;
@@ -329,6 +338,20 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
                                                     : "neutral (beta = 0)"},
             {"camera", camera.ToString()}};
   quality.Report(&report);
+  if (o.tracker.face.repair.enabled) {
+    nlohmann::json& r = report["landmark_checks"];
+    r["disputed_frames"] = disputed_frames;
+    r["repaired_frames"] = repaired_frames;
+    for (int i = 0; i < kNumRepairRegions; ++i) {
+      const char* name = LandmarkRegionName(static_cast<LandmarkRegion>(i));
+      r["disputed"][name] = disputes[i];
+      r["repaired"][name] = repairs[i];
+    }
+    r["what_it_means"] =
+        "frames where the shape predictor's points of a region disagreed with the flow from the previous frame "
+        "(disputed), and where the carried points were used instead (repaired, with --landmark-repair); "
+        "common/tracking/landmark_repair.h";
+  }
   if (o.tracker.face.locate_irises)
     report["gaze"] = {{"fitted_frames_with_an_iris", gaze_frames},
                       {"how", "irises located in the landmarks' eye regions; the eye joints fitted to them"}};

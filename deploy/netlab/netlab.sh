@@ -3,7 +3,7 @@
 #
 #   deploy/netlab/netlab.sh [--mode netns|loopback] [--rate KBIT] [--duration S] [--fps F]
 #                           [--recording REC [--head-model M]] [--out DIR] [--min-send-interval S] [--max-batch N]
-#                           [--max-kbps K] [--freshest] [--datagrams auto|on|off] [--pcap FILE]
+#                           [--max-kbps K] [--freshest] [--datagrams auto|on|off] [--queue-ms MS] [--pcap FILE]
 #
 # --recording replays a parameter recording (e.g. a real person tracked with
 # ICT-FaceKit by headcast-track); --head-model is the model .npz it was made
@@ -11,6 +11,8 @@
 # head's synthetic talking sequence. --freshest: the sender's newest-frame-only
 # mode (one frame per message, the receiver interpolates). --datagrams: the
 # sender's choice of frames as UDP datagrams (default auto: under 32 kbit/s).
+# --queue-ms: the tbf's queue in ms of the rate (default 1000); what does not
+# fit is dropped, so a short queue and a budget above the rate make loss.
 #
 # netns (root): two network namespaces joined by a veth pair (the project's own
 # test hosts, 10.213.0.1 receiver / 10.213.0.2 sender), optionally a tbf rate
@@ -25,7 +27,7 @@
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)
 bin=$root/build/bin
-mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" freshest=() pcap="" min_interval=0 max_batch=16 max_kbps="" datagrams=auto python=/usr/bin/python3
+mode=netns rate=0 duration=30 fps=30 recording="" head_model=builtin out="" freshest=() pcap="" min_interval=0 max_batch=16 max_kbps="" datagrams=auto queue_ms=1000 python=/usr/bin/python3
 while [ $# -gt 0 ]; do
   case $1 in
     --mode) mode=$2; shift 2 ;;
@@ -41,6 +43,7 @@ while [ $# -gt 0 ]; do
     --max-kbps) max_kbps=$2; shift 2 ;;
     --pcap) pcap=$2; shift 2 ;;
     --datagrams) datagrams=$2; shift 2 ;;
+    --queue-ms) queue_ms=$2; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/{/^#/p}' "$0"; exit 0 ;;
     *) echo "netlab: unknown option $1" >&2; exit 2 ;;
   esac
@@ -91,8 +94,8 @@ if [ "$mode" = netns ]; then
   ip -n "$rx" link set lo up
   ip -n "$tx" link set lo up
   if [ "$rate" != 0 ]; then
-    # Token bucket on the sender's egress: RATE kbit/s, one MTU of burst, 1 s of queue.
-    ip netns exec "$tx" tc qdisc add dev veth_tx_$$ root tbf rate "${rate}kbit" burst 1600 latency 1000ms
+    # Token bucket on the sender's egress: RATE kbit/s, one MTU of burst, 1 s of queue (--queue-ms).
+    ip netns exec "$tx" tc qdisc add dev veth_tx_$$ root tbf rate "${rate}kbit" burst 1600 latency "${queue_ms}ms"
   fi
   "$root/deploy/make_certs.sh" "$work/certs" 10.213.0.1 > /dev/null
   run_rx=(ip netns exec "$rx")

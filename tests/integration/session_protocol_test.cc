@@ -770,6 +770,29 @@ TEST(SessionDatagrams, AGapOfAWholeChainWaitsForTheKeyFrameItAsksFor) {
   ExpectTrueFrames(got);
 }
 
+// An overrun link drops datagrams rather than queueing them: the receiver's
+// count of lost ones lowers the sender's budget as a backlog would.
+TEST(SessionDatagrams, ManyLostDatagramsLowerTheBudget) {
+  ReceiverSessions receiver(ReceiverOptions(), Avatars());
+  InMemoryDatagrams net(receiver);
+  net.lose = [](int i) { return i % 3 == 0; };
+  Collector got(receiver);
+  SenderOptions o = DatagramOptions();
+  o.max_kbps = 16;
+  o.session_start_bytes = 0;
+  // Until the first datagram arrives Stats come on the stream and cost the
+  // budget their ACKs: not ten a second on a narrow link.
+  o.stats_interval_s = 0.5;
+  Client c(receiver, "secret-token", o, &net);
+  c.client->Start();
+  ASSERT_TRUE(c.client->WaitStreaming(5));
+  for (int i = 0; i < 150 && c.client->counters().budget_kbps >= 16; ++i) SubmitSpaced(*c.client, 5 * i, 5);
+  EXPECT_LT(c.client->counters().budget_kbps, 16) << c.client->counters().receiver_datagrams_lost << " lost";
+  EXPECT_GT(c.client->counters().receiver_datagrams_lost, 0u);
+  ExpectTrueFrames(got);
+  c.client->Stop();
+}
+
 // A receiver that offers no datagrams (none enabled): frames stay on the stream.
 TEST(SessionDatagrams, WithoutAnOfferFramesStayOnTheStream) {
   ReceiverSessions receiver(ReceiverOptions(), Avatars());
