@@ -76,7 +76,6 @@ bool SameToken(const std::string& a, const std::string& b) {
 
 // One streaming session's state: what its stats thread and its reading loop share.
 struct ReceiverSessions::Session {
-  using DatagramReply = ReceiverSessions::DatagramReply;
   explicit Session(DownlinkChannel& c) : channel(c) {}
   DownlinkChannel& channel;
   SessionView view;

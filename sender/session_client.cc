@@ -55,6 +55,15 @@ bool SenderOptions::WantsDatagrams() const {
 namespace {
 double Seconds() { return SteadyNowSeconds(); }
 
+// One Frames message: the packets and the capture time of the first.
+v1::Frames MakeFrames(const std::vector<std::string>& packets, double first_capture_s) {
+  v1::Frames f;
+  f.set_payload(PackPackets(packets));
+  f.set_count(static_cast<uint32_t>(packets.size()));
+  f.set_first_capture_time_s(first_capture_s);
+  return f;
+}
+
 // A batch's packets in datagram-sized Frames messages, in order.
 std::vector<v1::Frames> SplitForDatagrams(const std::vector<std::string>& packets,
                                           const std::vector<double>& capture_times) {
@@ -63,11 +72,7 @@ std::vector<v1::Frames> SplitForDatagrams(const std::vector<std::string>& packet
   double chunk_capture = 0;
   auto flush = [&] {
     if (chunk.empty()) return;
-    v1::Frames f;
-    f.set_payload(PackPackets(chunk));
-    f.set_count(static_cast<uint32_t>(chunk.size()));
-    f.set_first_capture_time_s(chunk_capture);
-    out.push_back(std::move(f));
+    out.push_back(MakeFrames(chunk, chunk_capture));
     chunk.clear();
   };
   size_t bytes = 0;
@@ -396,9 +401,7 @@ struct SenderClient::Impl {
         }
       } else {
         v1::Uplink up;
-        up.mutable_frames()->set_payload(PackPackets(packets));
-        up.mutable_frames()->set_count(static_cast<uint32_t>(packets.size()));
-        up.mutable_frames()->set_first_capture_time_s(capture_times.front());
+        *up.mutable_frames() = MakeFrames(packets, capture_times.front());
         messages = 1;
         payload_bytes = up.frames().payload().size();
         if (options.max_kbps > 0) tokens -= options.wire_overhead_bytes + payload_bytes;

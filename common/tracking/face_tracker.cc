@@ -72,7 +72,7 @@ struct FaceTracker::Impl {
   Landmarks2d previous{};
   cv::Size2d detected;  // the landmarks' extent at the last detection, pixels
   std::vector<OneEuroFilter> filters;
-  std::unique_ptr<LandmarkRepair> repair;
+  LandmarkRepair repair;
   cv::Mat previous_gray;  // the frame `previous` was found in
 
   // The box around landmarks as fractions of their bounding box's width and
@@ -117,7 +117,7 @@ struct FaceTracker::Impl {
 FaceTracker::FaceTracker(const FaceTrackerOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
   impl_->options = options;
-  impl_->repair = std::make_unique<LandmarkRepair>(options.repair);
+  impl_->repair = LandmarkRepair(options.repair);
   if (!std::filesystem::exists(options.predictor_path))
     throw std::runtime_error(options.predictor_path +
                              ": no such shape predictor (install libdlib-data, or give its path)");
@@ -135,7 +135,7 @@ FaceTracker::~FaceTracker() = default;
 
 void FaceTracker::Reset() {
   impl_->tracking = false;
-  impl_->repair->Reset();
+  impl_->repair.Reset();
   for (auto& f : impl_->filters) f.Reset();
 }
 
@@ -221,9 +221,9 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   }
   if (detect && !m.tracking) {
     for (auto& f : m.filters) f.Reset();  // a new face: do not smooth from the old one
-    m.repair->Reset();
+    m.repair.Reset();
   } else {
-    const LandmarkRepair::Regions regions = m.repair->Check(m.previous_gray, m.previous, gray, &obs.raw);
+    const LandmarkRepair::Regions regions = m.repair.Check(m.previous_gray, m.previous, gray, &obs.raw);
     obs.disputed = regions.disputed;
     obs.repaired = regions.repaired;
   }
