@@ -101,6 +101,15 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
                          {"ms_p95", with_surface["ms_p95"]},
                          {"fps_median", with_surface["fps_median"]},
                          {"stage_ms_median", with_surface["stage_ms_median"]}};
+  // And a subject's default avatar: the texture and the bounded matte (its
+  // bound's dilations and polygon per frame, the coverage's convolutions).
+  AvatarConfig subject = surface;
+  subject.matte = kSubjectMatte;
+  const nlohmann::json with_matte = MeasureConfig(options, subject, frames);
+  out["subject_default"] = {
+      {"surface_features", subject.surface_features}, {"matte", MatteModeName(subject.matte)},
+      {"ms_median", with_matte["ms_median"]},         {"ms_p95", with_matte["ms_p95"]},
+      {"fps_median", with_matte["fps_median"]},       {"stage_ms_median", with_matte["stage_ms_median"]}};
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

@@ -116,6 +116,20 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
                 "(the mesh carries the motion; off: rigid head frame, the thesis's avatar)");
 }
 
+// The outline: coverage predicted beside the RGB, bounded or not by the dataset's mask rules.
+void AddMatteFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
+  app->add_option_function<std::string>(
+         "--matte", [config](const std::string& name) { config->matte = ParseMatteMode(name); },
+         "the outline: none (RGB only, the thesis's avatar), learned (coverage predicted at full resolution, "
+         "composited over the background) or bounded (learned, kept inside the region the dataset's masks may "
+         "cover: below the jaw line and beside the face nothing)")
+      ->check(CLI::IsMember({"none", "learned", "bounded"}))
+      ->default_str(MatteModeName(config->matte));
+  app->add_option("--matte-weight", fit->loss.matte_weight,
+                  "with a matte: weight of the coverage's cross-entropy against the masks")
+      ->capture_default_str();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -172,6 +186,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   AddArchitectureFlags(pretrain, &g.config, "");
   AddSurfaceFlags(pretrain, &g.config, &g.fit);
+  AddMatteFlags(pretrain, &g.config, &g.fit);
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
   pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
   pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
@@ -184,6 +199,7 @@ int main(int argc, char** argv) {
   SubjectOptions s;
   s.fit.iterations = 1000;
   s.config.surface_features = kSubjectSurfaceFeatures;  // --surface-features 0: the thesis's avatar
+  s.config.matte = kSubjectMatte;                       // --matte none: the thesis's avatar
   subject->add_option("--head-model", s.head_model, "builtin or a model .npz")->capture_default_str();
   subject->add_option("--general", s.general, "the general model (.hcavatar)");
   subject->add_flag("--from-scratch", s.from_scratch, "random networks instead of a general model (comparisons)");
@@ -193,6 +209,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
   AddSurfaceFlags(subject, &s.config, &s.fit);
+  AddMatteFlags(subject, &s.config, &s.fit);
   subject->add_option(
       "--identity-from", s.identity_from,
       "the shape (beta) of an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json, not the dataset's");

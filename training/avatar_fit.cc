@@ -35,6 +35,7 @@ void LossOptions::Check() const {
   OptionsCheck c("LossOptions");
   c.NonNegative("mse_weight", mse_weight).NonNegative("perceptual_weight", perceptual_weight);
   c.NonNegative("ssim_weight", ssim_weight).NonNegative("offset_weight", offset_weight);
+  c.NonNegative("matte_weight", matte_weight);
   c.ThrowIfErrors();
 }
 
@@ -84,15 +85,23 @@ namespace {
 // A training sample: the frame through the one preparation path, and its target.
 struct PreparedSample {
   AvatarFrameInputs inputs;
-  torch::Tensor target;
+  torch::Tensor target;  // (1, 3, R, R): the picture masked onto the background colour
+  torch::Tensor mask;    // (1, 1, R, R) in {0, 1}
 };
 
+// With a bounded matte the mask is cut to the bound too: a synthetic render
+// shows the neck, which an avatar bounded at the jaw line cannot.
 PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
-                       const FrameParams& frame, const cv::Mat& target_bgr, RaySampler* sampler, std::mt19937* rng) {
+                       const FrameParams& frame, const cv::Mat& image_bgr, const cv::Mat& mask, RaySampler* sampler,
+                       std::mt19937* rng) {
   PreparedSample p;
   PrepareAvatarFrame(config, model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame, sampler, rng,
                      &p.inputs);
-  p.target = BgrToImageTensor(target_bgr);
+  cv::Mat m = mask;
+  if (!p.inputs.matte_bound.empty()) cv::bitwise_and(mask, p.inputs.matte_bound, m);
+  p.target = BgrToImageTensor(MaskedTarget(image_bgr, m));
+  const cv::Mat contiguous = m.isContinuous() ? m : m.clone();
+  p.mask = torch::from_blob(contiguous.data, {1, 1, m.rows, m.cols}, torch::kUInt8).gt(127).to(torch::kFloat);
   return p;
 }
 
@@ -319,7 +328,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       int real_index = -1;
       if (u01(rng) < p_synthetic) {
         const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
-        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, &sampler, &rng);
+        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, &rng);
         ++info.synthetic;
       } else {
         const std::vector<int>& train = data.real->train();
@@ -332,7 +341,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, data.real->subject().intrinsics, &frame, &image, &mask);
         }
-        p = Prepare(config, model, data.real->subject(), frame, MaskedTarget(image, mask), &sampler, &rng);
+        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, &rng);
       }
       torch::Tensor offset_penalty = torch::zeros({});
       if (real_index >= 0 && offsets.enabled()) {
@@ -349,6 +358,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         loss = loss + w.perceptual_weight * (*vgg)(out.image, p.target);
       else if (w.ssim_weight > 0)
         loss = loss + w.ssim_weight * (1 - Ssim(out.image, p.target));
+      if (out.coverage.defined() && w.matte_weight > 0)
+        loss = loss + w.matte_weight * torch::binary_cross_entropy(out.coverage.clamp(1e-5, 1 - 1e-5), p.mask);
       (loss / options.batch).backward();
       info.loss += loss.item<float>() / options.batch;
       info.mse += mse.item<float>() / options.batch;

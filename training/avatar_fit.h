@@ -33,6 +33,10 @@ struct LossOptions {
   std::string vgg_path;
   double perceptual_weight = 0.1;
   double ssim_weight = 0.1;
+  // With a matte: weight of the coverage's binary cross-entropy against the
+  // target's mask, which teaches the outline where the head's colours are
+  // close to the background's (dark hair) and the MSE says little.
+  double matte_weight = 0.02;
   // sum_k w ||offset_k||^2 over the learnable per-frame offsets of real samples
   // (METHOD eq. 8); 0 on synthetic ones, which have exact parameters.
   double offset_weight = 1.0;

@@ -150,6 +150,7 @@ SubjectOptions MakeSubjectOptions(const CreateOptions& o, const Models& m, const
   s.dataset = (work / "dataset").string();
   s.resolution = o.resolution;
   s.config.surface_features = kSubjectSurfaceFeatures;
+  s.config.matte = kSubjectMatte;
   s.fit.iterations = o.iterations;
   s.fit.weight_average = SubjectWeightAverage(o.iterations);
   // As bench/four_clips.sh: a fixed camera distance, no distance augmentation.

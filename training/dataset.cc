@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
+#include "common/avatar/matte.h"
 #include "common/core/check.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
@@ -72,80 +73,6 @@ double Percentile(std::vector<double> v, double q) {
 }
 
 }  // namespace
-
-void ClearBelowJawLine(const Landmarks2d& lm, cv::Mat* mask) {
-  const Eigen::Vector2d brow = 0.5 * (lm[19] + lm[24]);
-  Eigen::Vector2d down = lm[8] - brow;
-  if (!(down.norm() > 1e-6)) return;
-  down *= 4.0 * (mask->rows + mask->cols) / down.norm();
-  std::vector<cv::Point> polygon;
-  for (int l = 0; l < kNumContourLandmarks; ++l) polygon.emplace_back(cvRound(lm[l].x()), cvRound(lm[l].y()));
-  const Eigen::Vector2d right_end = lm[kNumContourLandmarks - 1] + down, left_end = lm[0] + down;
-  polygon.emplace_back(cvRound(right_end.x()), cvRound(right_end.y()));
-  polygon.emplace_back(cvRound(left_end.x()), cvRound(left_end.y()));
-  cv::fillPoly(*mask, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
-}
-
-namespace {
-
-// The half-plane on `up`'s side of the line through `point`, as a mask of `size`.
-cv::Mat HalfPlane(cv::Size size, const Eigen::Vector2d& point, const Eigen::Vector2d& up) {
-  const double far = 4.0 * (size.width + size.height);
-  const Eigen::Vector2d along(-up.y(), up.x());
-  const std::array<Eigen::Vector2d, 4> corners = {point - far * along, point + far * along,
-                                                  point + far * along + far * up, point - far * along + far * up};
-  std::vector<cv::Point> polygon;
-  for (const Eigen::Vector2d& p : corners) polygon.emplace_back(cvRound(p.x()), cvRound(p.y()));
-  cv::Mat out(size, CV_8U, cv::Scalar(0));
-  cv::fillConvexPoly(out, polygon, cv::Scalar(255));
-  return out;
-}
-
-// The face's up direction in the image (brows minus chin), or nothing when degenerate.
-std::optional<Eigen::Vector2d> FaceUp(const Landmarks2d& lm) {
-  const Eigen::Vector2d up = 0.5 * (lm[19] + lm[24]) - lm[8];
-  if (!(up.norm() > 1e-6)) return std::nullopt;
-  return up.normalized();
-}
-
-}  // namespace
-
-void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
-  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
-  if (!up) return;
-  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
-  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
-  const cv::Mat above = HalfPlane(mask->size(), brows, *up);
-  cv::Mat top;
-  cv::bitwise_and(*mask, above, top);
-  std::vector<cv::Point> points;
-  cv::findNonZero(top, points);
-  if (points.size() < 3) return;
-  std::vector<cv::Point> hull;
-  cv::convexHull(points, hull);
-  cv::Mat filled(mask->size(), CV_8U, cv::Scalar(0));
-  cv::fillConvexPoly(filled, hull, cv::Scalar(255));
-  cv::bitwise_and(filled, above, filled);
-  cv::bitwise_or(*mask, filled, *mask);
-}
-
-cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px, int side_px) {
-  auto grown = [&](int radius) {
-    cv::Mat out = silhouette.clone();
-    if (radius > 0)
-      cv::dilate(out, out, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
-    return out;
-  };
-  cv::Mat reach = grown(side_px);
-  Eigen::Vector2d eyes = Eigen::Vector2d::Zero();
-  for (int l = 36; l <= 47; ++l) eyes += lm[l] / 12.0;
-  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
-  if (!up || !eyes.allFinite()) return reach;
-  cv::Mat upper = HalfPlane(silhouette.size(), eyes, *up);
-  cv::bitwise_and(upper, grown(hair_px), upper);
-  cv::bitwise_or(reach, upper, reach);
-  return reach;
-}
 
 namespace {
 
@@ -282,11 +209,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       FillHairNotches(crop_landmarks, &m);
       RasterBuffers silhouette;
       Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
-      cv::bitwise_and(m,
-                      MaskReach(silhouette.Mask(), crop_landmarks, static_cast<int>(std::lround(o.mask_margin * r)),
-                                static_cast<int>(std::lround(o.side_margin * r))),
-                      m);
-      if (!o.keep_neck) ClearBelowJawLine(crop_landmarks, &m);
+      cv::bitwise_and(m, MatteBound(silhouette.Mask(), crop_landmarks, o.matte_rules()), m);
       WriteImage((rd / "masks" / FrameFileName(n)).string(), m);
     }
   }
@@ -370,6 +293,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
        "dilated by " +
            std::to_string(o.mask_margin) + " of the crop edge above the eye line, " + std::to_string(o.side_margin) +
            " below it" + (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
+      {"mask_rules", o.matte_rules().ToJson()},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
         {"frames", track_report.value("frames", 0)},
@@ -429,6 +353,15 @@ PreparedDataset PreparedDataset::Load(const std::string& dir, const HeadModel& m
     throw std::runtime_error(manifest_path.string() + ": " + e.what());
   }
   return d;
+}
+
+MatteRules PreparedDataset::matte_rules() const {
+  if (!manifest_.contains("mask_rules")) return MatteRules{};
+  try {
+    return MatteRules::FromJson(manifest_.at("mask_rules"));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(dir_ + "/dataset.json: " + e.what());
+  }
 }
 
 std::optional<CameraContract> PreparedDataset::camera_contract() const {

@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "common/avatar/matte.h"
 #include "common/capture/frame_source.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
@@ -57,6 +58,7 @@ struct PrepOptions {
   // Keep what GrabCut finds below the jaw line (the neck). Off by default: it
   // finds the neck in some frames only, which no avatar can learn.
   bool keep_neck = false;
+  MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   // Short videos: K frames synthesised between each pair of consecutive
@@ -72,25 +74,6 @@ struct PrepOptions {
 // Runs the tracker, crops, writes DIR; returns the dataset's report (also in dataset.json).
 // Throws with a clear message: no face anywhere, too few fitted frames for the split, unreadable input.
 nlohmann::json PrepareDataset(const PrepOptions& options);
-
-// Clears `mask` (CV_8U) below the jaw line given by landmarks 0..16 (pixels):
-// under the chin and between the jaw's ends, along the face's downward
-// direction (chin minus brows) to beyond the image. GrabCut takes the neck in
-// some frames and not in others; a target that comes and goes with the
-// shirt's colour cannot be learnt, one that stops at the jaw can.
-void ClearBelowJawLine(const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, cv::Mat* mask);
-
-// Where a training mask may reach: `silhouette` (CV_8U, the fitted model
-// rasterised) grown by `hair_px` above the eye line (landmarks 36..47; the
-// face's up direction is brows minus chin) and by `side_px` below it.
-cv::Mat MaskReach(const cv::Mat& silhouette, const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, int hair_px,
-                  int side_px);
-
-// Fills the notches GrabCut cuts into the top of the hair where a highlight
-// matches the wall's colour: above the brow line (landmarks 17..26) the mask
-// (CV_8U) becomes its convex hull there. The top of a head is convex; below
-// the brows the ears make it not so, and the mask is left alone.
-void FillHairNotches(const std::array<Eigen::Vector2d, kNumLandmarks>& landmarks, cv::Mat* mask);
 
 // One real training or test frame at one resolution.
 struct RealSample {
@@ -119,6 +102,9 @@ class PreparedDataset {
   // The full frames' camera and the crop (datasets prepared before the
   // source size was recorded have none).
   std::optional<CameraContract> camera_contract() const;
+  // The rules its masks were cut with (datasets from before they were
+  // recorded: the defaults, which they were made with unless prepped otherwise).
+  MatteRules matte_rules() const;
   const std::string& dir() const { return dir_; }
   // Reads (and caches) the crop and mask of position i.
   const RealSample& At(int i) const;

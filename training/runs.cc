@@ -192,6 +192,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     identity = (avatar ? "the avatar " : "headcast-fit-mesh ") + o.identity_from;
   }
   subject.texture = Resized(subject.texture, model.num_texture());
+  o.config.matte_rules = data.matte_rules();  // a bounded matte keeps to what its targets were cut by
   Avatar avatar = [&] {
     if (o.from_scratch) {
       o.config.output_size = o.resolution;
@@ -206,6 +207,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
       c.surface_resolution = o.config.surface_resolution;
       c.surface_extent = o.config.surface_extent;
     }
+    c.matte = o.config.matte;
+    c.matte_rules = o.config.matte_rules;
     return general.WithRuntimeSwitches(c);
   }();
   avatar.mutable_subject() = subject;

@@ -193,11 +193,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         const Landmarks2d landmarks = fitter.Project(f, subject.intrinsics);
         cv::Mat& mask = cut.mask;
         FillHairNotches(landmarks, &mask);
-        cv::bitwise_and(mask,
-                        MaskReach(silhouette.Mask(), landmarks, static_cast<int>(std::lround(prep.mask_margin * size)),
-                                  static_cast<int>(std::lround(prep.side_margin * size))),
-                        mask);
-        ClearBelowJawLine(landmarks, &mask);
+        cv::bitwise_and(mask, MatteBound(silhouette.Mask(), landmarks, prep.matte_rules()), mask);
         return MaskedTarget(cut.image, mask);
       },
       [&](int k, const cv::Mat& target, const cv::Mat& shown) {

@@ -14,6 +14,24 @@ void AvatarCommonConfig::CheckCommon(OptionsCheck* c) const {
   c->InRange("num_texture", num_texture, 0, 400);
 }
 
+const char* MatteModeName(MatteMode mode) {
+  switch (mode) {
+    case MatteMode::kNone:
+      return "none";
+    case MatteMode::kLearned:
+      return "learned";
+    case MatteMode::kBounded:
+      return "bounded";
+  }
+  return "?";
+}
+
+MatteMode ParseMatteMode(const std::string& name) {
+  for (MatteMode m : {MatteMode::kNone, MatteMode::kLearned, MatteMode::kBounded})
+    if (name == MatteModeName(m)) return m;
+  throw std::invalid_argument("unknown matte '" + name + "' (none, learned or bounded)");
+}
+
 void AvatarConfig::Check() const {
   OptionsCheck c("AvatarConfig");
   CheckCommon(&c);
@@ -36,6 +54,7 @@ void AvatarConfig::Check() const {
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.ThrowIfErrors();
+  matte_rules.Check();
 }
 
 nlohmann::json AvatarConfig::ToJson() const {
@@ -61,7 +80,9 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"canonical_samples", canonical_samples},
           {"surface_features", surface_features},
           {"surface_resolution", surface_resolution},
-          {"surface_extent", surface_extent}};
+          {"surface_extent", surface_extent},
+          {"matte", MatteModeName(matte)},
+          {"matte_rules", matte_rules.ToJson()}};
 }
 
 AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
@@ -94,6 +115,8 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_features = j.value("surface_features", 0);
     c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
     c.surface_extent = j.value("surface_extent", c.surface_extent);
+    c.matte = ParseMatteMode(j.value("matte", std::string("none")));
+    if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
   }

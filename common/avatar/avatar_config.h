@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "common/avatar/avatar_backend.h"
+#include "common/avatar/matte.h"
 
 namespace headcast {
 
@@ -14,10 +15,23 @@ enum class SamplingMode {
   kUniform,     // NeRF/HeadNeRF style: every ray, samples spread over a depth range
 };
 
+// How the avatar's outline is drawn.
+enum class MatteMode {
+  kNone,     // the renderer's RGB is the picture, background included (the thesis's avatar)
+  kLearned,  // the renderer also predicts coverage at full resolution; RGB is composited over the background
+  kBounded,  // kLearned, with the coverage kept inside the region the training masks may cover (MatteBound)
+};
+const char* MatteModeName(MatteMode mode);
+MatteMode ParseMatteMode(const std::string& name);  // throws std::invalid_argument naming the choices
+
+// What a subject's avatar gets by default (headcast-train subject, create):
+// surface-texture channels and the matte.
+inline constexpr int kSubjectSurfaceFeatures = 8;
+inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
+
 // The CNeRF backend's configuration: the shared part (output size,
 // conditioning sizes) and its own networks, sampling and speed switches.
 // Surface-texture channels a subject's avatar gets by default (headcast-train subject).
-inline constexpr int kSubjectSurfaceFeatures = 8;
 
 struct AvatarConfig : AvatarCommonConfig {
   int feature_channels = 48;  // channels of the CNeRF feature vector / feature map
@@ -54,7 +68,15 @@ struct AvatarConfig : AvatarCommonConfig {
   int surface_resolution = 256;  // texels along each plane edge
   double surface_extent = 0.2;   // metres from the model origin to a plane's edge
 
+  // The outline (kNone in files from before it). A coverage logit, summed over
+  // the renderer's levels like its RGB, can turn from 0 to 1 within a pixel
+  // wherever its smooth field crosses zero, which RGB that must also match the
+  // colours on both sides cannot; the masked targets' outline is sharp.
+  MatteMode matte = MatteMode::kNone;
+  MatteRules matte_rules;  // kBounded: the rules the training masks were cut with
+
   bool has_surface() const { return surface_features > 0; }
+  bool has_matte() const { return matte != MatteMode::kNone; }
 
   int feature_size() const { return output_size / 8; }
   int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi

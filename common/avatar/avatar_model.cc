@@ -181,6 +181,18 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
     post_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], ch[k + 1], 1)));
     to_rgb_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 3, 1)));
   }
+  if (config.has_matte()) {
+    input_alpha_ = register_module("input_alpha", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 1, 1)));
+    to_alpha_ = register_module("to_alpha", torch::nn::ModuleList());
+    for (int k = 0; k < 3; ++k) to_alpha_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 1, 1)));
+    // Covered everywhere at first: a matte added to a renderer without one
+    // starts from the picture it drew (the weights still get gradients).
+    torch::NoGradGuard no_grad;
+    input_alpha_->weight.zero_();
+    input_alpha_->bias.fill_(kInitialCoverageLogit);
+    for (const auto& m : *to_alpha_)
+      for (auto& p : m->parameters()) p.zero_();
+  }
 }
 
 torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height,
@@ -199,19 +211,25 @@ torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, con
   return rows.t().reshape({1, channels, height, width});
 }
 
-torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term) {
-  torch::Tensor rgb = input_rgb_->forward(feature_map);
+torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term,
+                                          torch::Tensor* coverage_logit) {
+  const auto up2 = F::InterpolateFuncOptions()
+                       .scale_factor(std::vector<double>{2.0, 2.0})
+                       .mode(torch::kBilinear)
+                       .align_corners(false);
+  const bool matte = input_alpha_ && coverage_logit;
+  torch::Tensor rgb = input_rgb_->forward(feature_map), alpha;
+  if (matte) alpha = input_alpha_->forward(feature_map);
   torch::Tensor x = feature_map;
   for (int k = 0; k < 3; ++k) {
-    rgb = F::interpolate(rgb, F::InterpolateFuncOptions()
-                                  .scale_factor(std::vector<double>{2.0, 2.0})
-                                  .mode(torch::kBilinear)
-                                  .align_corners(false));
+    rgb = F::interpolate(rgb, up2);
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x);
     if (k == 2 && surface_term.defined()) x = x + surface_term;
     x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
     rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
+    if (matte) alpha = F::interpolate(alpha, up2) + to_alpha_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
   }
+  if (matte) *coverage_logit = alpha;
   return torch::sigmoid(rgb);
 }
 

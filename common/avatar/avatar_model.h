@@ -90,15 +90,21 @@ class SurfaceTextureImpl : public torch::nn::Module {
 };
 TORCH_MODULE(SurfaceTexture);
 
+// The coverage logit a new matte starts with everywhere (sigmoid: 0.9975).
+inline constexpr double kInitialCoverageLogit = 6;
+
 // Three x2 levels; at each, RGB from the previous level bilinearly upsampled
 // plus RGB from the upsampled features; 1x1 convs and LeakyReLU elsewhere.
 // With surface features, a per-pixel two-layer branch of the full-resolution
-// surface image joins the last level's features.
+// surface image joins the last level's features. With a matte, a coverage
+// logit is built the same way as the RGB (its own 1x1 convs per level).
 class NeuralRendererImpl : public torch::nn::Module {
  public:
   explicit NeuralRendererImpl(const AvatarConfig& config);
   // (B, C0, h, w) [, surface_term (B, C3, 8h, 8w) from SurfaceTerm] -> (B, 3, 8h, 8w), RGB in [0, 1].
-  torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term = torch::Tensor());
+  // With a matte, `coverage_logit` gets (B, 1, 8h, 8w): where the head covers the picture.
+  torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term = torch::Tensor(),
+                        torch::Tensor* coverage_logit = nullptr);
   // The surface branch (two 1x1 layers) on the covered pixels only: texture
   // features (P, Cs) at flat pixel indices `pixels` (P) of an h x w image ->
   // (1, C3, h, w). Uncovered pixels get the branch's value for zero features,
@@ -106,8 +112,8 @@ class NeuralRendererImpl : public torch::nn::Module {
   torch::Tensor SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height, int width);
 
  private:
-  torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr};
-  torch::nn::ModuleList blocks_, post_, to_rgb_;
+  torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr}, input_alpha_{nullptr};
+  torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_;
 };
 TORCH_MODULE(NeuralRenderer);
 

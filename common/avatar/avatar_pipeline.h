@@ -16,6 +16,7 @@ AvatarConditioning MakeConditioning(const AvatarConfig& config, const SubjectPar
 
 struct AvatarOutput {
   torch::Tensor image;        // (1, 3, H, W) RGB in [0, 1]
+  torch::Tensor coverage;     // with a matte: (1, 1, H, W) in [0, 1], the head's share of each pixel
   torch::Tensor feature_map;  // (1, F, h, w)
   torch::Tensor opacity;      // (1, 1, h, w)
 };
@@ -28,8 +29,9 @@ torch::Tensor BgrToImageTensor(const cv::Mat& image_bgr);
 // the same object serves frame after frame.
 struct AvatarFrameInputs {
   RayBatch rays;
-  SurfaceBatch surface;             // empty unless the avatar has surface features
+  SurfaceBatch surface;             // empty unless the avatar has surface features or a bounded matte
   std::vector<float> to_canonical;  // with canonical_samples: 12 per ray (CanonicalTransforms)
+  cv::Mat matte_bound;              // with a bounded matte: H x W CV_8U, 255 where the head may show (MatteBound)
   RigidTransform cam_from_head;
   AvatarConditioning conditioning;
   HeadModelOutput posed;
@@ -37,14 +39,15 @@ struct AvatarFrameInputs {
 };
 
 // Runs CNeRF on the frame's samples, composites the feature map, looks up the
-// surface texture (when the avatar has one) and upsamples.
+// surface texture (when the avatar has one) and upsamples; with a matte, the
+// RGB is composited over the background colour by the coverage.
 AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings = nullptr);
 
 // The head model posed by `frame` with `identity` (the subject's shape), seen
 // through the subject's intrinsics at feature resolution: rays and depths
 // (jittered within their strata when `rng` is given: training), placement
 // and conditioning; with surface features, the covered output pixels on the
-// canonical mesh (`identity`'s neutral shape).
+// canonical mesh (`identity`'s neutral shape); with a bounded matte, its bound.
 void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
                         const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
                         AvatarFrameInputs* out, AvatarTimings* timings = nullptr);

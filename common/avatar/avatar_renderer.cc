@@ -24,6 +24,28 @@ AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& 
   return {torch::tensor(g).view({1, -1}), torch::tensor(a).view({1, -1})};
 }
 
+namespace {
+
+// (1, 3, 1, 1): the renders' background colour, RGB.
+torch::Tensor BackgroundColour() {
+  const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
+  return torch::tensor({rgb[0], rgb[1], rgb[2]}).view({1, 3, 1, 1});
+}
+
+// The bound of a bounded matte: the silhouette of the covered output pixels
+// and the posed landmarks projected, through the dataset's mask rules.
+cv::Mat MatteBoundOf(const SurfaceBatch& surface, const HeadModelOutput& posed, const RigidTransform& cam_from_head,
+                     const PinholeCamera& camera, const MatteRules& rules) {
+  cv::Mat silhouette(surface.height, surface.width, CV_8U, cv::Scalar(0));
+  for (int32_t p : surface.pixel) silhouette.data[p] = 255;
+  Landmarks2d landmarks;
+  for (int l = 0; l < kNumLandmarks; ++l)
+    landmarks[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
+  return MatteBound(silhouette, landmarks, rules);
+}
+
+}  // namespace
+
 void ImageTensorToBgr(const torch::Tensor& image, cv::Mat* out) {
   const torch::Tensor bytes =
       image.squeeze(0).flip({0}).permute({1, 2, 0}).mul(255.f).round().clamp(0, 255).to(torch::kUInt8).contiguous();
@@ -99,7 +121,20 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
         n > 0 ? modules.surface->forward(canonical) : torch::zeros({0, modules.cnerf->config().surface_features});
     surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width);
   }
-  out.image = modules.renderer->forward(out.feature_map, surface_term);
+  if (!modules.cnerf->config().has_matte()) {
+    out.image = modules.renderer->forward(out.feature_map, surface_term);
+  } else {
+    torch::Tensor logit;
+    const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit);
+    out.coverage = torch::sigmoid(logit);
+    if (!inputs.matte_bound.empty()) {
+      const cv::Mat& b = inputs.matte_bound;
+      const torch::Tensor bound =
+          torch::from_blob(b.data, {1, 1, b.rows, b.cols}, torch::kUInt8).to(torch::kFloat) / 255.f;
+      out.coverage = out.coverage * bound;
+    }
+    out.image = out.coverage * rgb + (1 - out.coverage) * BackgroundColour();
+  }
   if (timings) timings->upsample_ms += watch.ElapsedMs();
   return out;
 }
@@ -121,6 +156,14 @@ void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, cons
   out->to_canonical.clear();
   if (config.canonical_samples)
     CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical);
+  if (config.matte == MatteMode::kBounded) {
+    if (!config.has_surface())  // the bound needs the full-resolution silhouette the surface lookup makes
+      sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
+    out->matte_bound =
+        MatteBoundOf(out->surface, out->posed, out->cam_from_head, subject.intrinsics, config.matte_rules);
+  } else {
+    out->matte_bound.release();
+  }
   out->conditioning = MakeConditioning(config, subject, frame);
   if (timings) timings->sample_ms = watch.ElapsedMs();
 }

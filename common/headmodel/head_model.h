@@ -23,6 +23,8 @@ constexpr int kNumContourLandmarks = 17;  // the jaw contour, landmarks 0..16
 constexpr int kNumYawBins = 79;           // FLAME's dynamic contour table: yaw -39..39 degrees
 
 using RowMatrixX3f = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
+// 68 landmark positions in an image, pixels (dlib's order).
+using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
 using RowMatrixX3i = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;
 using RowMatrixX2f = Eigen::Matrix<float, Eigen::Dynamic, 2, Eigen::RowMajor>;
 using PoseVector = Eigen::Matrix<double, kNumPoseParams, 1>;

@@ -18,7 +18,6 @@ class Problem;
 
 namespace headcast {
 
-using Landmarks2d = std::array<Eigen::Vector2d, kNumLandmarks>;
 struct EyeIrises;  // iris_locator.h
 
 struct HeadFitterOptions {

@@ -1,0 +1,56 @@
+// The geometry of a training mask: where the picture may show the head, as a
+// function of the fitted head alone (its silhouette and landmarks). The
+// dataset cuts its masks with these rules, and an avatar with a bounded matte
+// keeps its coverage inside the same region, so the outline the receiver
+// draws below the jaw and beside the cheeks is the one it was trained on
+// rather than a blur the networks must learn.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "common/headmodel/head_model.h"
+
+namespace headcast {
+
+// The rules a dataset's masks were cut with (PrepOptions holds the same three).
+struct MatteRules {
+  // Above the eye line the mask may reach this fraction of the image edge
+  // beyond the model's silhouette (hair); below it, `side_margin` (cheeks, ears).
+  double hair_margin = 0.08;
+  double side_margin = 0.02;
+  bool keep_neck = false;  // false: nothing below the jaw line (landmarks 0..16)
+  void Check() const;
+  nlohmann::json ToJson() const;
+  static MatteRules FromJson(const nlohmann::json& j);  // checks
+  bool operator==(const MatteRules& o) const {
+    return hair_margin == o.hair_margin && side_margin == o.side_margin && keep_neck == o.keep_neck;
+  }
+};
+
+// Clears `mask` (CV_8U) below the jaw line given by landmarks 0..16 (pixels):
+// under the chin and between the jaw's ends, along the face's downward
+// direction (chin minus brows) to beyond the image. GrabCut takes the neck in
+// some frames and not in others; a target that comes and goes with the
+// shirt's colour cannot be learnt, one that stops at the jaw can.
+void ClearBelowJawLine(const Landmarks2d& landmarks, cv::Mat* mask);
+
+// Where a training mask may reach: `silhouette` (CV_8U, the fitted model
+// rasterised) grown by `hair_px` above the eye line (landmarks 36..47; the
+// face's up direction is brows minus chin) and by `side_px` below it.
+cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& landmarks, int hair_px, int side_px);
+
+// Fills the notches GrabCut cuts into the top of the hair where a highlight
+// matches the wall's colour: above the brow line (landmarks 17..26) the mask
+// (CV_8U) becomes its convex hull there. The top of a head is convex; below
+// the brows the ears make it not so, and the mask is left alone.
+void FillHairNotches(const Landmarks2d& landmarks, cv::Mat* mask);
+
+// The region (CV_8U, 255 inside) a mask cut by `rules` may cover for a head
+// with this silhouette (CV_8U, square) and these landmarks: MaskReach with the
+// margins scaled to the image, minus what lies below the jaw line.
+cv::Mat MatteBound(const cv::Mat& silhouette, const Landmarks2d& landmarks, const MatteRules& rules);
+
+}  // namespace headcast

@@ -1,0 +1,245 @@
+// The matte: the mask rules' bound on a posed head, the renderer's coverage
+// (starting as the picture without one, bounded pixels exactly the
+// background, learning the mask), and its file.
+#include "common/avatar/matte.h"
+
+#include <gtest/gtest.h>
+
+#include "common/avatar/avatar_pipeline.h"
+#include "common/core/zip_archive.h"
+#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_render.h"
+#include "tests/testing/test_data.h"
+#include "tests/testing/tiny_avatar.h"
+
+namespace headcast {
+namespace {
+
+const HeadModel& Builtin() {
+  static const HeadModel model = MakeBuiltinHead();
+  return model;
+}
+
+AvatarConfig TinyWithMatte(MatteMode mode) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.matte = mode;
+  return c;
+}
+
+FrameParams Turned() {
+  FrameParams p;
+  p.expression = Eigen::VectorXf::Zero(Builtin().num_expression());
+  p.expression[8] = 1.0f;  // lips part
+  p.jaw = Eigen::Vector3f(0.2f, 0, 0);
+  p.neck = Eigen::Vector3f(0.05f, 0.25f, 0);
+  p.SetCamFromHead(FrontalCamFromHead(0.62));
+  return p;
+}
+
+// The posed head's silhouette and projected landmarks at `size`.
+struct PosedView {
+  cv::Mat silhouette;
+  Landmarks2d landmarks;
+};
+PosedView View(const FrameParams& frame, int size) {
+  const HeadModel& m = Builtin();
+  HeadModelOutput posed;
+  m.Forward(m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), frame.expression.cast<double>(), frame.HeadPose(),
+            &posed);
+  RasterVertices v_cam;
+  TransformToCamera(posed.vertices, frame.CamFromHead(), &v_cam);
+  const PinholeCamera camera = DefaultSubject(m, size).intrinsics;
+  RasterBuffers raster;
+  Rasterize(v_cam, m.data().faces, camera, RasterOptions{}, &raster);
+  PosedView v;
+  v.silhouette = raster.Mask();
+  for (int l = 0; l < kNumLandmarks; ++l)
+    v.landmarks[l] = camera.Project(frame.CamFromHead().Apply(posed.landmarks.row(l).transpose().cast<double>()));
+  return v;
+}
+
+cv::Mat Shown(Avatar& avatar, const FrameParams& frame, AvatarFrameInputs* buffers) {
+  const HeadModel& m = Builtin();
+  avatar.modules().eval();
+  torch::InferenceMode inference;
+  RaySampler sampler(avatar.config());
+  cv::Mat image;
+  RenderAvatarFrame(avatar.modules(), avatar.config(), m, m.MakeIdentity(avatar.subject().shape.cast<double>()),
+                    avatar.subject(), frame, &sampler, buffers, &image);
+  return image;
+}
+
+cv::Vec3b BackgroundBgr() {
+  const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
+  return cv::Vec3b(cv::saturate_cast<uchar>(255 * rgb[2]), cv::saturate_cast<uchar>(255 * rgb[1]),
+                   cv::saturate_cast<uchar>(255 * rgb[0]));
+}
+
+}  // namespace
+
+TEST(MatteRules, TravelAsJsonAndRefuseBadMargins) {
+  const MatteRules r{0.1, 0.03, true};
+  EXPECT_TRUE(MatteRules::FromJson(r.ToJson()) == r);
+  EXPECT_THROW((MatteRules{0.05, 0.1, false}.Check()), std::invalid_argument) << "sides beyond the hair";
+  EXPECT_THROW((MatteRules{-0.1, 0, false}.Check()), std::invalid_argument);
+  nlohmann::json j = r.ToJson();
+  j.erase("keep_neck");
+  EXPECT_THROW(MatteRules::FromJson(j), std::invalid_argument);
+  j = r.ToJson();
+  j["side_margin"] = "wide";
+  EXPECT_THROW(MatteRules::FromJson(j), std::invalid_argument);
+}
+
+// The bound holds the silhouette above the jaw, grows it by the margins
+// (more above the eyes), and nothing below the jaw line unless the neck is kept.
+TEST(MatteBound, ReachesTheMarginsAndStopsAtTheJawLine) {
+  const int size = 128;
+  const PosedView v = View(Turned(), size);
+  const MatteRules rules;  // 0.08 above the eyes, 0.02 below, no neck
+  const cv::Mat bound = MatteBound(v.silhouette, v.landmarks, rules);
+  ASSERT_EQ(bound.size(), v.silhouette.size());
+  const Landmarks2d& lm = v.landmarks;
+  const Eigen::Vector2d chin = lm[8], brows = 0.5 * (lm[19] + lm[24]);
+  const Eigen::Vector2d down = (chin - brows).normalized();
+  auto at = [&](const cv::Mat& m, const Eigen::Vector2d& p) -> int {
+    const int x = static_cast<int>(std::lround(p.x())), y = static_cast<int>(std::lround(p.y()));
+    return x >= 0 && y >= 0 && x < m.cols && y < m.rows ? m.at<uchar>(y, x) : -1;
+  };
+  // Below the chin: the silhouette (neck) is there, the bound is not.
+  const Eigen::Vector2d under_chin = chin + 4 * down;
+  ASSERT_EQ(at(v.silhouette, under_chin), 255)
+      << "the built-in head has no neck under the chin: the test proves little";
+  EXPECT_EQ(at(bound, under_chin), 0);
+  EXPECT_EQ(at(MatteBound(v.silhouette, v.landmarks, MatteRules{0.08, 0.02, true}), under_chin), 255);
+  // Above the brows every silhouette pixel is in the bound; past the top of
+  // the head it reaches hair_margin * size, not twice that.
+  const Eigen::Vector2d nose_bridge = lm[27];
+  Eigen::Vector2d top = nose_bridge;
+  while (at(v.silhouette, top - down) == 255) top -= down;
+  EXPECT_EQ(at(bound, top), 255);
+  EXPECT_EQ(at(bound, top - 0.5 * rules.hair_margin * size * down), 255);
+  const Eigen::Vector2d across = (lm[17] - lm[26]).normalized();  // above the eyes, image left
+  Eigen::Vector2d temple = lm[17];
+  while (at(v.silhouette, temple + across) == 255) temple += across;
+  EXPECT_EQ(at(bound, temple + 0.5 * rules.hair_margin * size * across), 255);
+  EXPECT_EQ(at(bound, temple + 2.0 * rules.hair_margin * size * across), 0);
+  // Beside the cheek (below the eyes) the margin is side_margin (the neck
+  // kept, so that the jaw line's cut does not reach out there too).
+  const cv::Mat with_neck = MatteBound(v.silhouette, v.landmarks, MatteRules{0.08, 0.02, true});
+  const Eigen::Vector2d side = (lm[3] - lm[13]).normalized();  // image left
+  Eigen::Vector2d cheek = lm[3];
+  while (at(v.silhouette, cheek + side) == 255) cheek += side;
+  EXPECT_EQ(at(with_neck, cheek + 0.5 * rules.side_margin * size * side), 255);
+  EXPECT_EQ(at(with_neck, cheek + 3.0 * rules.side_margin * size * side), 0);
+}
+
+// A learned matte added to an avatar without one starts from its picture; a
+// bounded one shows exactly the background outside the bound, and the bound is
+// the one the mask rules give for the frame.
+TEST(Matte, StartsAsThePictureWithoutAndBoundedPixelsAreBackground) {
+  const HeadModel& m = Builtin();
+  Avatar plain = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 5);
+  Avatar learned = plain.WithRuntimeSwitches(TinyWithMatte(MatteMode::kLearned));
+  Avatar bounded = plain.WithRuntimeSwitches(TinyWithMatte(MatteMode::kBounded));
+  const FrameParams frame = Turned();
+  AvatarFrameInputs b0, b1, b2;
+  const cv::Mat without = Shown(plain, frame, &b0);
+  EXPECT_LE(cv::norm(without, Shown(learned, frame, &b1), cv::NORM_INF), 1) << "a new matte covers everything";
+  EXPECT_TRUE(b1.matte_bound.empty());
+  const cv::Mat shown = Shown(bounded, frame, &b2);
+  ASSERT_FALSE(b2.matte_bound.empty());
+  const PosedView v = View(frame, 128);
+  EXPECT_EQ(cv::countNonZero(b2.matte_bound != MatteBound(v.silhouette, v.landmarks, MatteRules{})), 0);
+  int outside = 0, inside_same = 0, inside = 0;
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 128; ++x) {
+      if (b2.matte_bound.at<uchar>(y, x) == 0) {
+        ++outside;
+        EXPECT_EQ(shown.at<cv::Vec3b>(y, x), BackgroundBgr()) << "at " << x << "," << y;
+      } else {
+        ++inside;
+        inside_same += cv::norm(shown.at<cv::Vec3b>(y, x), without.at<cv::Vec3b>(y, x), cv::NORM_INF) <= 1;
+      }
+    }
+  EXPECT_GT(outside, 1000);
+  EXPECT_EQ(inside_same, inside) << "inside the bound the picture is the one without a matte";
+}
+
+// The coverage learns a mask: every matte weight gets a gradient, and a few
+// steps on the cross-entropy take the coverage from everywhere towards the
+// head's silhouette (lower loss, more inside than outside).
+TEST(Matte, CoverageLearnsTheMask) {
+  const HeadModel& m = Builtin();
+  Avatar a = Avatar::CreateRandom(TinyWithMatte(MatteMode::kLearned), m, DefaultSubject(m, 128), 6);
+  a.modules().train();
+  AvatarFrameInputs inputs;
+  RaySampler sampler(a.config());
+  PrepareAvatarFrame(a.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), a.subject(), Turned(),
+                     &sampler, nullptr, &inputs);
+  cv::Mat head = View(Turned(), 128).silhouette;
+  const torch::Tensor mask = torch::from_blob(head.data, {1, 1, 128, 128}, torch::kUInt8).gt(0).to(torch::kFloat);
+  torch::optim::Adam adam(a.modules().parameters(), torch::optim::AdamOptions(1e-2));
+  auto loss = [&] {
+    return torch::binary_cross_entropy(RunAvatar(a.modules(), inputs).coverage.clamp(1e-5, 1 - 1e-5), mask);
+  };
+  const torch::Tensor first_loss = loss();
+  first_loss.backward();
+  for (const auto& p : a.modules().renderer->named_parameters())
+    if (p.key().find("alpha") != std::string::npos)
+      EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
+  const float first = first_loss.item<float>();
+  for (int step = 0; step < 120; ++step) {
+    adam.zero_grad();
+    loss().backward();
+    adam.step();
+  }
+  const float last = loss().item<float>();
+  EXPECT_LT(last, 0.5f * first) << first << " -> " << last;
+  torch::NoGradGuard no_grad;
+  const torch::Tensor c = RunAvatar(a.modules(), inputs).coverage;
+  const float inside = (c * mask).sum().item<float>() / mask.sum().item<float>();
+  const float outside = (c * (1 - mask)).sum().item<float>() / (1 - mask).sum().item<float>();
+  EXPECT_GT(inside, 0.8f);
+  EXPECT_LT(outside, 0.2f);
+}
+
+TEST(Matte, TheFileKeepsItAndOldFilesHaveNone) {
+  const HeadModel& m = Builtin();
+  const std::string dir = testing::TempDir("matte");
+  AvatarConfig config = TinyWithMatte(MatteMode::kBounded);
+  config.matte_rules = MatteRules{0.1, 0.03, false};
+  Avatar a = Avatar::CreateRandom(config, m, DefaultSubject(m, 128), 7);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : a.modules().renderer->parameters()) t.add_(0.05 * torch::randn_like(t));
+  }
+  const std::string path = dir + "/m.hcavatar";
+  a.Save(path);
+  Avatar back = Avatar::Load(path, m);
+  EXPECT_EQ(back.config().ToJson(), config.ToJson());
+  AvatarFrameInputs b0, b1, b2;
+  const cv::Mat y = Shown(back, Turned(), &b0);
+  EXPECT_EQ(cv::norm(Shown(a, Turned(), &b1), y, cv::NORM_INF), 0) << "the loaded matte draws what the saved one did";
+  EXPECT_EQ(cv::norm(y, Shown(back, Turned(), &b2), cv::NORM_INF), 0) << "deterministic";
+  // A manifest that promises a matte the weights do not hold is refused.
+  Avatar plain = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 7);
+  plain.Save(dir + "/p.hcavatar");
+  ZipEntries entries = ReadZip(dir + "/p.hcavatar");
+  nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+  manifest["config"]["matte"] = "learned";
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/lying.hcavatar", entries);
+  EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
+  manifest["config"]["matte"] = "sharp";
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/foreign.hcavatar", entries);
+  EXPECT_THROW(Avatar::Load(dir + "/foreign.hcavatar", m), std::runtime_error);
+  // Files from before the matte (no such keys) load without one.
+  manifest["config"].erase("matte");
+  manifest["config"].erase("matte_rules");
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/old.hcavatar", entries);
+  EXPECT_FALSE(Avatar::Load(dir + "/old.hcavatar", m).config().has_matte());
+}
+
+}  // namespace headcast
