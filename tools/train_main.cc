@@ -125,6 +125,10 @@ void AddMatteFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
          "cover: below the jaw line and beside the face nothing)")
       ->check(CLI::IsMember({"none", "learned", "bounded"}))
       ->default_str(MatteModeName(config->matte));
+  app->add_option("--matte-core", config->matte_core,
+                  "with a bounded matte: the model's silhouette eroded by this fraction of the image edge is always "
+                  "covered (0: off)")
+      ->capture_default_str();
   app->add_option("--matte-weight", fit->loss.matte_weight,
                   "with a matte: weight of the coverage's cross-entropy against the masks")
       ->capture_default_str();

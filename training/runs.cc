@@ -209,6 +209,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     }
     c.matte = o.config.matte;
     c.matte_rules = o.config.matte_rules;
+    c.matte_core = o.config.matte_core;
     return general.WithRuntimeSwitches(c);
   }();
   avatar.mutable_subject() = subject;

@@ -53,6 +53,7 @@ void AvatarConfig::Check() const {
   c.InRange("surface_extent", surface_extent, 0.01, 2.0);
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
+  c.InRange("matte_core", matte_core, 0.0, 0.1);
   c.ThrowIfErrors();
   matte_rules.Check();
 }
@@ -82,7 +83,8 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"surface_resolution", surface_resolution},
           {"surface_extent", surface_extent},
           {"matte", MatteModeName(matte)},
-          {"matte_rules", matte_rules.ToJson()}};
+          {"matte_rules", matte_rules.ToJson()},
+          {"matte_core", matte_core}};
 }
 
 AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
@@ -117,6 +119,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_extent = j.value("surface_extent", c.surface_extent);
     c.matte = ParseMatteMode(j.value("matte", std::string("none")));
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
+    c.matte_core = j.value("matte_core", 0.0);
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
   }

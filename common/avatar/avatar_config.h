@@ -74,6 +74,12 @@ struct AvatarConfig : AvatarCommonConfig {
   // colours on both sides cannot; the masked targets' outline is sharp.
   MatteMode matte = MatteMode::kNone;
   MatteRules matte_rules;  // kBounded: the rules the training masks were cut with
+  // kBounded: the model's silhouette inside the bound, eroded by this fraction
+  // of the image edge, is always covered (0: off). The fitted face and skull
+  // are the head whatever the learnt coverage says on an expression it saw
+  // rarely (a wide-open jaw); the learnt coverage draws the hair beyond them.
+  // Off by default: within the run-to-run spread on talking_d9 and d10.
+  double matte_core = 0;
 
   bool has_surface() const { return surface_features > 0; }
   bool has_matte() const { return matte != MatteMode::kNone; }

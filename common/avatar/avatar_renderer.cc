@@ -32,16 +32,25 @@ torch::Tensor BackgroundColour() {
   return torch::tensor({rgb[0], rgb[1], rgb[2]}).view({1, 3, 1, 1});
 }
 
-// The bound of a bounded matte: the silhouette of the covered output pixels
-// and the posed landmarks projected, through the dataset's mask rules.
-cv::Mat MatteBoundOf(const SurfaceBatch& surface, const HeadModelOutput& posed, const RigidTransform& cam_from_head,
-                     const PinholeCamera& camera, const MatteRules& rules) {
+// A bounded matte's bound and core: the silhouette of the covered output
+// pixels and the posed landmarks projected, through the dataset's mask rules.
+void MakeMatteBound(const AvatarConfig& config, const SurfaceBatch& surface, const HeadModelOutput& posed,
+                    const RigidTransform& cam_from_head, const PinholeCamera& camera, AvatarFrameInputs* out) {
   cv::Mat silhouette(surface.height, surface.width, CV_8U, cv::Scalar(0));
   for (int32_t p : surface.pixel) silhouette.data[p] = 255;
   Landmarks2d landmarks;
   for (int l = 0; l < kNumLandmarks; ++l)
     landmarks[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
-  return MatteBound(silhouette, landmarks, rules);
+  out->matte_bound = MatteBound(silhouette, landmarks, config.matte_rules);
+  if (config.matte_core > 0)
+    out->matte_core = MatteCore(silhouette, out->matte_bound, config.matte_core);
+  else
+    out->matte_core.release();
+}
+
+// (1, 1, H, W) in {0, 1} from a CV_8U mask.
+torch::Tensor MaskTensor(const cv::Mat& m) {
+  return torch::from_blob(m.data, {1, 1, m.rows, m.cols}, torch::kUInt8).to(torch::kFloat) / 255.f;
 }
 
 }  // namespace
@@ -127,12 +136,11 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     torch::Tensor logit;
     const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit);
     out.coverage = torch::sigmoid(logit);
-    if (!inputs.matte_bound.empty()) {
-      const cv::Mat& b = inputs.matte_bound;
-      const torch::Tensor bound =
-          torch::from_blob(b.data, {1, 1, b.rows, b.cols}, torch::kUInt8).to(torch::kFloat) / 255.f;
-      out.coverage = out.coverage * bound;
+    if (!inputs.matte_core.empty()) {
+      const torch::Tensor core = MaskTensor(inputs.matte_core);
+      out.coverage = core + (1 - core) * out.coverage;
     }
+    if (!inputs.matte_bound.empty()) out.coverage = out.coverage * MaskTensor(inputs.matte_bound);
     out.image = out.coverage * rgb + (1 - out.coverage) * BackgroundColour();
   }
   if (timings) timings->upsample_ms += watch.ElapsedMs();
@@ -159,10 +167,10 @@ void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, cons
   if (config.matte == MatteMode::kBounded) {
     if (!config.has_surface())  // the bound needs the full-resolution silhouette the surface lookup makes
       sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
-    out->matte_bound =
-        MatteBoundOf(out->surface, out->posed, out->cam_from_head, subject.intrinsics, config.matte_rules);
+    MakeMatteBound(config, out->surface, out->posed, out->cam_from_head, subject.intrinsics, out);
   } else {
     out->matte_bound.release();
+    out->matte_core.release();
   }
   out->conditioning = MakeConditioning(config, subject, frame);
   if (timings) timings->sample_ms = watch.ElapsedMs();

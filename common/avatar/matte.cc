@@ -115,4 +115,15 @@ cv::Mat MatteBound(const cv::Mat& silhouette, const Landmarks2d& landmarks, cons
   return bound;
 }
 
+cv::Mat MatteCore(const cv::Mat& silhouette, const cv::Mat& bound, double erosion) {
+  cv::Mat core;
+  const int radius = static_cast<int>(std::lround(erosion * silhouette.cols));
+  if (radius > 0)
+    cv::erode(silhouette, core, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
+  else
+    core = silhouette.clone();
+  cv::bitwise_and(core, bound, core);
+  return core;
+}
+
 }  // namespace headcast

@@ -53,4 +53,7 @@ void FillHairNotches(const Landmarks2d& landmarks, cv::Mat* mask);
 // margins scaled to the image, minus what lies below the jaw line.
 cv::Mat MatteBound(const cv::Mat& silhouette, const Landmarks2d& landmarks, const MatteRules& rules);
 
+// What is always covered: `silhouette` eroded by `erosion` times its edge, within `bound` (CV_8U each).
+cv::Mat MatteCore(const cv::Mat& silhouette, const cv::Mat& bound, double erosion);
+
 }  // namespace headcast

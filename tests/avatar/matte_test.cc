@@ -165,6 +165,43 @@ TEST(Matte, StartsAsThePictureWithoutAndBoundedPixelsAreBackground) {
   EXPECT_EQ(inside_same, inside) << "inside the bound the picture is the one without a matte";
 }
 
+// A core (the silhouette eroded, inside the bound) shows the renderer's RGB
+// whatever the coverage says; the rest of the bound follows the coverage.
+TEST(Matte, ACoreIsCoveredWhateverTheCoverageSays) {
+  const HeadModel& m = Builtin();
+  Avatar plain = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 5);
+  AvatarConfig config = TinyWithMatte(MatteMode::kBounded);
+  config.matte_core = 0.02;
+  Avatar cored = plain.WithRuntimeSwitches(config);
+  {
+    torch::NoGradGuard no_grad;  // a coverage of nothing
+    for (auto& p : cored.modules().renderer->named_parameters())
+      if (p.key() == "input_alpha.bias") p.value().fill_(-20);
+  }
+  const FrameParams frame = Turned();
+  AvatarFrameInputs b0, b1;
+  const cv::Mat without = Shown(plain, frame, &b0), shown = Shown(cored, frame, &b1);
+  ASSERT_FALSE(b1.matte_core.empty());
+  const PosedView v = View(frame, 128);
+  const cv::Mat bound = MatteBound(v.silhouette, v.landmarks, MatteRules{});
+  EXPECT_EQ(cv::countNonZero(b1.matte_core != MatteCore(v.silhouette, bound, 0.02)), 0);
+  int core = 0, rest = 0;
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 128; ++x) {
+      if (b1.matte_core.at<uchar>(y, x)) {
+        ++core;
+        EXPECT_EQ(shown.at<cv::Vec3b>(y, x), without.at<cv::Vec3b>(y, x)) << "at " << x << "," << y;
+      } else {
+        rest += shown.at<cv::Vec3b>(y, x) == BackgroundBgr();
+      }
+    }
+  EXPECT_GT(core, 1000);
+  EXPECT_EQ(rest, 128 * 128 - core) << "outside the core, a coverage of nothing shows the background";
+  // The core lies inside the silhouette, at least the erosion away from its edge.
+  EXPECT_EQ(cv::countNonZero(b1.matte_core & ~v.silhouette), 0);
+  EXPECT_LT(core, cv::countNonZero(v.silhouette & bound));
+}
+
 // The coverage learns a mask: every matte weight gets a gradient, and a few
 // steps on the cross-entropy take the coverage from everywhere towards the
 // head's silhouette (lower loss, more inside than outside).
