@@ -9,16 +9,14 @@
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "tests/testing/posed_head.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
 namespace {
 
-const HeadModel& Builtin() {
-  static const HeadModel model = MakeBuiltinHead();
-  return model;
-}
+const HeadModel& Builtin() { return *testing::BuiltinHead(); }
 
 AvatarConfig TinyWithMatte(MatteMode mode) {
   AvatarConfig c = testing::TinyAvatarConfig();
@@ -26,13 +24,12 @@ AvatarConfig TinyWithMatte(MatteMode mode) {
   return c;
 }
 
+// Less turned than testing::Expressive(): both temples stay in view for the margins' checks.
 FrameParams Turned() {
-  FrameParams p;
-  p.expression = Eigen::VectorXf::Zero(Builtin().num_expression());
-  p.expression[8] = 1.0f;  // lips part
+  FrameParams p = testing::Expressive();
+  p.expression[0] = 0;
   p.jaw = Eigen::Vector3f(0.2f, 0, 0);
   p.neck = Eigen::Vector3f(0.05f, 0.25f, 0);
-  p.SetCamFromHead(FrontalCamFromHead(0.62));
   return p;
 }
 
@@ -42,19 +39,13 @@ struct PosedView {
   Landmarks2d landmarks;
 };
 PosedView View(const FrameParams& frame, int size) {
-  const HeadModel& m = Builtin();
-  HeadModelOutput posed;
-  m.Forward(m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), frame.expression.cast<double>(), frame.HeadPose(),
-            &posed);
-  RasterVertices v_cam;
-  TransformToCamera(posed.vertices, frame.CamFromHead(), &v_cam);
-  const PinholeCamera camera = DefaultSubject(m, size).intrinsics;
+  const testing::Posed p = testing::Pose(frame, size);
   RasterBuffers raster;
-  Rasterize(v_cam, m.data().faces, camera, RasterOptions{}, &raster);
+  Rasterize(p.v_cam, Builtin().data().faces, p.camera, RasterOptions{}, &raster);
   PosedView v;
   v.silhouette = raster.Mask();
   for (int l = 0; l < kNumLandmarks; ++l)
-    v.landmarks[l] = camera.Project(frame.CamFromHead().Apply(posed.landmarks.row(l).transpose().cast<double>()));
+    v.landmarks[l] = p.camera.Project(frame.CamFromHead().Apply(p.posed.landmarks.row(l).transpose().cast<double>()));
   return v;
 }
 

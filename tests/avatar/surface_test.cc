@@ -9,52 +9,23 @@
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "tests/testing/posed_head.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
 namespace {
 
-std::shared_ptr<const HeadModel> Builtin() {
-  static auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
-  return model;
-}
+using testing::Expressive;
+using testing::Pose;
+using testing::Posed;
+std::shared_ptr<const HeadModel> Builtin() { return testing::BuiltinHead(); }
 
 AvatarConfig TinyWithSurface() {
   AvatarConfig c = testing::TinyAvatarConfig();
   c.surface_features = 4;
   c.surface_resolution = 32;
   return c;
-}
-
-// A frame with an expression and a turned head, so that the posed mesh is far
-// from the canonical one.
-FrameParams Expressive() {
-  FrameParams p;
-  p.expression = Eigen::VectorXf::Zero(Builtin()->num_expression());
-  p.expression[0] = 1.5f;  // smile
-  p.expression[8] = 1.0f;  // lips part
-  p.jaw = Eigen::Vector3f(0.25f, 0, 0);
-  p.neck = Eigen::Vector3f(0.1f, 0.3f, 0);
-  p.SetCamFromHead(FrontalCamFromHead(0.62));
-  return p;
-}
-
-struct Posed {
-  HeadIdentity identity;
-  HeadModelOutput posed;
-  RasterVertices v_cam;
-  PinholeCamera camera;
-};
-
-Posed Pose(const FrameParams& frame, int size) {
-  const HeadModel& m = *Builtin();
-  Posed p;
-  p.identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
-  m.Forward(p.identity, frame.expression.cast<double>(), frame.HeadPose(), &p.posed);
-  TransformToCamera(p.posed.vertices, frame.CamFromHead(), &p.v_cam);
-  p.camera = DefaultSubject(m, size).intrinsics;
-  return p;
 }
 
 // What the receiver shows for `frame`.
