@@ -43,13 +43,18 @@ def main():
         parts["outside"] += err[~head & ~band].sum()
     mse = sum(parts.values())
     band = parts["band_lower"] + parts["band_upper"]
+    if not mse > 0:
+        sys.exit(f"outline_error: the avatar frames in {a.frames} equal their truths: no error to place")
+    rest = mse - band
     result = {"frames": len(avatars), "band_px": a.band,
               "share": {k: v / mse for k, v in parts.items()},
-              "psnr_db": -10 * math.log10(mse), "psnr_without_band_db": -10 * math.log10(mse - band)}
+              "psnr_db": -10 * math.log10(mse),
+              "psnr_without_band_db": -10 * math.log10(rest) if rest > 1e-15 else None}  # None: all in the band
     print(f"{len(avatars)} frames; share of the squared error: outline band (±{a.band} px) lower "
           f"{result['share']['band_lower']:.2f}, upper {result['share']['band_upper']:.2f}; inside "
           f"{result['share']['inside']:.2f}; background {result['share']['outside']:.2f}; PSNR of the mean "
-          f"{result['psnr_db']:.2f} dB, {result['psnr_without_band_db']:.2f} dB without the band")
+          f"{result['psnr_db']:.2f} dB, " + (f"{result['psnr_without_band_db']:.2f} dB" if result["psnr_without_band_db"]
+                                              else "no error") + " without the band")
     print(f"reproduce: bench/outline_error.py FRAMES --band {a.band}")
     if a.json:
         json.dump(result, open(a.json, "w"), indent=2)
