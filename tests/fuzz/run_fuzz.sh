@@ -26,8 +26,8 @@ sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${p
 libs[session_messages]="-lprotobuf -lcrypto"
 sources[files]="tests/fuzz/files_fuzzer.cc ${codec[*]} ${proto[*]} proto/recording.cc proto/protocol.cc
   common/core/npy.cc common/core/zip_archive.cc common/core/check.cc common/core/log.cc
-  common/avatar/avatar_config.cc"
-libs[files]="-lprotobuf -lzip -lz -lspdlog -lfmt -lopencv_core"
+  common/avatar/avatar_config.cc common/avatar/matte.cc"
+libs[files]="-lprotobuf -lzip -lz -lspdlog -lfmt -lopencv_core -lopencv_imgproc"
 failed=0
 for t in "${targets[@]}"; do
   [ -n "${sources[$t]:-}" ] || { echo "run_fuzz: no target $t" >&2; exit 2; }
