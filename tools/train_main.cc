@@ -109,6 +109,13 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
       ->capture_default_str();
   app->add_option("--surface-extent", config->surface_extent, "metres from the model's origin to a plane's edge")
       ->capture_default_str();
+  app->add_option("--surface-shell", config->surface_shell,
+                  "metres: the texture also covers the pixels just beyond the mesh, looked up on the mesh inflated "
+                  "by this much (hair, the outline; 0: the mesh only)")
+      ->capture_default_str();
+  app->add_flag("--surface-conditioned", config->surface_conditioned,
+                "the texture's branch is scaled and shifted per frame by the pose and expression (detail that comes "
+                "and goes with the expression: wrinkles, creases)");
   app->add_option("--surface-lr", fit->surface_lr_scale, "the texture's learning rate as a multiple of --lr")
       ->capture_default_str();
   app->add_flag("--canonical-samples", config->canonical_samples,

@@ -206,6 +206,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
       c.surface_features = o.config.surface_features;
       c.surface_resolution = o.config.surface_resolution;
       c.surface_extent = o.config.surface_extent;
+      c.surface_shell = o.config.surface_shell;
+      c.surface_conditioned = o.config.surface_conditioned;
     }
     c.matte = o.config.matte;
     c.matte_rules = o.config.matte_rules;

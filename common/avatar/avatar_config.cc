@@ -51,6 +51,9 @@ void AvatarConfig::Check() const {
          "renderer_channels[0] must equal feature_channels");
   c.InRange("surface_features", surface_features, 0, 64).InRange("surface_resolution", surface_resolution, 8, 2048);
   c.InRange("surface_extent", surface_extent, 0.01, 2.0);
+  c.InRange("surface_shell", surface_shell, 0.0, 0.2);
+  c.That(surface_shell == 0 || has_surface(), "surface_shell needs surface_features > 0");
+  c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
@@ -82,6 +85,8 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"surface_features", surface_features},
           {"surface_resolution", surface_resolution},
           {"surface_extent", surface_extent},
+          {"surface_shell", surface_shell},
+          {"surface_conditioned", surface_conditioned},
           {"matte", MatteModeName(matte)},
           {"matte_rules", matte_rules.ToJson()},
           {"matte_core", matte_core}};
@@ -117,6 +122,8 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_features = j.value("surface_features", 0);
     c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
     c.surface_extent = j.value("surface_extent", c.surface_extent);
+    c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
+    c.surface_conditioned = j.value("surface_conditioned", false);
     c.matte = ParseMatteMode(j.value("matte", std::string("none")));
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);

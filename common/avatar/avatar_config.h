@@ -67,6 +67,17 @@ struct AvatarConfig : AvatarCommonConfig {
   int surface_features = 0;      // channels of the texture
   int surface_resolution = 256;  // texels along each plane edge
   double surface_extent = 0.2;   // metres from the model origin to a plane's edge
+  // Pixels just beyond the mesh (hair, the outline) get the texture too: the
+  // posed mesh inflated along its normals by this many metres is rasterised,
+  // and where it alone covers a pixel the texture is looked up at the
+  // canonical mesh inflated alike. The hair's outline then moves with the
+  // head and can be drawn as sharply as the face (0: off, the mesh only).
+  double surface_shell = 0;
+  // The surface branch's hidden layer is scaled and shifted per frame by the
+  // pose and expression (FiLM), so that the texture can hold detail that comes
+  // and goes with the expression (forehead wrinkles, creases, the mouth's
+  // inside) instead of its average. false: the same branch for every frame.
+  bool surface_conditioned = false;
 
   // The outline (kNone in files from before it). A coverage logit, summed over
   // the renderer's levels like its RGB, can turn from 0 to 1 within a pixel
@@ -86,6 +97,7 @@ struct AvatarConfig : AvatarCommonConfig {
 
   int feature_size() const { return output_size / 8; }
   int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi
+  int motion_dim() const { return 12 + num_expression; }  // the conditioning without beta: what changes per frame
   int appearance_dim() const { return 27 + num_texture; }                   // lambda, tau
   int encoding_dim() const { return 3 + 6 * pe_frequencies; }
 

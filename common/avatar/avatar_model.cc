@@ -169,9 +169,14 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
     // Zero: a renderer given surface features starts as the one without (a
     // fine-tune from a general model starts where the general model is); the
     // texture gets gradients from the first step that moves these weights.
+    if (config.surface_conditioned)
+      surface_film_ = register_module("surface_film", torch::nn::Linear(config.motion_dim(), 2 * hidden));
     torch::NoGradGuard no_grad;
     surface_out_->weight.zero_();
     surface_out_->bias.zero_();
+    // Zero too: a conditioned branch starts as the unconditioned one.
+    if (surface_film_)
+      for (auto& p : surface_film_->parameters()) p.zero_();
   }
   blocks_ = register_module("blocks", torch::nn::ModuleList());
   post_ = register_module("post", torch::nn::ModuleList());
@@ -196,12 +201,22 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
 }
 
 torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height,
-                                              int width) {
+                                              int width, const torch::Tensor& motion) {
   if (!surface_out_) throw std::logic_error("SurfaceTerm: this renderer has no surface branch");
   const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  torch::Tensor scale, shift;  // (1, hidden) each, once per frame
+  if (surface_film_) {
+    if (!motion.defined() || motion.dim() != 2 || motion.size(1) != surface_film_->weight.size(1))
+      throw std::invalid_argument("SurfaceTerm: a conditioned surface branch needs the frame's motion (1, " +
+                                  std::to_string(surface_film_->weight.size(1)) + ")");
+    const auto film = surface_film_->forward(motion).chunk(2, 1);
+    scale = 1 + film[0];
+    shift = film[1];
+  }
   auto branch = [&](const torch::Tensor& f) {  // (P, Cs) -> (P, C3): the 1x1 convolutions as matrices
-    const torch::Tensor h =
-        F::leaky_relu(F::linear(f, surface_hidden_->weight.flatten(1), surface_hidden_->bias), leaky);
+    torch::Tensor h = F::linear(f, surface_hidden_->weight.flatten(1), surface_hidden_->bias);
+    if (surface_film_) h = h * scale + shift;
+    h = F::leaky_relu(h, leaky);
     return F::linear(h, surface_out_->weight.flatten(1), surface_out_->bias);
   };
   const int64_t channels = surface_out_->weight.size(0), in = surface_hidden_->weight.size(1);

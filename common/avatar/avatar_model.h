@@ -109,10 +109,14 @@ class NeuralRendererImpl : public torch::nn::Module {
   // features (P, Cs) at flat pixel indices `pixels` (P) of an h x w image ->
   // (1, C3, h, w). Uncovered pixels get the branch's value for zero features,
   // so this equals the branch run on the whole zero-filled surface image.
-  torch::Tensor SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height, int width);
+  // `motion` (1, motion_dim): the frame's pose and expression, which scale
+  // and shift the hidden layer when the branch is conditioned (else unused).
+  torch::Tensor SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height, int width,
+                            const torch::Tensor& motion = torch::Tensor());
 
  private:
   torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr}, input_alpha_{nullptr};
+  torch::nn::Linear surface_film_{nullptr};  // motion -> (scale, shift) of the surface branch's hidden layer
   torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_;
 };
 TORCH_MODULE(NeuralRenderer);

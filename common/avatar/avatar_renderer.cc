@@ -37,7 +37,7 @@ torch::Tensor BackgroundColour() {
 void MakeMatteBound(const AvatarConfig& config, const SurfaceBatch& surface, const HeadModelOutput& posed,
                     const RigidTransform& cam_from_head, const PinholeCamera& camera, AvatarFrameInputs* out) {
   cv::Mat silhouette(surface.height, surface.width, CV_8U, cv::Scalar(0));
-  for (int32_t p : surface.pixel) silhouette.data[p] = 255;
+  for (int i = 0; i < surface.mesh_pixels; ++i) silhouette.data[surface.pixel[i]] = 255;
   Landmarks2d landmarks;
   for (int l = 0; l < kNumLandmarks; ++l)
     landmarks[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
@@ -128,7 +128,11 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
         torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
     const torch::Tensor features =
         n > 0 ? modules.surface->forward(canonical) : torch::zeros({0, modules.cnerf->config().surface_features});
-    surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width);
+    const AvatarConfig& config = modules.cnerf->config();
+    const torch::Tensor motion =
+        config.surface_conditioned ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
+                                   : torch::Tensor();
+    surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width, motion);
   }
   if (!modules.cnerf->config().has_matte()) {
     out.image = modules.renderer->forward(out.feature_map, surface_term);

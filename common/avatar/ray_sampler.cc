@@ -88,6 +88,21 @@ void CheckCanonicalVertices(const char* who, const Eigen::VectorXf& canonical, E
                                 " canonical vertices for a mesh of " + std::to_string(vertices));
 }
 
+// The canonical point under pixel `p` of `b`: the same triangle and
+// barycentrics on `canonical` (x y z per vertex), each vertex moved by
+// `offset` along its canonical normal (none when `normals` is null).
+void CanonicalPoint(const RasterBuffers& b, int p, const RasterFaces& faces, const Eigen::VectorXf& canonical,
+                    const RowMatrixX3f* normals, float offset, float point[3]) {
+  point[0] = point[1] = point[2] = 0;
+  const int f = b.face[p];
+  for (int corner = 0; corner < 3; ++corner) {
+    const float w = b.bary[3 * p + corner];
+    const int v = faces(f, corner);
+    for (int k = 0; k < 3; ++k)
+      point[k] += w * (canonical[3 * v + k] + (normals ? offset * (*normals)(v, k) : 0.f));
+  }
+}
+
 }  // namespace
 
 void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
@@ -102,15 +117,36 @@ void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const Rast
   out->canonical.clear();
   const RasterBuffers& b = surface_buffers_;
   for (int p = 0; p < cam.width * cam.height; ++p) {
-    const int f = b.face[p];
-    if (f < 0) continue;
+    if (b.face[p] < 0) continue;
     out->pixel.push_back(p);
-    float point[3] = {0, 0, 0};
-    for (int corner = 0; corner < 3; ++corner) {
-      const float w = b.bary[3 * p + corner];
-      const int v = faces(f, corner);
-      for (int k = 0; k < 3; ++k) point[k] += w * canonical_vertices[3 * v + k];
-    }
+    float point[3];
+    CanonicalPoint(b, p, faces, canonical_vertices, nullptr, 0.f, point);
+    out->canonical.insert(out->canonical.end(), point, point + 3);
+  }
+  out->mesh_pixels = out->num_pixels();
+  if (config_.surface_shell > 0)
+    AppendShell(vertices_in_cam, faces, canonical_vertices, cam, static_cast<float>(config_.surface_shell), out);
+}
+
+void RaySampler::AppendShell(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
+                             const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, float shell,
+                             SurfaceBatch* out) {
+  // Inflated along the vertex normals, posed and canonical alike, so that a
+  // shell point keeps its place relative to the surface under it.
+  inflated_ = vertices_in_cam + shell * VertexNormals(vertices_in_cam, faces);
+  const RowMatrixX3f canonical =
+      Eigen::Map<const RowMatrixX3f>(canonical_vertices.data(), canonical_vertices.size() / 3, 3);
+  const RowMatrixX3f canonical_normals = VertexNormals(canonical, faces);
+  RasterOptions raster;
+  raster.cull_back_faces = true;
+  Rasterize(inflated_, faces, cam, raster, &shell_buffers_);
+  const RasterBuffers& mesh = surface_buffers_;
+  const RasterBuffers& b = shell_buffers_;
+  for (int p = 0; p < cam.width * cam.height; ++p) {
+    if (b.face[p] < 0 || mesh.face[p] >= 0) continue;
+    out->pixel.push_back(p);
+    float point[3];
+    CanonicalPoint(b, p, faces, canonical_vertices, &canonical_normals, shell, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
   }
 }

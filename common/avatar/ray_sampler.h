@@ -28,10 +28,13 @@ struct RayBatch {
 // Pixels of the output image that the posed mesh covers, each with the point
 // of the canonical (neutral) mesh under it: the same triangle and barycentrics
 // on the canonical vertices. What the surface texture is looked up with.
+// With a shell (AvatarConfig::surface_shell), the pixels only the inflated
+// mesh covers follow the mesh's, with points on the inflated canonical mesh.
 struct SurfaceBatch {
   int width = 0, height = 0;     // output image size
-  std::vector<int32_t> pixel;    // covered pixel -> y * width + x
+  std::vector<int32_t> pixel;    // covered pixel -> y * width + x; the mesh's first, then the shell's
   std::vector<float> canonical;  // 3 per covered pixel, model frame, metres
+  int mesh_pixels = 0;           // the first this many pixels are the mesh's: its silhouette
   int num_pixels() const { return static_cast<int>(pixel.size()); }
 };
 
@@ -56,7 +59,8 @@ class RaySampler {
               const RigidTransform& cam_from_head, std::mt19937* rng, RayBatch* out);
 
   // Rasterises the posed mesh at `output_camera`'s size and maps every covered
-  // pixel to the canonical mesh (`canonical_vertices`: 3N, x y z per vertex).
+  // pixel to the canonical mesh (`canonical_vertices`: 3N, x y z per vertex);
+  // with a shell, then the pixels only the inflated mesh covers.
   void SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
                      const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, SurfaceBatch* out);
 
@@ -64,8 +68,15 @@ class RaySampler {
   void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,
               RayBatch* out) const;
 
+  // Appends the pixels covered by the mesh inflated by `shell` metres that
+  // `surface_buffers_` (the mesh) leaves empty.
+  void AppendShell(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
+                   const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, float shell,
+                   SurfaceBatch* out);
+
   AvatarConfig config_;
-  RasterBuffers buffers_, surface_buffers_;
+  RasterBuffers buffers_, surface_buffers_, shell_buffers_;
+  RasterVertices inflated_;
   std::vector<float> surface_depth_;
   std::vector<int32_t> surface_face_;
 };

@@ -154,6 +154,16 @@ TEST(Matte, StartsAsThePictureWithoutAndBoundedPixelsAreBackground) {
     }
   EXPECT_GT(outside, 1000);
   EXPECT_EQ(inside_same, inside) << "inside the bound the picture is the one without a matte";
+  // The bound is the mesh's: a texture shell beyond it changes nothing there.
+  AvatarConfig shelled = TinyWithMatte(MatteMode::kBounded);
+  shelled.surface_features = 4;
+  shelled.surface_resolution = 32;
+  shelled.surface_shell = 0.03;
+  Avatar with_shell = plain.WithRuntimeSwitches(shelled);
+  AvatarFrameInputs b3;
+  Shown(with_shell, frame, &b3);
+  EXPECT_GT(b3.surface.num_pixels(), b3.surface.mesh_pixels);
+  EXPECT_EQ(cv::countNonZero(b3.matte_bound != b2.matte_bound), 0);
 }
 
 // A core (the silhouette eroded, inside the bound) shows the renderer's RGB

@@ -90,6 +90,83 @@ TEST(SurfaceSampling, TheCanonicalPointMapsBackOntoThePixel) {
   EXPECT_GT(moved, 0.005) << "the expression and jaw moved nothing: the test frame proves little";
 }
 
+// The shell leaves the mesh's pixels as they were and adds pixels beyond its
+// silhouette, each mapped to a point the shell's thickness off the canonical surface.
+TEST(SurfaceShell, AddsPixelsBeyondTheMeshOffTheCanonicalSurface) {
+  const HeadModel& m = *Builtin();
+  const Posed p = Pose(Expressive(), 128);
+  const RasterFaces& faces = m.data().faces;
+  AvatarConfig with_shell = TinyWithSurface();
+  with_shell.surface_shell = 0.02;
+  RaySampler plain_sampler(TinyWithSurface()), shell_sampler(with_shell);
+  SurfaceBatch plain, shell;
+  plain_sampler.SampleSurface(p.v_cam, faces, p.identity.v_shaped, p.camera, &plain);
+  shell_sampler.SampleSurface(p.v_cam, faces, p.identity.v_shaped, p.camera, &shell);
+  EXPECT_EQ(plain.mesh_pixels, plain.num_pixels()) << "without a shell every pixel is the mesh's";
+  ASSERT_EQ(shell.mesh_pixels, plain.num_pixels());
+  EXPECT_TRUE(std::equal(plain.pixel.begin(), plain.pixel.end(), shell.pixel.begin()));
+  EXPECT_TRUE(std::equal(plain.canonical.begin(), plain.canonical.end(), shell.canonical.begin()));
+  const int added = shell.num_pixels() - shell.mesh_pixels;
+  EXPECT_GT(added, 300) << "a 2 cm shell around a head ~100 px wide adds a ring of pixels";
+  ASSERT_EQ(shell.canonical.size(), 3u * shell.num_pixels());
+  std::vector<bool> on_mesh(128 * 128, false);
+  for (int i = 0; i < shell.mesh_pixels; ++i) on_mesh[shell.pixel[i]] = true;
+  const Eigen::Index vertices = p.identity.v_shaped.size() / 3;
+  double nearest_min = 1e9, nearest_max = 0;
+  for (int i = shell.mesh_pixels; i < shell.num_pixels(); ++i) {
+    EXPECT_FALSE(on_mesh[shell.pixel[i]]) << "pixel " << shell.pixel[i] << " is the mesh's and the shell's";
+    const Eigen::Vector3f c(shell.canonical[3 * i], shell.canonical[3 * i + 1], shell.canonical[3 * i + 2]);
+    double nearest = 1e9;
+    for (Eigen::Index v = 0; v < vertices; ++v) nearest = std::min<double>(nearest, (Corner(p.identity.v_shaped, v) - c).norm());
+    nearest_min = std::min(nearest_min, nearest);
+    nearest_max = std::max(nearest_max, nearest);
+  }
+  // The nearest vertex is a little farther than the surface; normals averaged
+  // over corners bring the shell a little nearer than its thickness.
+  EXPECT_GT(nearest_min, 0.6 * 0.02);
+  EXPECT_LT(nearest_max, 1.5 * 0.02);
+}
+
+// Unposed and unexpressive, the posed mesh is the canonical one moved rigidly:
+// a shell pixel's canonical point, moved alike, lands on the pixel.
+TEST(SurfaceShell, OnTheNeutralHeadTheShellPointLandsOnItsPixel) {
+  const HeadModel& m = *Builtin();
+  FrameParams neutral;
+  neutral.expression = Eigen::VectorXf::Zero(m.num_expression());
+  neutral.SetCamFromHead(FrontalCamFromHead(0.62));
+  const Posed p = Pose(neutral, 128);
+  AvatarConfig c = TinyWithSurface();
+  c.surface_shell = 0.03;
+  RaySampler sampler(c);
+  SurfaceBatch shell;
+  sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &shell);
+  ASSERT_GT(shell.num_pixels() - shell.mesh_pixels, 300);
+  const RigidTransform cam_from_head = neutral.CamFromHead();
+  double worst_px = 0;
+  for (int i = shell.mesh_pixels; i < shell.num_pixels(); ++i) {
+    const Eigen::Vector3d c(shell.canonical[3 * i], shell.canonical[3 * i + 1], shell.canonical[3 * i + 2]);
+    const Eigen::Vector2d at = p.camera.Project(cam_from_head.Apply(c));
+    const int px = shell.pixel[i];
+    worst_px = std::max(worst_px, std::hypot(at.x() - px % 128, at.y() - px / 128));
+  }
+  EXPECT_LT(worst_px, 0.05);
+}
+
+TEST(SurfaceShell, NeedsATextureAndTravelsInTheFile) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_shell = 0.025;
+  EXPECT_EQ(AvatarConfig::FromJson(c.ToJson()).surface_shell, 0.025);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_shell");
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_shell, 0) << "files from before the shell: the mesh only";
+  AvatarConfig bad = c;
+  bad.surface_shell = -0.01;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad = testing::TinyAvatarConfig();
+  bad.surface_shell = 0.02;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a shell without a texture to look up";
+}
+
 TEST(SurfaceSampling, RefusesCanonicalVerticesOfAnotherMesh) {
   const Posed p = Pose(Expressive(), 64);
   RaySampler sampler(TinyWithSurface());
@@ -203,6 +280,69 @@ TEST(SurfaceTexture, StartsAsTheAvatarWithoutItAndLearns) {
     adam.step();
   }
   EXPECT_GT(with.modules().surface->parameters()[0].abs().max().item<float>(), 0.f);
+}
+
+// A conditioned branch starts as the plain one; once its FiLM weights move,
+// the same texture draws differently for another expression, it learns, and
+// a branch asked without the frame's motion refuses.
+TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
+  const HeadModel& m = *Builtin();
+  Avatar plain = Avatar::CreateRandom(TinyWithSurface(), m, DefaultSubject(m, 128), 6);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : plain.modules().surface->parameters()) t.uniform_(-1, 1);
+    for (auto& p : plain.modules().renderer->named_parameters())
+      if (p.key().find("surface_out") != std::string::npos) p.value().uniform_(-0.5, 0.5);
+  }
+  AvatarConfig conditioned_config = TinyWithSurface();
+  conditioned_config.surface_conditioned = true;
+  EXPECT_TRUE(AvatarConfig::FromJson(conditioned_config.ToJson()).surface_conditioned);
+  Avatar conditioned = Avatar::CreateRandom(conditioned_config, m, plain.subject(), 6);
+  {  // the plain avatar's weights, the FiLM at its zero start
+    torch::NoGradGuard no_grad;
+    auto from = plain.modules().renderer->named_parameters();
+    for (auto& p : conditioned.modules().renderer->named_parameters())
+      if (const torch::Tensor* t = from.find(p.key())) p.value().copy_(*t);
+    auto cnerf = plain.modules().cnerf->named_parameters();
+    for (auto& p : conditioned.modules().cnerf->named_parameters()) p.value().copy_(cnerf[p.key()]);
+    conditioned.modules().surface->parameters()[0].copy_(plain.modules().surface->parameters()[0]);
+  }
+  FrameParams smile = Expressive(), other = Expressive();
+  other.expression[0] = -1.0f;
+  EXPECT_EQ(cv::norm(Shown(plain, smile), Shown(conditioned, smile), cv::NORM_INF), 0);
+
+  // The texture's contribution (the surface term) at the same canonical
+  // points for two expressions: equal without FiLM, different with it.
+  const torch::Tensor canonical = torch::rand({200, 3}) * 0.2 - 0.1;
+  auto term = [&](Avatar& a, const FrameParams& f) {
+    torch::NoGradGuard no_grad;
+    const AvatarConfig& c = a.config();
+    const torch::Tensor motion =
+        MakeConditioning(c, a.subject(), f).geometry.narrow(1, c.num_shape, c.motion_dim());
+    return a.modules().renderer->SurfaceTerm(a.modules().surface->forward(canonical), torch::arange(200), 16, 16,
+                                             c.surface_conditioned ? motion : torch::Tensor());
+  };
+  EXPECT_EQ((term(plain, smile) - term(plain, other)).abs().max().item<float>(), 0.f);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : conditioned.modules().renderer->named_parameters())
+      if (p.key().find("surface_film") != std::string::npos) p.value().uniform_(-0.5, 0.5);
+  }
+  EXPECT_GT((term(conditioned, smile) - term(conditioned, other)).abs().max().item<float>(), 1e-3f);
+  EXPECT_THROW(conditioned.modules().renderer->SurfaceTerm(torch::zeros({1, 4}), torch::zeros({1}, torch::kLong), 4,
+                                                          4),
+               std::invalid_argument);
+
+  // Its FiLM weights get gradients from the picture.
+  conditioned.modules().train();
+  RaySampler sampler(conditioned.config());
+  AvatarFrameInputs inputs;
+  PrepareAvatarFrame(conditioned.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())),
+                     conditioned.subject(), smile, &sampler, nullptr, &inputs);
+  torch::mse_loss(RunAvatar(conditioned.modules(), inputs).image, torch::full({1, 3, 128, 128}, 0.8f)).backward();
+  for (auto& p : conditioned.modules().renderer->named_parameters())
+    if (p.key().find("surface_film") != std::string::npos)
+      EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
 }
 
 TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
