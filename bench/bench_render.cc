@@ -101,13 +101,14 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
                          {"ms_p95", with_surface["ms_p95"]},
                          {"fps_median", with_surface["fps_median"]},
                          {"stage_ms_median", with_surface["stage_ms_median"]}};
-  // And a subject's default avatar: the texture and the bounded matte (its
-  // bound's dilations and polygon per frame, the coverage's convolutions).
-  AvatarConfig subject = surface;
-  subject.matte = kSubjectMatte;
+  // And a subject's default avatar: the texture, its conditioned branch and the
+  // bounded matte (its bound's dilations and polygon per frame, the coverage's convolutions).
+  AvatarConfig subject = AvatarConfig::Default(options.resolution);
+  ApplySubjectDefaults(&subject);
   const nlohmann::json with_matte = MeasureConfig(options, subject, frames);
   out["subject_default"] = {
-      {"surface_features", subject.surface_features}, {"matte", MatteModeName(subject.matte)},
+      {"surface_features", subject.surface_features}, {"surface_conditioned", subject.surface_conditioned},
+      {"matte", MatteModeName(subject.matte)},
       {"ms_median", with_matte["ms_median"]},         {"ms_p95", with_matte["ms_p95"]},
       {"fps_median", with_matte["fps_median"]},       {"stage_ms_median", with_matte["stage_ms_median"]}};
   if (options.compare_headnerf) {

@@ -113,9 +113,12 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
                   "metres: the texture also covers the pixels just beyond the mesh, looked up on the mesh inflated "
                   "by this much (hair, the outline; 0: the mesh only)")
       ->capture_default_str();
-  app->add_flag("--surface-conditioned", config->surface_conditioned,
+  app->add_flag("--surface-conditioned,!--no-surface-conditioned", config->surface_conditioned,
                 "the texture's branch is scaled and shifted per frame by the pose and expression (detail that comes "
                 "and goes with the expression: wrinkles, creases)");
+  app->add_option("--surface-hidden", config->surface_hidden,
+                  "hidden channels of the texture's per-pixel branch (0: twice --surface-features)")
+      ->capture_default_str();
   app->add_option("--surface-lr", fit->surface_lr_scale, "the texture's learning rate as a multiple of --lr")
       ->capture_default_str();
   app->add_flag("--canonical-samples", config->canonical_samples,
@@ -209,8 +212,8 @@ int main(int argc, char** argv) {
   auto* subject = app.add_subcommand("subject", "fine-tune a person's avatar from the general model");
   SubjectOptions s;
   s.fit.iterations = 1000;
-  s.config.surface_features = kSubjectSurfaceFeatures;  // --surface-features 0: the thesis's avatar
-  s.config.matte = kSubjectMatte;                       // --matte none: the thesis's avatar
+  // --surface-features 0 --matte none: the thesis's avatar.
+  ApplySubjectDefaults(&s.config);
   subject->add_option("--head-model", s.head_model, "builtin or a model .npz")->capture_default_str();
   subject->add_option("--general", s.general, "the general model (.hcavatar)");
   subject->add_flag("--from-scratch", s.from_scratch, "random networks instead of a general model (comparisons)");
@@ -338,6 +341,10 @@ int main(int argc, char** argv) {
       FitOptions& fit = pretrain->parsed() ? g.fit : s.fit;
       if (subject->parsed() && subject->get_option("--weight-average")->count() == 0)
         fit.weight_average = SubjectWeightAverage(fit.iterations);
+      // The default conditioning belongs to the default texture: without a
+      // texture (the thesis's avatar) there is nothing to condition, unless asked.
+      if (subject->parsed() && !s.config.has_surface() && subject->get_option("--surface-conditioned")->count() == 0)
+        s.config.surface_conditioned = false;
       std::unique_ptr<LocalRanks> ranks;
       if (processes > 1) {
         if (fit.distributed.world_size > 1)

@@ -149,8 +149,7 @@ SubjectOptions MakeSubjectOptions(const CreateOptions& o, const Models& m, const
   s.general = m.general;
   s.dataset = (work / "dataset").string();
   s.resolution = o.resolution;
-  s.config.surface_features = kSubjectSurfaceFeatures;
-  s.config.matte = kSubjectMatte;
+  ApplySubjectDefaults(&s.config);
   s.fit.iterations = o.iterations;
   s.fit.weight_average = SubjectWeightAverage(o.iterations);
   // As bench/four_clips.sh: a fixed camera distance, no distance augmentation.

@@ -169,6 +169,20 @@ nlohmann::json RunPretrain(PretrainOptions o) {
   return summary;
 }
 
+namespace {
+
+// The surface texture's settings (a subject's own, added to a general model).
+void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
+  to->surface_features = from.surface_features;
+  to->surface_resolution = from.surface_resolution;
+  to->surface_extent = from.surface_extent;
+  to->surface_shell = from.surface_shell;
+  to->surface_conditioned = from.surface_conditioned;
+  to->surface_hidden = from.surface_hidden;
+}
+
+}  // namespace
+
 void SubjectOptions::Check() const {
   OptionsCheck c("SubjectOptions");
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
@@ -177,6 +191,11 @@ void SubjectOptions::Check() const {
   CheckRun(resolution, outputs, &c);
   c.ThrowIfErrors();
   fit.Check();
+  // The texture's options are the subject's own (added to the general model):
+  // the same rules as a whole configuration's (surface_conditioned needs a texture, ...).
+  AvatarConfig texture = AvatarConfig::Default(resolution);
+  CopySurfaceTexture(config, &texture);
+  texture.Check();
 }
 
 nlohmann::json RunSubject(SubjectOptions o) {
@@ -203,11 +222,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.output_size = o.resolution;
     c.canonical_samples = c.canonical_samples || o.config.canonical_samples;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
-      c.surface_features = o.config.surface_features;
-      c.surface_resolution = o.config.surface_resolution;
-      c.surface_extent = o.config.surface_extent;
-      c.surface_shell = o.config.surface_shell;
-      c.surface_conditioned = o.config.surface_conditioned;
+      CopySurfaceTexture(o.config, &c);
     }
     c.matte = o.config.matte;
     c.matte_rules = o.config.matte_rules;

@@ -31,7 +31,6 @@ inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
 
 // The CNeRF backend's configuration: the shared part (output size,
 // conditioning sizes) and its own networks, sampling and speed switches.
-// Surface-texture channels a subject's avatar gets by default (headcast-train subject).
 
 struct AvatarConfig : AvatarCommonConfig {
   int feature_channels = 48;  // channels of the CNeRF feature vector / feature map
@@ -78,6 +77,7 @@ struct AvatarConfig : AvatarCommonConfig {
   // and goes with the expression (forehead wrinkles, creases, the mouth's
   // inside) instead of its average. false: the same branch for every frame.
   bool surface_conditioned = false;
+  int surface_hidden = 0;  // the branch's hidden channels (0: twice surface_features, as in files from before)
 
   // The outline (kNone in files from before it). A coverage logit, summed over
   // the renderer's levels like its RGB, can turn from 0 to 1 within a pixel
@@ -93,6 +93,7 @@ struct AvatarConfig : AvatarCommonConfig {
   double matte_core = 0;
 
   bool has_surface() const { return surface_features > 0; }
+  int surface_hidden_channels() const { return surface_hidden > 0 ? surface_hidden : 2 * surface_features; }
   bool has_matte() const { return matte != MatteMode::kNone; }
 
   int feature_size() const { return output_size / 8; }
@@ -112,5 +113,10 @@ struct AvatarConfig : AvatarCommonConfig {
   // figures: 32x32x256 feature map, 64 uniform samples, MLP 8 x 384 with a skip at 4.
   static AvatarConfig HeadNeRFSized();
 };
+
+// A subject's avatar by default (headcast-train subject and create, the render
+// benchmark's subject row): the surface texture with its branch conditioned
+// per frame, and the bounded matte. The thesis's avatar has none of them.
+void ApplySubjectDefaults(AvatarConfig* config);
 
 }  // namespace headcast

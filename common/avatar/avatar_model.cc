@@ -162,7 +162,7 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   const auto& ch = config.renderer_channels;
   input_rgb_ = register_module("input_rgb", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 3, 1)));
   if (config.has_surface()) {
-    const int hidden = 2 * config.surface_features;
+    const int hidden = config.surface_hidden_channels();
     surface_hidden_ = register_module("surface_hidden",
                                       torch::nn::Conv2d(torch::nn::Conv2dOptions(config.surface_features, hidden, 1)));
     surface_out_ = register_module("surface_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, ch[3], 1)));

@@ -345,6 +345,25 @@ TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
       EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
 }
 
+TEST(SurfaceTexture, TheBranchWidthIsChosenAndOldFilesKeepTwiceTheFeatures) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig c = TinyWithSurface();
+  EXPECT_EQ(c.surface_hidden_channels(), 2 * c.surface_features);
+  c.surface_hidden = 24;
+  Avatar a = Avatar::CreateRandom(c, m, DefaultSubject(m, 128), 2);
+  const auto params = a.modules().renderer->named_parameters();
+  ASSERT_NE(params.find("surface_hidden.weight"), nullptr);
+  EXPECT_EQ(params["surface_hidden.weight"].size(0), 24);
+  const std::string path = testing::TempDir("surface_hidden") + "/h.hcavatar";
+  a.Save(path);
+  EXPECT_EQ(Avatar::Load(path, m).config().surface_hidden_channels(), 24);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_hidden");
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_hidden_channels(), 2 * c.surface_features);
+  c.surface_hidden = -1;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+}
+
 TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
   const HeadModel& m = *Builtin();
   const std::string dir = testing::TempDir("surface");

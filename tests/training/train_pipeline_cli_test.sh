@@ -86,6 +86,21 @@ interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
   ok "interpolation: 11 in-between frames for 12 training frames, trained on, never tested on" ||
   bad "interpolation: $interp frames, $(json "$tmp/i.json" "j['interpolated_frames']")"
 
+# A subject's texture branch is conditioned per frame by default; without a texture (the thesis's avatar) there is
+# nothing to condition, and asking for both is refused.
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --surface-features 0 --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
+config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('$1').read('manifest.json'))['config']$2)"; }
+[ "$(config "$tmp/i.hcavatar" "['surface_conditioned']")" = True ] &&
+  [ "$(config "$tmp/t.hcavatar" "['surface_features']")" = 0 ] &&
+  [ "$(config "$tmp/t.hcavatar" "['surface_conditioned']")" = False ] &&
+  ok "subject: the texture's branch conditioned by default; --surface-features 0 has neither" ||
+  bad "subject conditioning: $(tail -3 "$tmp/t.err")"
+out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
+  --iterations 2 --surface-features 0 --surface-conditioned --out "$tmp/u.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "surface-conditioned needs --surface-features" <<<"$out" &&
+  ok "--surface-conditioned without a texture refused" || bad "conditioned without texture: $out"
+
 # eval --split train: the real training frames only (never the in-between ones); a bad split is refused.
 "$bin/headcast-train" eval --avatar "$tmp/i.hcavatar" --data "$tmp/dsi" --out "$tmp/evt" --split train \
   --orbit-frames 0 > /dev/null 2> "$tmp/evt.err"
