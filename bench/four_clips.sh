@@ -114,7 +114,7 @@ for x in rows:
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
              f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} |")
-L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration: surface texture, bounded matte): " +
+L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration: surface texture with its conditioned branch, bounded matte): " +
       "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
                 for r, v in render.items())]
 open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")
