@@ -106,11 +106,13 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
   AvatarConfig subject = AvatarConfig::Default(options.resolution);
   ApplySubjectDefaults(&subject);
   const nlohmann::json with_matte = MeasureConfig(options, subject, frames);
-  out["subject_default"] = {
-      {"surface_features", subject.surface_features}, {"surface_conditioned", subject.surface_conditioned},
-      {"matte", MatteModeName(subject.matte)},
-      {"ms_median", with_matte["ms_median"]},         {"ms_p95", with_matte["ms_p95"]},
-      {"fps_median", with_matte["fps_median"]},       {"stage_ms_median", with_matte["stage_ms_median"]}};
+  out["subject_default"] = {{"surface_features", subject.surface_features},
+                            {"surface_conditioned", subject.surface_conditioned},
+                            {"matte", MatteModeName(subject.matte)},
+                            {"ms_median", with_matte["ms_median"]},
+                            {"ms_p95", with_matte["ms_p95"]},
+                            {"fps_median", with_matte["fps_median"]},
+                            {"stage_ms_median", with_matte["stage_ms_median"]}};
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

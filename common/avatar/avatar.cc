@@ -101,10 +101,10 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
     throw std::invalid_argument(
         "WithRuntimeSwitches: the network architecture differs; only run-time switches may change");
   const bool adds_surface = !c.has_surface() && config.has_surface();
-  if (!adds_surface && (config.surface_features != c.surface_features ||
-                        config.surface_resolution != c.surface_resolution || config.surface_extent != c.surface_extent ||
-                        config.surface_conditioned != c.surface_conditioned ||
-                        config.surface_hidden_channels() != c.surface_hidden_channels()))
+  if (!adds_surface &&
+      (config.surface_features != c.surface_features || config.surface_resolution != c.surface_resolution ||
+       config.surface_extent != c.surface_extent || config.surface_conditioned != c.surface_conditioned ||
+       config.surface_hidden_channels() != c.surface_hidden_channels()))
     throw std::invalid_argument(
         "WithRuntimeSwitches: the surface texture differs; it can only be added to an avatar without one");
   Avatar a;

@@ -98,8 +98,8 @@ struct AvatarConfig : AvatarCommonConfig {
 
   int feature_size() const { return output_size / 8; }
   int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi
-  int motion_dim() const { return 12 + num_expression; }  // the conditioning without beta: what changes per frame
-  int appearance_dim() const { return 27 + num_texture; }                   // lambda, tau
+  int motion_dim() const { return 12 + num_expression; }   // the conditioning without beta: what changes per frame
+  int appearance_dim() const { return 27 + num_texture; }  // lambda, tau
   int encoding_dim() const { return 3 + 6 * pe_frequencies; }
 
   // Throws std::invalid_argument naming each bad field.

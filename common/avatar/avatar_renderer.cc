@@ -129,9 +129,9 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     const torch::Tensor features =
         n > 0 ? modules.surface->forward(canonical) : torch::zeros({0, modules.cnerf->config().surface_features});
     const AvatarConfig& config = modules.cnerf->config();
-    const torch::Tensor motion =
-        config.surface_conditioned ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
-                                   : torch::Tensor();
+    const torch::Tensor motion = config.surface_conditioned
+                                     ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
+                                     : torch::Tensor();
     surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width, motion);
   }
   if (!modules.cnerf->config().has_matte()) {

@@ -98,8 +98,7 @@ void CanonicalPoint(const RasterBuffers& b, int p, const RasterFaces& faces, con
   for (int corner = 0; corner < 3; ++corner) {
     const float w = b.bary[3 * p + corner];
     const int v = faces(f, corner);
-    for (int k = 0; k < 3; ++k)
-      point[k] += w * (canonical[3 * v + k] + (normals ? offset * (*normals)(v, k) : 0.f));
+    for (int k = 0; k < 3; ++k) point[k] += w * (canonical[3 * v + k] + (normals ? offset * (*normals)(v, k) : 0.f));
   }
 }
 

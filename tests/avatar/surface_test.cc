@@ -117,7 +117,8 @@ TEST(SurfaceShell, AddsPixelsBeyondTheMeshOffTheCanonicalSurface) {
     EXPECT_FALSE(on_mesh[shell.pixel[i]]) << "pixel " << shell.pixel[i] << " is the mesh's and the shell's";
     const Eigen::Vector3f c(shell.canonical[3 * i], shell.canonical[3 * i + 1], shell.canonical[3 * i + 2]);
     double nearest = 1e9;
-    for (Eigen::Index v = 0; v < vertices; ++v) nearest = std::min<double>(nearest, (Corner(p.identity.v_shaped, v) - c).norm());
+    for (Eigen::Index v = 0; v < vertices; ++v)
+      nearest = std::min<double>(nearest, (Corner(p.identity.v_shaped, v) - c).norm());
     nearest_min = std::min(nearest_min, nearest);
     nearest_max = std::max(nearest_max, nearest);
   }
@@ -317,8 +318,7 @@ TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
   auto term = [&](Avatar& a, const FrameParams& f) {
     torch::NoGradGuard no_grad;
     const AvatarConfig& c = a.config();
-    const torch::Tensor motion =
-        MakeConditioning(c, a.subject(), f).geometry.narrow(1, c.num_shape, c.motion_dim());
+    const torch::Tensor motion = MakeConditioning(c, a.subject(), f).geometry.narrow(1, c.num_shape, c.motion_dim());
     return a.modules().renderer->SurfaceTerm(a.modules().surface->forward(canonical), torch::arange(200), 16, 16,
                                              c.surface_conditioned ? motion : torch::Tensor());
   };
@@ -329,8 +329,7 @@ TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
       if (p.key().find("surface_film") != std::string::npos) p.value().uniform_(-0.5, 0.5);
   }
   EXPECT_GT((term(conditioned, smile) - term(conditioned, other)).abs().max().item<float>(), 1e-3f);
-  EXPECT_THROW(conditioned.modules().renderer->SurfaceTerm(torch::zeros({1, 4}), torch::zeros({1}, torch::kLong), 4,
-                                                          4),
+  EXPECT_THROW(conditioned.modules().renderer->SurfaceTerm(torch::zeros({1, 4}), torch::zeros({1}, torch::kLong), 4, 4),
                std::invalid_argument);
 
   // Its FiLM weights get gradients from the picture.
