@@ -133,9 +133,12 @@ void RaySampler::AppendShell(const RasterVertices& vertices_in_cam, const Raster
   // Inflated along the vertex normals, posed and canonical alike, so that a
   // shell point keeps its place relative to the surface under it.
   inflated_ = vertices_in_cam + shell * VertexNormals(vertices_in_cam, faces);
-  const RowMatrixX3f canonical =
-      Eigen::Map<const RowMatrixX3f>(canonical_vertices.data(), canonical_vertices.size() / 3, 3);
-  const RowMatrixX3f canonical_normals = VertexNormals(canonical, faces);
+  if (normals_of_.size() != canonical_vertices.size() || normals_of_ != canonical_vertices) {
+    const RowMatrixX3f canonical =
+        Eigen::Map<const RowMatrixX3f>(canonical_vertices.data(), canonical_vertices.size() / 3, 3);
+    canonical_normals_ = VertexNormals(canonical, faces);
+    normals_of_ = canonical_vertices;
+  }
   RasterOptions raster;
   raster.cull_back_faces = true;
   Rasterize(inflated_, faces, cam, raster, &shell_buffers_);
@@ -145,7 +148,7 @@ void RaySampler::AppendShell(const RasterVertices& vertices_in_cam, const Raster
     if (b.face[p] < 0 || mesh.face[p] >= 0) continue;
     out->pixel.push_back(p);
     float point[3];
-    CanonicalPoint(b, p, faces, canonical_vertices, &canonical_normals, shell, point);
+    CanonicalPoint(b, p, faces, canonical_vertices, &canonical_normals_, shell, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
   }
 }

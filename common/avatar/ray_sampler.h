@@ -77,6 +77,10 @@ class RaySampler {
   AvatarConfig config_;
   RasterBuffers buffers_, surface_buffers_, shell_buffers_;
   RasterVertices inflated_;
+  // The canonical mesh's vertex normals, kept while the canonical mesh (the
+  // subject's neutral shape, the same every frame) stays the one they are of.
+  Eigen::VectorXf normals_of_;
+  RowMatrixX3f canonical_normals_;
   std::vector<float> surface_depth_;
   std::vector<int32_t> surface_face_;
 };
