@@ -66,6 +66,10 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--shape-prior", t.tracker.fit.shape_prior,
                  "with --calibrate: weight of the shape's squared coefficients against squared landmark pixels")
       ->capture_default_str();
+  app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
+                 "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
+                 "pixels): what every key frame shows goes into the shape")
+      ->capture_default_str();
   AddCameraFlags(app, s, f.camera_size);
   app.add_option("--identity-from", f.identity_from,
                  "take the identity (shape) from an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json");

@@ -169,6 +169,10 @@ int main(int argc, char** argv) {
   prep->add_option("--shape-prior", p.shape_prior,
                    "identity calibration: weight of the shape's squared coefficients against squared landmark pixels")
       ->capture_default_str();
+  prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
+                   "identity calibration: weight of the key frames' mean expression (per frame, against squared "
+                   "landmark pixels): what every key frame shows goes into the shape")
+      ->capture_default_str();
   prep->add_option("--identity-from", p.identity_from,
                    "shape from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json (implies --no-calibrate)");
   prep->add_option("--intrinsics", p.intrinsics, "camera fx,fy,cx,cy in pixels, when known");

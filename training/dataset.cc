@@ -36,7 +36,8 @@ void PrepOptions::Check() const {
       .InRange("crop_scale", crop_scale, 1.0, 6.0)
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
       .InRange("side_margin", side_margin, 0.0, mask_margin)
-      .NonNegative("shape_prior", shape_prior);
+      .NonNegative("shape_prior", shape_prior)
+      .NonNegative("calibration_mean_expression", calibration_mean_expression);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -111,6 +112,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.max_frames = o.max_frames;
   track.calibrate = o.calibrate;
   track.tracker.fit.shape_prior = o.shape_prior;
+  track.tracker.fit.calibration_mean_expression = o.calibration_mean_expression;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");

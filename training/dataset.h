@@ -45,6 +45,8 @@ struct PrepOptions {
   std::string identity_from;  // or: beta from an avatar (.hcavatar) or headcast-fit-mesh's PARAMS.json
   std::string intrinsics;     // fx,fy,cx,cy when known (else calibration / field of view)
   double shape_prior = HeadFitterOptions{}.shape_prior;  // calibration: weight of the shape's squared coefficients
+  // calibration: weight of the key frames' mean expression (HeadFitterOptions::calibration_mean_expression)
+  double calibration_mean_expression = HeadFitterOptions{}.calibration_mean_expression;
   double crop_scale = 2.2;  // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
   // head model's silhouette dilated by this fraction of the crop edge: pixels

@@ -25,6 +25,7 @@ void HeadFitterOptions::Check() const {
   c.NonNegative("vergence_weight", vergence_weight).NonNegative("eye_roll_weight", eye_roll_weight);
   c.InRange("max_gaze_rad", max_gaze_rad, 0.0, 1.5);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
+  c.NonNegative("calibration_mean_expression", calibration_mean_expression);
   c.ThrowIfErrors();
 }
 
@@ -133,6 +134,30 @@ class RangeCost : public ceres::CostFunction {
 
  private:
   double lo_, hi_, weight_;
+};
+
+// w * (the mean of n blocks of the same size), with its constant Jacobian.
+class MeanCost : public ceres::CostFunction {
+ public:
+  MeanCost(int size, int blocks, double weight) : scale_(weight / blocks) {
+    set_num_residuals(size);
+    for (int b = 0; b < blocks; ++b) mutable_parameter_block_sizes()->push_back(size);
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const int n = num_residuals(), blocks = static_cast<int>(parameter_block_sizes().size());
+    std::fill(residuals, residuals + n, 0.0);
+    for (int b = 0; b < blocks; ++b)
+      for (int i = 0; i < n; ++i) residuals[i] += scale_ * x[b][i];
+    for (int b = 0; jacobians && b < blocks; ++b) {
+      if (!jacobians[b]) continue;
+      std::fill(jacobians[b], jacobians[b] + n * n, 0.0);
+      for (int i = 0; i < n; ++i) jacobians[b][i * n + i] = scale_;
+    }
+    return true;
+  }
+
+ private:
+  double scale_;
 };
 
 }  // namespace
@@ -340,6 +365,14 @@ HeadFitter::Calibration HeadFitter::CalibrateIdentity(const std::vector<Landmark
     if (E == 0) problem.SetParameterBlockConstant(expression[f].data());
   }
   if (result.frames < 2) return result;
+  if (E > 0 && options_.calibration_mean_expression > 0) {
+    std::vector<double*> blocks;
+    for (size_t f = 0; f < key_frames.size(); ++f)
+      if (usable[f]) blocks.push_back(expression[f].data());
+    problem.AddResidualBlock(
+        new MeanCost(E, result.frames, std::sqrt(options_.calibration_mean_expression * result.frames)), nullptr,
+        blocks);
+  }
   problem.AddResidualBlock(new PriorCost(S, std::sqrt(options_.shape_prior * kNumLandmarks * result.frames)), nullptr,
                            shape.data());
   problem.SetParameterLowerBound(&log_focal, 0, -std::log(options_.max_focal_change));

@@ -44,6 +44,14 @@ struct HeadFitterOptions {
   double max_gaze_rad = 0.7;     // an eye turns about 45 degrees at most; a larger fit is a wrong iris
   double shape_prior = 1e-2;     // calibration: weight of sum(beta^2) against squared pixels per landmark
   double max_focal_change = 2;   // calibration: the focal length stays within this factor of the initial one
+  // Calibration: weight of |the key frames' mean expression|^2, per key frame,
+  // against squared pixels. Per frame an expression is far cheaper than a
+  // shape (expression_prior against shape_prior), so without it what is the
+  // same in every key frame — wider cheeks, eyes set closer, a wider eye
+  // opening — is fitted as an expression held in every frame (ICT's
+  // cheekPuff, eyeLookIn, eyeWide at their bound) instead of the identity,
+  // and that expression then cannot move further when the face does.
+  double calibration_mean_expression = 0;
   void Check() const;
 };
 

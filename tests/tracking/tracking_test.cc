@@ -333,6 +333,56 @@ TEST(HeadFitter, CalibratesShapeAndFocalLengthOverKeyFrames) {
   EXPECT_LT(c.rms_px, 1.6);
 }
 
+// What every key frame shows belongs to the identity: a person whose shape
+// differs from the model's mean, neutral in every key frame. With a shape prior
+// that makes shape dear against expression, the plain calibration holds part of
+// the difference as an expression repeated in every frame; the penalty on the
+// key frames' mean expression moves it into the shape.
+TEST(HeadFitter, CalibrationMovesTheRepeatedExpressionIntoTheShape) {
+  const HeadModel& model = Model();
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  HeadModelParams p;
+  p.shape = Eigen::VectorXd(model.num_shape());
+  for (auto& v : p.shape) v = 1.5 * u(rng);
+  const HeadModelOutput out = model.Forward(p);
+  std::vector<Landmarks2d> key_frames;
+  for (int f = 0; f < 7; ++f) {
+    const RigidTransform cam_from_head = FrontalCamFromHead(0.6, -30 + 10.0 * f, 0, model.rest_landmark_centroid());
+    Landmarks2d l;
+    for (int k = 0; k < kNumLandmarks; ++k)
+      l[k] = cam.Project(cam_from_head.Apply(out.landmarks.row(k).cast<double>().transpose()));
+    key_frames.push_back(l);
+  }
+  struct Outcome {
+    double mean_expression, shape_error;
+  };
+  auto calibrate = [&](double mean_weight) {
+    HeadFitterOptions options;
+    options.shape_prior = 0.3;
+    options.calibration_mean_expression = mean_weight;
+    HeadFitter fitter(model, options);
+    std::vector<FrameParams> frames;
+    const HeadFitter::Calibration c = fitter.CalibrateIdentity(key_frames, cam, &frames, true);
+    EXPECT_TRUE(c.ok);
+    Eigen::VectorXf mean = Eigen::VectorXf::Zero(model.num_expression());
+    for (const FrameParams& f : frames) mean += f.expression / static_cast<float>(frames.size());
+    HeadModelParams fitted;
+    fitted.shape = c.shape;
+    const auto a = model.Forward(fitted).landmarks;  // neutral, rest pose
+    double err = 0;
+    for (int k = 0; k < kNumLandmarks; ++k) err += (a.row(k) - out.landmarks.row(k)).norm() / kNumLandmarks;
+    return Outcome{mean.norm(), err};
+  };
+  const Outcome plain = calibrate(0), penalised = calibrate(100);
+  std::printf("mean expression over the key frames %.3f -> %.3f, neutral landmark error %.2f -> %.2f mm\n",
+              plain.mean_expression, penalised.mean_expression, 1e3 * plain.shape_error, 1e3 * penalised.shape_error);
+  EXPECT_GT(plain.mean_expression, 0.05);  // the case this is about: without the penalty the frames hold it
+  EXPECT_LT(penalised.mean_expression, 0.5 * plain.mean_expression);
+  EXPECT_LT(penalised.shape_error, 0.92 * plain.shape_error);
+}
+
 // Given intrinsics are a measurement: calibration must not move the focal length.
 TEST(HeadFitter, CalibrationKeepsAKnownFocalLength) {
   const HeadModel& model = Model();
