@@ -46,11 +46,11 @@ struct HeadFitterOptions {
   double max_focal_change = 2;   // calibration: the focal length stays within this factor of the initial one
   // Calibration: weight of |the key frames' mean expression|^2, per key frame,
   // against squared pixels. Per frame an expression is far cheaper than a
-  // shape (expression_prior against shape_prior), so without it what is the
-  // same in every key frame — wider cheeks, eyes set closer, a wider eye
-  // opening — is fitted as an expression held in every frame (ICT's
-  // cheekPuff, eyeLookIn, eyeWide at their bound) instead of the identity,
-  // and that expression then cannot move further when the face does.
+  // shape (expression_prior against shape_prior), so what is the same in every
+  // key frame can be fitted as an expression held in every frame instead of
+  // the identity, and that expression then cannot move further when the face
+  // does (an eye opening at its bound). Off by default: what the shape can take
+  // over depends on the model's shape space (see the benchmark report).
   double calibration_mean_expression = 0;
   void Check() const;
 };
