@@ -66,6 +66,12 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--shape-prior", t.tracker.fit.shape_prior,
                  "with --calibrate: weight of the shape's squared coefficients against squared landmark pixels")
       ->capture_default_str();
+  app.add_option("--contour-weight", t.tracker.fit.contour_weight,
+                 "weight of the jaw contour's landmarks (0..16) against the inner ones")
+      ->capture_default_str();
+  app.add_option("--expression-prior", t.tracker.fit.expression_prior,
+                 "weight of the expression's squared coefficients against squared landmark pixels")
+      ->capture_default_str();
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
                  "pixels): what every key frame shows goes into the shape")
