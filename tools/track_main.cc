@@ -69,6 +69,10 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--contour-weight", t.tracker.fit.contour_weight,
                  "weight of the jaw contour's landmarks (0..16) against the inner ones")
       ->capture_default_str();
+  app.add_option("--rigid-flow-weight", t.tracker.fit.rigid_flow_weight,
+                 "weight of each rigid head point (forehead, hairline) followed by optical flow from the previous "
+                 "frame, against a landmark (0: off)")
+      ->capture_default_str();
   app.add_option("--expression-prior", t.tracker.fit.expression_prior,
                  "weight of the expression's squared coefficients against squared landmark pixels")
       ->capture_default_str();

@@ -169,6 +169,10 @@ int main(int argc, char** argv) {
   prep->add_option("--shape-prior", p.shape_prior,
                    "identity calibration: weight of the shape's squared coefficients against squared landmark pixels")
       ->capture_default_str();
+  prep->add_option("--rigid-flow-weight", p.rigid_flow_weight,
+                   "tracking: weight of each rigid head point (forehead, hairline) followed by optical flow, against a "
+                   "landmark (0: off)")
+      ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "
                    "landmark pixels): what every key frame shows goes into the shape")

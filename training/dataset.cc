@@ -37,7 +37,8 @@ void PrepOptions::Check() const {
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
       .InRange("side_margin", side_margin, 0.0, mask_margin)
       .NonNegative("shape_prior", shape_prior)
-      .NonNegative("calibration_mean_expression", calibration_mean_expression);
+      .NonNegative("calibration_mean_expression", calibration_mean_expression)
+      .NonNegative("rigid_flow_weight", rigid_flow_weight);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -113,6 +114,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.calibrate = o.calibrate;
   track.tracker.fit.shape_prior = o.shape_prior;
   track.tracker.fit.calibration_mean_expression = o.calibration_mean_expression;
+  track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 
 #include "common/core/options.h"
 #include "common/core/timer.h"
@@ -13,6 +15,9 @@
 
 namespace headcast {
 namespace {
+
+// A rigid point whose flow there and back misses its start by more than this is not used.
+constexpr double kFlowRoundTripPx = 0.5;
 
 RgbdFitOptions RgbdOptions(bool fit_shape) {
   RgbdFitOptions o;
@@ -108,6 +113,7 @@ void FrameTracker::Reset() {
   last_ = FrameParams{};
   last_.cam_translation.setZero();
   last_rgbd_ = RgbdFitResult{};
+  reference_ = RigidObservations{};
 }
 
 bool FrameTracker::FreezeRgbdIdentity() {
@@ -140,6 +146,33 @@ cv::Rect DepthBoxForFit(const Landmarks2d& landmarks, const cv::Size& image) {
       cv::Point(static_cast<int>(std::floor(u_lo - margin)), static_cast<int>(std::floor(v_lo - forehead))),
       cv::Point(static_cast<int>(std::ceil(u_hi + margin)), static_cast<int>(std::ceil(v_hi + margin))));
   return box & cv::Rect(cv::Point(0, 0), image);
+}
+
+RigidObservations FollowRigidPoints(const RigidObservations& reference, const cv::Mat& reference_gray,
+                                    const cv::Mat& gray, const std::vector<Eigen::Vector2d>& predicted) {
+  RigidObservations out;
+  if (reference.head.empty() || predicted.size() != reference.observed.size()) return out;
+  std::vector<cv::Point2f> from, to, back;
+  for (size_t i = 0; i < predicted.size(); ++i) {
+    from.emplace_back(static_cast<float>(reference.observed[i].x()), static_cast<float>(reference.observed[i].y()));
+    to.emplace_back(static_cast<float>(predicted[i].x()), static_cast<float>(predicted[i].y()));
+  }
+  back = from;
+  std::vector<uchar> ok, ok_back;
+  std::vector<float> error;
+  const cv::Size window(21, 21);
+  const auto criteria = cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 30, 0.01);
+  cv::calcOpticalFlowPyrLK(reference_gray, gray, from, to, ok, error, window, 3, criteria,
+                           cv::OPTFLOW_USE_INITIAL_FLOW);
+  cv::calcOpticalFlowPyrLK(gray, reference_gray, to, back, ok_back, error, window, 3, criteria,
+                           cv::OPTFLOW_USE_INITIAL_FLOW);
+  for (size_t i = 0; i < from.size(); ++i) {
+    // Kept where the flow comes back to where it started (texture to follow, not occluded).
+    if (!ok[i] || !ok_back[i] || cv::norm(back[i] - from[i]) > kFlowRoundTripPx) continue;
+    out.head.push_back(reference.head[i]);
+    out.observed.emplace_back(to[i].x, to[i].y);
+  }
+  return out;
 }
 
 TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
@@ -203,7 +236,30 @@ TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, dou
     }
     last_rgbd_ = fit;
   } else {
-    r.fitted = FitTrackedFace(fitter_, r.face, camera, &last_).ok;
+    cv::Mat gray;
+    RigidObservations rigid;
+    if (options_.fit.rigid_flow_weight > 0) {
+      cv::cvtColor(bgr, gray, cv::COLOR_BGR2GRAY);
+      // A face followed from the previous fit: its rigid points are found
+      // again from the reference frame (not the previous one, whose error
+      // they would carry on), starting where the previous pose puts them.
+      if (r.face.status == FaceStatus::kTracked && last_.cam_translation.z() > 0 &&
+          reference_gray_.size() == gray.size() && !reference_.head.empty()) {
+        std::vector<Eigen::Vector2d> predicted;
+        fitter_.ProjectRigidPoints(last_, camera, reference_.head, &predicted);
+        rigid = FollowRigidPoints(reference_, reference_gray_, gray, predicted);
+      } else {
+        reference_ = RigidObservations{};
+      }
+      r.rigid_points = static_cast<int>(rigid.head.size());
+    }
+    r.fitted = FitTrackedFace(fitter_, r.face, camera, &last_, r.rigid_points > 0 ? &rigid : nullptr).ok;
+    // A new reference when there is none or most of its points are lost.
+    if (options_.fit.rigid_flow_weight > 0 && r.fitted &&
+        (reference_.head.empty() || 2 * r.rigid_points < static_cast<int>(reference_.head.size()))) {
+      fitter_.RigidPointsInView(last_, camera, &reference_.head, &reference_.observed);
+      reference_gray_ = gray;
+    }
     if (!r.fitted && r.face.status != FaceStatus::kNoFace) r.problem = "landmark fit did not converge";
   }
   r.fit_ms = watch.ElapsedMs();

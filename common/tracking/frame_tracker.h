@@ -51,8 +51,15 @@ struct TrackedFrame {
   cv::Mat depth_m;             // RGB-D: the depth the fit read
   double rgbd_accuracy_m = 0;  // RGB-D: point-to-mesh RMS after the fit
   int contour_rejected = 0;    // RGB-D: contour landmarks taken for background
+  int rigid_points = 0;        // rigid points followed by optical flow into this frame's fit
   std::string problem;         // why not fitted, when a fit failed
 };
+
+// Rigid points seen in a reference frame (`reference`: head-frame points and
+// their pixels there) found in `gray` by pyramidal Lucas-Kanade, starting at
+// `predicted` (one per point); those whose flow back misses their start are dropped.
+RigidObservations FollowRigidPoints(const RigidObservations& reference, const cv::Mat& reference_gray,
+                                    const cv::Mat& gray, const std::vector<Eigen::Vector2d>& predicted);
 
 class FrameTracker {
  public:
@@ -103,6 +110,9 @@ class FrameTracker {
   std::vector<Eigen::VectorXd> calibration_shapes_;
   RgbdFitResult last_rgbd_;
   FrameParams last_;
+  // Rigid points: the frame they were taken in and where they were seen there.
+  cv::Mat reference_gray_;
+  RigidObservations reference_;
 };
 
 // The person's shape for tracking: from an avatar (.hcavatar: the identity it

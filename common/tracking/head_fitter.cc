@@ -23,7 +23,7 @@ void HeadFitterOptions::Check() const {
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
   c.NonNegative("iris_weight", iris_weight).NonNegative("gaze_prior", gaze_prior);
   c.NonNegative("vergence_weight", vergence_weight).NonNegative("eye_roll_weight", eye_roll_weight);
-  c.InRange("max_gaze_rad", max_gaze_rad, 0.0, 1.5);
+  c.InRange("max_gaze_rad", max_gaze_rad, 0.0, 1.5).NonNegative("rigid_flow_weight", rigid_flow_weight);
   c.NonNegative("shape_prior", shape_prior).InRange("max_focal_change", max_focal_change, 1, 100);
   c.NonNegative("calibration_mean_expression", calibration_mean_expression);
   c.ThrowIfErrors();
@@ -39,14 +39,78 @@ struct HeadFitter::LandmarkBasis {
   Eigen::Vector3d jaw_joint;
 };
 
+namespace {
+
+// Vertices above the brows that face forward and that no expression moves by
+// more than a millimetre per unit coefficient (forehead, hairline, crown), nor
+// the jaw or the eyes: what optical flow can follow as the rigid head. At most
+// `count`, spread evenly over the candidates.
+std::vector<int> RigidHeadVertices(const HeadModel& model,
+                                   const Eigen::Matrix<double, kNumLandmarks, 3, Eigen::RowMajor>& rest_landmarks,
+                                   int count) {
+  const HeadModelData& d = model.data();
+  const double brow_y = rest_landmarks.middleRows(17, 10).col(1).maxCoeff();
+  const RowMatrixX3f normals = model.VertexNormals(d.v_template);
+  std::vector<int> candidates;
+  for (int v = 0; v < model.num_vertices(); ++v) {
+    if (d.v_template(v, 1) < brow_y + 0.01 || normals(v, 2) < 0.3) continue;
+    if (d.weights(v, kJawJoint) > 0 || d.weights(v, kLeftEyeJoint) > 0 || d.weights(v, kRightEyeJoint) > 0) continue;
+    double moved = 0;
+    for (int k = 0; k < model.num_expression(); ++k)
+      moved = std::max<double>(moved, d.expressiondirs.block(3 * v, k, 3, 1).norm());
+    if (moved <= 1e-3) candidates.push_back(v);
+  }
+  if (static_cast<int>(candidates.size()) <= count) return candidates;
+  std::vector<int> picked;
+  for (int i = 0; i < count; ++i) picked.push_back(candidates[i * candidates.size() / count]);
+  return picked;
+}
+
+}  // namespace
+
 HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options) : model_(model), options_(options) {
   options.Check();
   num_expression_ =
       options.num_expression > 0 ? std::min(options.num_expression, model.num_expression()) : model.num_expression();
+  rigid_vertices_ = RigidHeadVertices(model, MakeBasis(PoseVector::Zero(), true).base, 64);
   SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));
 }
 
-void HeadFitter::SetIdentity(const Eigen::VectorXd& shape) { identity_ = model_.MakeIdentity(shape); }
+void HeadFitter::ProjectRigidPoints(const FrameParams& frame, const PinholeCamera& cam,
+                                    const std::vector<Eigen::Vector3d>& head,
+                                    std::vector<Eigen::Vector2d>* pixels) const {
+  const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
+  const Eigen::Vector3d t = frame.cam_translation.cast<double>();
+  pixels->clear();
+  for (const auto& p : head) pixels->push_back(cam.Project(R * p + t));
+}
+
+void HeadFitter::RigidPointsInView(const FrameParams& frame, const PinholeCamera& cam,
+                                   std::vector<Eigen::Vector3d>* head, std::vector<Eigen::Vector2d>* pixels) const {
+  head->clear();
+  pixels->clear();
+  const Eigen::Matrix3d R = AxisAngleToMatrix(frame.cam_rotation.cast<double>());
+  const Eigen::Vector3d t = frame.cam_translation.cast<double>();
+  for (size_t i = 0; i < rigid_vertices_.size(); ++i) {
+    const Eigen::Vector3d p = identity_.v_shaped.segment<3>(3 * rigid_vertices_[i]).cast<double>();
+    const Eigen::Vector3d x = R * p + t;
+    const Eigen::Vector3d n = R * rigid_normals_.row(static_cast<Eigen::Index>(i)).transpose().cast<double>();
+    if (x.z() <= 0 || n.dot(x.normalized()) > -0.3) continue;  // behind the camera, or seen edge-on or from behind
+    const Eigen::Vector2d u = cam.Project(x);
+    if (u.x() < 0 || u.y() < 0 || u.x() > cam.width - 1 || u.y() > cam.height - 1) continue;
+    head->push_back(p);
+    pixels->push_back(u);
+  }
+}
+
+void HeadFitter::SetIdentity(const Eigen::VectorXd& shape) {
+  identity_ = model_.MakeIdentity(shape);
+  const RowMatrixX3f vertices = Eigen::Map<const RowMatrixX3f>(identity_.v_shaped.data(), model_.num_vertices(), 3);
+  const RowMatrixX3f normals = model_.VertexNormals(vertices);
+  rigid_normals_.resize(static_cast<Eigen::Index>(rigid_vertices_.size()), 3);
+  for (size_t i = 0; i < rigid_vertices_.size(); ++i)
+    rigid_normals_.row(static_cast<Eigen::Index>(i)) = normals.row(rigid_vertices_[i]);
+}
 
 HeadFitter::LandmarkBasis HeadFitter::MakeBasis(const PoseVector& pose, bool shape_free) const {
   LandmarkBasis b;
@@ -230,7 +294,7 @@ Landmarks2d HeadFitter::Project(const FrameParams& frame, const PinholeCamera& c
 }
 
 LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCamera& cam, FrameParams* frame,
-                                  const EyeIrises* irises) const {
+                                  const EyeIrises* irises, const RigidObservations* rigid) const {
   if (frame->expression.size() != model_.num_expression())
     frame->expression = Eigen::VectorXf::Zero(model_.num_expression());
   const LandmarkBasis b = MakeBasis(frame->ViewPose());
@@ -276,6 +340,11 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
     problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
                              {rotation, translation, expression.data(), jaw});
   }
+  if (rigid && options_.rigid_flow_weight > 0)
+    for (size_t i = 0; i < rigid->head.size() && i < rigid->observed.size(); ++i)
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RigidPointResidual, 2, 3, 3>(new RigidPointResidual(
+                                   rigid->head[i], rigid->observed[i], cam, options_.rigid_flow_weight)),
+                               new ceres::HuberLoss(options_.huber_px), rotation, translation);
   AddExpressionPriors(&problem, expression.data());
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);

@@ -20,6 +20,13 @@ namespace headcast {
 
 struct EyeIrises;  // iris_locator.h
 
+// Points of the head that no expression moves (skull, hairline), head frame,
+// and where optical flow found them in this frame.
+struct RigidObservations {
+  std::vector<Eigen::Vector3d> head;      // metres
+  std::vector<Eigen::Vector2d> observed;  // pixels
+};
+
 struct HeadFitterOptions {
   int num_expression = 0;          // expression components fitted (0: all the model has)
   double expression_prior = 2e-3;  // weight of sum(psi^2) against squared pixels
@@ -42,8 +49,14 @@ struct HeadFitterOptions {
   double vergence_weight = 50;   // weight of |left - right|^2: the eyes look together, which steadies one-eye noise
   double eye_roll_weight = 1e4;  // an eye does not roll about its line of sight (unobservable from the iris)
   double max_gaze_rad = 0.7;     // an eye turns about 45 degrees at most; a larger fit is a wrong iris
-  double shape_prior = 1e-2;     // calibration: weight of sum(beta^2) against squared pixels per landmark
-  double max_focal_change = 2;   // calibration: the focal length stays within this factor of the initial one
+  // Rigid points followed by optical flow from the previous frame (forehead,
+  // hairline: head vertices no expression moves), each weighted against a
+  // landmark; 0: off. Landmarks alone trade the head's position for
+  // expression: on an expressive face the fitted head slides against the
+  // hair, and the avatar's outline with it.
+  double rigid_flow_weight = 0;
+  double shape_prior = 1e-2;    // calibration: weight of sum(beta^2) against squared pixels per landmark
+  double max_focal_change = 2;  // calibration: the focal length stays within this factor of the initial one
   // Calibration: weight of |the key frames' mean expression|^2, per key frame,
   // against squared pixels. Per frame an expression is far cheaper than a
   // shape (expression_prior against shape_prior), so what is the same in every
@@ -71,8 +84,15 @@ class HeadFitter {
   // from the landmarks (PnP on a neutral face) first. With `irises`, the eye
   // joints (left_eye, right_eye) are fitted too when the model's eyes move and
   // an iris was found; otherwise the frame keeps its gaze (held through blinks).
+  // With `rigid`, those points hold the pose too (rigid_flow_weight).
   LandmarkFitResult Fit(const Landmarks2d& landmarks, const PinholeCamera& camera, FrameParams* frame,
-                        const EyeIrises* irises = nullptr) const;
+                        const EyeIrises* irises = nullptr, const RigidObservations* rigid = nullptr) const;
+  // The rigid points `frame` shows facing the camera: head frame and where they project.
+  void RigidPointsInView(const FrameParams& frame, const PinholeCamera& camera, std::vector<Eigen::Vector3d>* head,
+                         std::vector<Eigen::Vector2d>* pixels) const;
+  // Head-frame points projected with `frame`'s pose.
+  void ProjectRigidPoints(const FrameParams& frame, const PinholeCamera& camera,
+                          const std::vector<Eigen::Vector3d>& head, std::vector<Eigen::Vector2d>* pixels) const;
   // Where the model's pupils project for `frame` (left, right); false when the model has no eyes to turn.
   bool ProjectPupils(const FrameParams& frame, const PinholeCamera& camera, Eigen::Vector2d* left,
                      Eigen::Vector2d* right) const;
@@ -111,6 +131,8 @@ class HeadFitter {
   HeadFitterOptions options_;
   HeadIdentity identity_;
   int num_expression_;
+  std::vector<int> rigid_vertices_;  // above the brows, moved by no expression
+  RowMatrixX3f rigid_normals_;       // theirs, for the identity
 };
 
 // The normalised landmark error: mean distance / outer-eye-corner distance (points 36, 45).

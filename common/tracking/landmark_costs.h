@@ -61,6 +61,28 @@ struct LandmarkResidual {
   double weight;
 };
 
+// A point of the head that no expression moves (head frame), seen at
+// `observed`: cam_from_head and the pinhole projection only.
+struct RigidPointResidual {
+  RigidPointResidual(const Eigen::Vector3d& head, const Eigen::Vector2d& observed, const PinholeCamera& cam,
+                     double weight)
+      : head(head), observed(observed), cam(cam), weight(weight) {}
+  template <typename T>
+  bool operator()(const T* cam_rotation, const T* cam_translation, T* residual) const {
+    const T p[3] = {T(head.x()), T(head.y()), T(head.z())};
+    T x[3];
+    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
+    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
+    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    return true;
+  }
+  Eigen::Vector3d head;
+  Eigen::Vector2d observed;
+  PinholeCamera cam;
+  double weight;
+};
+
 // The same landmark during identity calibration: shape (and the jaw joint's
 // dependence on it) and a log focal-length scale are unknowns too. Blocks:
 // rotation, translation, expression, jaw, shape, log focal scale.

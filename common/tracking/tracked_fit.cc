@@ -3,7 +3,7 @@
 namespace headcast {
 
 LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
-                                 FrameParams* params) {
+                                 FrameParams* params, const RigidObservations* rigid) {
   if (face.status == FaceStatus::kNoFace) {
     params->cam_translation.setZero();
     return {};
@@ -13,7 +13,7 @@ LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation
     params->left_eye.setZero();
     params->right_eye.setZero();
   }
-  const LandmarkFitResult fit = fitter.Fit(face.landmarks, camera, params, &face.irises);
+  const LandmarkFitResult fit = fitter.Fit(face.landmarks, camera, params, &face.irises, rigid);
   if (!fit.ok) params->cam_translation.setZero();
   return fit;
 }

@@ -14,7 +14,8 @@ namespace headcast {
 // neutral expression, not from the old pose. No face, or a failed fit, leaves
 // *params marked cold (cam_translation zero) so the next face starts afresh;
 // the result is then not ok.
+// `rigid`: points the fit holds the pose to as well (optical flow), or null.
 LandmarkFitResult FitTrackedFace(const HeadFitter& fitter, const FaceObservation& face, const PinholeCamera& camera,
-                                 FrameParams* params);
+                                 FrameParams* params, const RigidObservations* rigid = nullptr);
 
 }  // namespace headcast

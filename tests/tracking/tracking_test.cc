@@ -17,6 +17,7 @@
 #include "common/headmodel/head_render.h"
 #include "common/headmodel/ict_converter.h"
 #include "common/tracking/face_tracker.h"
+#include "common/tracking/frame_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/landmark_costs.h"
 #include "common/tracking/tracked_fit.h"
@@ -381,6 +382,74 @@ TEST(HeadFitter, CalibrationMovesTheRepeatedExpressionIntoTheShape) {
   EXPECT_GT(plain.mean_expression, 0.05);  // the case this is about: without the penalty the frames hold it
   EXPECT_LT(penalised.mean_expression, 0.5 * plain.mean_expression);
   EXPECT_LT(penalised.shape_error, 0.92 * plain.shape_error);
+}
+
+// Landmarks that a wrong expression fit explains by sliding the head: the
+// observed landmarks are the true ones moved 6 px up (as if the whole face had
+// moved), while rigid points above the brows are seen where the true pose puts
+// them. With the rigid points the fitted head stays near the truth.
+TEST(HeadFitter, RigidPointsHoldTheHeadWhereTheLandmarksPullIt) {
+  const HeadModel& model = Model();
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
+  FrameParams truth;
+  truth.expression = Eigen::VectorXf::Zero(model.num_expression());
+  truth.SetCamFromHead(FrontalCamFromHead(0.6, 10, 5, model.rest_landmark_centroid()));
+  HeadFitterOptions options;
+  options.rigid_flow_weight = 1;
+  const HeadFitter fitter(model, options);
+  RigidObservations rigid;
+  fitter.RigidPointsInView(truth, cam, &rigid.head, &rigid.observed);
+  ASSERT_GE(rigid.head.size(), 20u) << "the built-in head has rigid points above the brows in view";
+  Landmarks2d observed = fitter.Project(truth, cam);
+  for (auto& l : observed) l.y() -= 6;
+  // How far the rigid points above the brows land from where the true pose puts them (mean, px).
+  auto fit = [&](const RigidObservations* r) {
+    FrameParams f = truth;
+    EXPECT_TRUE(fitter.Fit(observed, cam, &f, nullptr, r).ok);
+    std::vector<Eigen::Vector2d> at;
+    fitter.ProjectRigidPoints(f, cam, rigid.head, &at);
+    double sum = 0;
+    for (size_t i = 0; i < at.size(); ++i) sum += (at[i] - rigid.observed[i]).norm() / at.size();
+    return sum;
+  };
+  const double plain = fit(nullptr), held = fit(&rigid);
+  std::printf("rigid points off by: landmarks only %.2f px, with %zu rigid points %.2f px\n", plain, rigid.head.size(),
+              held);
+  EXPECT_GT(plain, 4.0);  // the landmarks alone move the head by ~6 px
+  EXPECT_LT(held, 0.5 * plain);
+}
+
+// Pyramidal Lucas-Kanade from a reference frame: a textured image moved by a
+// known sub-pixel offset is found within 0.1 px; a point on a flat patch
+// (nothing to follow) is dropped; the head-frame points travel with their pixels.
+TEST(FollowRigidPoints, FindsAKnownShiftAndDropsPointsWithoutTexture) {
+  cv::Mat reference(240, 320, CV_8U);
+  cv::RNG rng(3);
+  rng.fill(reference, cv::RNG::UNIFORM, 0, 255);
+  cv::GaussianBlur(reference, reference, cv::Size(0, 0), 2.0);
+  reference(cv::Rect(200, 20, 100, 100)).setTo(128);  // flat
+  const cv::Point2d shift(2.4, -1.7);
+  cv::Mat moved;
+  const cv::Mat affine = (cv::Mat_<double>(2, 3) << 1, 0, shift.x, 0, 1, shift.y);
+  cv::warpAffine(reference, moved, affine, reference.size(), cv::INTER_CUBIC, cv::BORDER_REFLECT);
+  RigidObservations seen;
+  std::vector<Eigen::Vector2d> predicted;
+  for (int i = 0; i < 6; ++i) {
+    seen.head.emplace_back(i, 0, 0);
+    seen.observed.emplace_back(60 + 20 * i, 150);
+    predicted.push_back(seen.observed.back());  // no prior motion: the flow finds it
+  }
+  seen.head.emplace_back(99, 0, 0);
+  seen.observed.emplace_back(250, 70);  // on the flat patch
+  predicted.push_back(seen.observed.back());
+  const RigidObservations found = FollowRigidPoints(seen, reference, moved, predicted);
+  ASSERT_EQ(found.head.size(), 6u);
+  for (size_t i = 0; i < found.head.size(); ++i) {
+    EXPECT_EQ(found.head[i].x(), static_cast<double>(i));
+    EXPECT_NEAR(found.observed[i].x(), seen.observed[i].x() + shift.x, 0.1);
+    EXPECT_NEAR(found.observed[i].y(), seen.observed[i].y() + shift.y, 0.1);
+  }
+  EXPECT_TRUE(FollowRigidPoints(seen, reference, moved, {}).head.empty());  // a prediction per point or nothing
 }
 
 // Given intrinsics are a measurement: calibration must not move the focal length.
