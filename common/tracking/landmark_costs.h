@@ -11,6 +11,17 @@
 
 namespace headcast {
 
+// weight * (the pinhole projection of cam_from_head * p - observed), pixels.
+template <typename T>
+void ProjectionResidual(const T* cam_rotation, const T* cam_translation, const T* p, const PinholeCamera& cam,
+                        const Eigen::Vector2d& observed, double weight, T* residual) {
+  T x[3];
+  ceres::AngleAxisRotatePoint(cam_rotation, p, x);
+  for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
+  residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
+  residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+}
+
 // One landmark of one frame: expression-linear position, jaw skinning, cam_from_head, pinhole projection.
 struct LandmarkResidual {
   LandmarkResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
@@ -44,11 +55,7 @@ struct LandmarkResidual {
       ceres::AngleAxisRotatePoint(jaw, rel, rotated);
       for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + T(jaw_joint[c]));
     }
-    T x[3];
-    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
-    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
-    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
-    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    ProjectionResidual(cam_rotation, cam_translation, p, cam, observed, weight, residual);
     return true;
   }
 
@@ -70,11 +77,7 @@ struct RigidPointResidual {
   template <typename T>
   bool operator()(const T* cam_rotation, const T* cam_translation, T* residual) const {
     const T p[3] = {T(head.x()), T(head.y()), T(head.z())};
-    T x[3];
-    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
-    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
-    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
-    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    ProjectionResidual(cam_rotation, cam_translation, p, cam, observed, weight, residual);
     return true;
   }
   Eigen::Vector3d head;
@@ -153,13 +156,10 @@ struct PupilResidual {
 
   template <typename T>
   bool operator()(const T* cam_rotation, const T* cam_translation, const T* eye, T* residual) const {
-    T rel[3] = {T(pupil[0] - eye_joint[0]), T(pupil[1] - eye_joint[1]), T(pupil[2] - eye_joint[2])}, p[3], x[3];
+    T rel[3] = {T(pupil[0] - eye_joint[0]), T(pupil[1] - eye_joint[1]), T(pupil[2] - eye_joint[2])}, p[3];
     ceres::AngleAxisRotatePoint(eye, rel, p);
     for (int c = 0; c < 3; ++c) p[c] += T(eye_joint[c]);
-    ceres::AngleAxisRotatePoint(cam_rotation, p, x);
-    for (int c = 0; c < 3; ++c) x[c] += cam_translation[c];
-    residual[0] = T(weight) * (T(cam.fx) * x[0] / x[2] + T(cam.cx) - T(observed.x()));
-    residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
+    ProjectionResidual(cam_rotation, cam_translation, p, cam, observed, weight, residual);
     return true;
   }
 
