@@ -5,9 +5,9 @@ pose) up to the top of the head mask in that column, in millimetres at the
 head's distance. The hair does not move on the skull, so what this distance
 does from frame to frame is mostly the fit sliding the head (and GrabCut's
 outline); its spread compares tracker settings in a minute, without training
-an avatar (on talking_d9 it follows the avatar's best vertical shift per
-held-out frame, correlation 0.72). Long hair that moves, and large pitch
-changes (the outline is a silhouette, not a point), add to it.
+an avatar (how well it follows an avatar's misplacement: the benchmark
+report). Long hair that moves, and large pitch changes (the outline is a
+silhouette, not a point), add to it.
 
   bench/rigid_outline.py DATASET --head-model MODEL.npz [--frames A:B] [--bin DIR]
 
