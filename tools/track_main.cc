@@ -73,6 +73,21 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "weight of each rigid head point (forehead, hairline) followed by optical flow from the previous "
                  "frame, against a landmark (0: off)")
       ->capture_default_str();
+  app.add_option_function<std::string>(
+         "--landmark-filter",
+         [&t](const std::string& mode) {
+           t.tracker.face.filter = mode == "causal";
+           t.two_sided_filter = mode == "two-sided";
+         },
+         "the landmarks over time: causal (filtered forwards, as live; the default), off (as found) or two-sided "
+         "(recorded input: filtered forwards and backwards, no lag)")
+      ->check(CLI::IsMember({"causal", "off", "two-sided"}));
+  app.add_option("--landmark-filter-hz", t.tracker.face.filter_min_cutoff,
+                 "the landmarks' One-Euro filter at rest, Hz (higher: less lag, more jitter)")
+      ->capture_default_str();
+  app.add_option("--landmark-filter-beta", t.tracker.face.filter_beta,
+                 "the One-Euro filter's cutoff rise per pixel a second of landmark speed")
+      ->capture_default_str();
   app.add_option("--expression-prior", t.tracker.fit.expression_prior,
                  "weight of the expression's squared coefficients against squared landmark pixels")
       ->capture_default_str();

@@ -192,6 +192,17 @@ int main(int argc, char** argv) {
   prep->add_flag("!--no-landmark-repair", p.landmark_repair,
                  "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
                  "frame (no repair; drive the avatar the same way)");
+  prep->add_option("--landmark-filter", p.landmark_filter,
+                   "tracking: the landmarks over time: causal (the live tracker's filter), off (as found) or "
+                   "two-sided (filtered forwards and backwards: no lag)")
+      ->check(CLI::IsMember({"causal", "off", "two-sided"}))
+      ->capture_default_str();
+  prep->add_option("--landmark-filter-hz", p.landmark_filter_hz,
+                   "tracking: the landmarks' One-Euro filter at rest, Hz (higher: less lag, more jitter)")
+      ->capture_default_str();
+  prep->add_option("--landmark-filter-beta", p.landmark_filter_beta,
+                   "tracking: the One-Euro filter's cutoff rise per pixel a second of landmark speed")
+      ->capture_default_str();
   prep->add_option("--interpolate", p.interpolate,
                    "short videos: frames synthesised between consecutive training frames")
       ->capture_default_str();

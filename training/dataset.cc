@@ -38,7 +38,11 @@ void PrepOptions::Check() const {
       .InRange("side_margin", side_margin, 0.0, mask_margin)
       .NonNegative("shape_prior", shape_prior)
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
-      .NonNegative("rigid_flow_weight", rigid_flow_weight);
+      .NonNegative("rigid_flow_weight", rigid_flow_weight)
+      .Positive("landmark_filter_hz", landmark_filter_hz)
+      .NonNegative("landmark_filter_beta", landmark_filter_beta)
+      .That(landmark_filter == "causal" || landmark_filter == "off" || landmark_filter == "two-sided",
+            "landmark_filter is causal, off or two-sided");
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }
@@ -117,6 +121,10 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
+  track.tracker.face.filter_min_cutoff = o.landmark_filter_hz;
+  track.tracker.face.filter_beta = o.landmark_filter_beta;
+  track.tracker.face.filter = o.landmark_filter == "causal";
+  track.two_sided_filter = o.landmark_filter == "two-sided";
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
   if (!o.identity_from.empty()) {
     track.identity = ReadTrackingIdentity(o.identity_from, model);

@@ -27,6 +27,7 @@
 #include "common/capture/frame_source.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 
 namespace headcast {
@@ -64,6 +65,14 @@ struct PrepOptions {
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
+  // The landmarks' One-Euro filter (FaceTrackerOptions::filter_min_cutoff,
+  // filter_beta). It steadies a live picture but lags a moving face; the
+  // crops are not lagged, so a lag is a mismatch the avatar learns as blur.
+  double landmark_filter_hz = FaceTrackerOptions{}.filter_min_cutoff;
+  double landmark_filter_beta = FaceTrackerOptions{}.filter_beta;
+  // "causal": the live tracker's forward filter; "off": as found;
+  // "two-sided": forwards and backwards (OfflineTrackOptions::two_sided_filter).
+  std::string landmark_filter = "causal";
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

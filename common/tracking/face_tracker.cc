@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 #include <vector>
 
 #include "common/core/options.h"
@@ -228,13 +229,15 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
     obs.repaired = regions.repaired;
   }
   for (int l = 0; l < kNumLandmarks; ++l)
-    obs.landmarks[l] = Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
-                                       m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
+    obs.landmarks[l] = !m.options.filter ? obs.raw[l]
+                                         : Eigen::Vector2d(m.filters[2 * l].Filter(obs.raw[l].x(), time_s),
+                                                           m.filters[2 * l + 1].Filter(obs.raw[l].y(), time_s));
   if (m.options.locate_irises) {
     obs.irises = LocateIrises(gray, obs.raw, m.options.iris);
     IrisObservation* irises[2] = {&obs.irises.left, &obs.irises.right};
     for (int e = 0; e < 2; ++e) {
       OneEuroFilter* f = &m.filters[2 * kNumLandmarks + 2 * e];
+      if (!m.options.filter) continue;
       if (!irises[e]->found) {
         f[0].Reset();  // a blink: the iris comes back somewhere else
         f[1].Reset();
@@ -251,6 +254,69 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   m.previous_gray = gray;
   m.tracking = true;
   return obs;
+}
+
+namespace {
+
+// One coordinate over the frames [begin, end): forwards and backwards, averaged.
+// `get` reads the value of frame i, `set` writes the smoothed one.
+template <typename Get, typename Set>
+void SmoothRun(size_t begin, size_t end, const std::vector<double>& t, double min_cutoff, double beta, Get get,
+               Set set) {
+  std::vector<double> forward(end - begin);
+  OneEuroFilter f(min_cutoff, beta);
+  for (size_t i = begin; i < end; ++i) forward[i - begin] = f.Filter(get(i), t[i]);
+  // Backwards in time: the filter sees time running forward from the run's end.
+  OneEuroFilter b(min_cutoff, beta);
+  for (size_t i = end; i-- > begin;)
+    set(i, 0.5 * (forward[i - begin] + b.Filter(get(i), t[end - 1] - t[i] + t[begin])));
+}
+
+// Calls run(begin, end) for each maximal run of frames where inside(i).
+template <typename Inside, typename Run>
+void ForEachRun(size_t n, Inside inside, Run run) {
+  for (size_t i = 0; i < n;) {
+    if (!inside(i)) {
+      ++i;
+      continue;
+    }
+    size_t j = i;
+    while (j < n && inside(j)) ++j;
+    run(i, j);
+    i = j;
+  }
+}
+
+}  // namespace
+
+void SmoothTrackTwoSided(std::vector<FaceObservation>* track, const std::vector<double>& t, double min_cutoff,
+                         double beta) {
+  std::vector<FaceObservation>& o = *track;
+  if (t.size() != o.size()) throw std::invalid_argument("SmoothTrackTwoSided: one time per observation is needed");
+  for (size_t i = 1; i < t.size(); ++i)
+    if (!(t[i] > t[i - 1])) throw std::invalid_argument("SmoothTrackTwoSided: times must increase");
+  if (!(min_cutoff > 0) || !(beta >= 0)) throw std::invalid_argument("SmoothTrackTwoSided: bad filter settings");
+  ForEachRun(
+      o.size(), [&](size_t i) { return o[i].status != FaceStatus::kNoFace; },
+      [&](size_t begin, size_t end) {
+        for (int l = 0; l < kNumLandmarks; ++l)
+          for (int c = 0; c < 2; ++c)
+            SmoothRun(
+                begin, end, t, min_cutoff, beta, [&](size_t i) { return o[i].raw[l][c]; },
+                [&](size_t i, double v) { o[i].landmarks[l][c] = v; });
+      });
+  for (IrisObservation EyeIrises::*eye : {&EyeIrises::left, &EyeIrises::right})
+    ForEachRun(
+        o.size(), [&](size_t i) { return o[i].status != FaceStatus::kNoFace && (o[i].irises.*eye).found; },
+        [&](size_t begin, size_t end) {
+          for (int c = 0; c < 2; ++c) {
+            std::vector<double> found(end - begin);  // read all before writing: the run smooths the found centres
+            for (size_t i = begin; i < end; ++i) found[i - begin] = (o[i].irises.*eye).center[c];
+            SmoothRun(
+                begin, end, t, min_cutoff, beta, [&](size_t i) { return found[i - begin]; },
+                [&](size_t i, double v) { (o[i].irises.*eye).center[c] = v; });
+          }
+        });
 }
 
 }  // namespace headcast

@@ -37,7 +37,10 @@ struct FaceTrackerOptions {
   double max_scale_change_since_detection = 1.1;
   double filter_min_cutoff = 1.5;  // One-Euro: Hz at rest (lower: steadier)
   double filter_beta = 0.05;       // One-Euro: speed coefficient (higher: less lag when moving)
-  bool locate_irises = true;       // the irises in the eyes the landmarks give (gaze), filtered like them
+  // false: landmarks and irises as found, unfiltered (an offline pass that
+  // smooths the whole track afterwards, SmoothTrackTwoSided).
+  bool filter = true;
+  bool locate_irises = true;  // the irises in the eyes the landmarks give (gaze), filtered like them
   IrisLocatorOptions iris;
   LandmarkRepairOptions repair;  // predictor jumps caught by flow from the previous frame
   void Check() const;
@@ -86,5 +89,15 @@ class OneEuroFilter {
   bool initialised_ = false;
   double x_ = 0, dx_ = 0, t_ = 0;
 };
+
+// A recorded face track smoothed without lag: each landmark and iris
+// coordinate through the One-Euro filter forwards and backwards in time, the
+// two averaged (their lags cancel). A live tracker can only filter forwards,
+// which draws a moving face where it was a frame or two before. Reads `raw`
+// and the irises as found; writes `landmarks` and the irises' centres. A
+// frame without a face (or an iris not found) ends a run: runs are smoothed
+// apart. `times_s` has one entry per observation, increasing.
+void SmoothTrackTwoSided(std::vector<FaceObservation>* track, const std::vector<double>& times_s, double min_cutoff,
+                         double beta);
 
 }  // namespace headcast

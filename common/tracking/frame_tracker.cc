@@ -177,11 +177,20 @@ RigidObservations FollowRigidPoints(const RigidObservations& reference, const cv
 
 TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
                                  FrameParams* params, const DepthOnDemand* depth_on_demand) {
+  Stopwatch watch;
+  const FaceObservation face = faces_.Track(bgr, time_s);
+  const double landmarks_ms = watch.ElapsedMs();
+  TrackedFrame r = TrackObserved(bgr, depth_m, face, camera, params, depth_on_demand);
+  r.landmarks_ms = landmarks_ms;
+  return r;
+}
+
+TrackedFrame FrameTracker::TrackObserved(const cv::Mat& bgr, const cv::Mat& depth_m, const FaceObservation& face,
+                                         const PinholeCamera& camera, FrameParams* params,
+                                         const DepthOnDemand* depth_on_demand) {
   TrackedFrame r;
   Stopwatch watch;
-  r.face = faces_.Track(bgr, time_s);
-  r.landmarks_ms = watch.ElapsedMs();
-  watch.Restart();
+  r.face = face;
   r.depth_m = depth_m;
   if (r.face.status != FaceStatus::kNoFace && depth_m.empty() && depth_on_demand) {
     // Following a head, depth is looked for around where it was (the face lies

@@ -44,22 +44,60 @@ struct IdentityCalibration {
   nlohmann::json report;
 };
 
-IdentityCalibration CalibrateOverKeyFrames(const HeadModel& model, const OfflineTrackOptions& o,
-                                           const FrameSourceFactory& open) {
+// The face in every readable frame of the input (as the main pass counts them),
+// unfiltered, then the whole track smoothed forwards and backwards.
+std::vector<FaceObservation> ObserveFacesTwoSided(const OfflineTrackOptions& o, const FrameSourceFactory& open) {
+  FaceTrackerOptions unfiltered = o.tracker.face;
+  unfiltered.filter = false;
+  FaceTracker faces(unfiltered);
   auto source = open();
-  FrameTracker first(model, o.tracker);
-  if (o.identity.size() > 0) first.SetIdentity(o.identity);
-  std::vector<std::pair<double, Landmarks2d>> seen;  // (yaw, landmarks)
-  std::optional<PinholeCamera> initial;
-  for (int n = 0; o.max_frames <= 0 || n < o.max_frames; ++n) {
+  std::vector<FaceObservation> track;
+  std::vector<double> times;
+  while (o.max_frames <= 0 || static_cast<int>(track.size()) < o.max_frames) {
     CapturedFrame c;
     std::string why;
     const ReadStatus st = source->Read(&c, &why);
     if (st == ReadStatus::kEnd) break;
     if (st == ReadStatus::kSkipped) continue;
+    // Times must increase for the filter; a source without them counts frames.
+    const double t = c.capture_time_s > (times.empty() ? -1e300 : times.back())
+                         ? c.capture_time_s
+                         : (times.empty() ? 0.0 : times.back() + 1.0 / std::max(1.0, source->fps()));
+    track.push_back(faces.Track(c.bgr, t));
+    times.push_back(t);
+  }
+  SmoothTrackTwoSided(&track, times, o.tracker.face.filter_min_cutoff, o.tracker.face.filter_beta);
+  spdlog::info("faces observed in {} frames, smoothed forwards and backwards", track.size());
+  return track;
+}
+
+// The observation of readable frame `index` from the first pass; the input must read alike twice.
+const FaceObservation& Observed(const std::vector<FaceObservation>& observed, int index, const std::string& input) {
+  if (index < 0 || index >= static_cast<int>(observed.size()))
+    throw std::runtime_error(input + ": the input gave more frames on a second reading than on the first");
+  return observed[static_cast<size_t>(index)];
+}
+
+IdentityCalibration CalibrateOverKeyFrames(const HeadModel& model, const OfflineTrackOptions& o,
+                                           const FrameSourceFactory& open,
+                                           const std::vector<FaceObservation>* observed) {
+  auto source = open();
+  FrameTracker first(model, o.tracker);
+  if (o.identity.size() > 0) first.SetIdentity(o.identity);
+  std::vector<std::pair<double, Landmarks2d>> seen;  // (yaw, landmarks)
+  std::optional<PinholeCamera> initial;
+  for (int n = 0; o.max_frames <= 0 || n < o.max_frames;) {
+    CapturedFrame c;
+    std::string why;
+    const ReadStatus st = source->Read(&c, &why);
+    if (st == ReadStatus::kEnd) break;
+    if (st == ReadStatus::kSkipped) continue;
+    const int index = n++;
     if (!initial) initial = FirstFrameCamera(o, std::nullopt, c);
     FrameParams p;
-    const TrackedFrame t = first.Track(c.bgr, cv::Mat(), c.capture_time_s, *initial, &p);
+    const TrackedFrame t =
+        observed ? first.TrackObserved(c.bgr, cv::Mat(), Observed(*observed, index, o.input), *initial, &p)
+                 : first.Track(c.bgr, cv::Mat(), c.capture_time_s, *initial, &p);
     if (t.fitted)
       seen.emplace_back(ViewRotation(AxisAngleToMatrix(p.cam_rotation.cast<double>())).y(), t.face.landmarks);
   }
@@ -177,6 +215,8 @@ void OfflineTrackOptions::Check() const {
   c.NotEmpty("input", input).NonNegative("max_frames", max_frames).InRange("fov_deg", fov_deg, 1, 179);
   c.InRange("calibration_frames", calibration_frames, 3, 10000);
   c.That(!(calibrate && IsCamera(input)), "calibrate needs a recorded input (a live camera cannot be read twice)");
+  c.That(!(two_sided_filter && IsCamera(input)),
+         "two_sided_filter needs a recorded input (a live camera cannot be read twice)");
   c.That(!(calibrate && identity.size() > 0), "calibrate and a given identity exclude each other");
   if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
   c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");
@@ -198,9 +238,11 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   FrameTracker tracker(model, o.tracker);
   tracker.SetIdentity(o.identity.size() > 0 ? o.identity : Eigen::VectorXd::Zero(model.num_shape()),
                       o.identity.size() > 0);
+  std::vector<FaceObservation> observed;
+  if (o.two_sided_filter) observed = ObserveFacesTwoSided(o, open);
   std::optional<IdentityCalibration> calibration;
   if (o.calibrate) {
-    calibration = CalibrateOverKeyFrames(model, o, open);
+    calibration = CalibrateOverKeyFrames(model, o, open, o.two_sided_filter ? &observed : nullptr);
     tracker.SetIdentity(calibration->shape, false);  // RGB only: RGB-D frames still calibrate their own
   }
   std::unique_ptr<FrameSource> source = open();
@@ -253,8 +295,11 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         spdlog::info("tracking: {} frames, {} fitted; {}", index, fitted, HumanDuration(elapsed));
     }
     FrameParams params;
-    const TrackedFrame t = tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params,
-                                         captured.depth_on_demand.get());
+    const TrackedFrame t = o.two_sided_filter
+                               ? tracker.TrackObserved(frame, captured.depth_m, Observed(observed, index, o.input),
+                                                       camera, &params, captured.depth_on_demand.get())
+                               : tracker.Track(frame, captured.depth_m, captured.capture_time_s, camera, &params,
+                                               captured.depth_on_demand.get());
     ms.Add(t.landmarks_ms + t.fit_ms);
     if (!t.fitted && !t.problem.empty()) spdlog::debug("frame {}: {}", index, t.problem);
     ++statuses[t.face.status == FaceStatus::kNoFace ? "no_face" : t.fitted ? "fitted" : "fit_failed"];

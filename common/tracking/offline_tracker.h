@@ -29,6 +29,11 @@ struct OfflineTrackOptions {
   // RGB, recorded input: identity (shape) and focal length calibrated over key
   // frames spread over the head's yaw in a first pass (METHOD §2).
   bool calibrate = false;
+  // Recorded input: the landmarks and irises of the whole input found first,
+  // then smoothed forwards and backwards (SmoothTrackTwoSided, with the face
+  // tracker's filter settings) and fitted: no lag, which a live camera's
+  // forward-only filter has. For training data: the crops are not lagged.
+  bool two_sided_filter = false;
   int calibration_frames = 15;  // key frames at most (calibrate); RGB-D: frames whose median shape is the identity
   Eigen::VectorXd identity;     // a given shape (empty: calibrated, RGB-D, or neutral)
   std::string identity_source;  // where `identity` came from, for the report

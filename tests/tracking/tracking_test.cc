@@ -540,6 +540,48 @@ TEST(OneEuroFilter, SmoothsNoiseAndFollowsMotion) {
   EXPECT_NEAR(y, 100.0, 2.0);  // a step is followed within 1.5 s
 }
 
+// A face moving at constant speed with noisy landmarks: the two-sided
+// smoothing follows it without the forward filter's lag and with less noise
+// than the raw points; a frame without a face splits the runs.
+TEST(SmoothTrackTwoSided, NoLagLessNoiseAndRunsSplitAtLostFaces) {
+  const int n = 240;
+  const double speed = 60;  // pixels a second
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0, 1.0);
+  std::vector<FaceObservation> track(n);
+  std::vector<double> times(n);
+  OneEuroFilter forward(1.5, 0.05);
+  double lag_forward = 0, lag_two_sided = 0, raw_error = 0, smooth_error = 0, forward_x = 0;
+  for (int i = 0; i < n; ++i) {
+    times[i] = i / 30.0;
+    FaceObservation& o = track[i];
+    o.status = i == 120 ? FaceStatus::kNoFace : FaceStatus::kTracked;
+    for (int l = 0; l < kNumLandmarks; ++l) o.raw[l] = Eigen::Vector2d(speed * times[i] + l + noise(rng), 5.0 * l);
+    o.irises.left.found = i % 2 == 0;
+    o.irises.left.center = Eigen::Vector2d(7, 8);
+  }
+  SmoothTrackTwoSided(&track, times, 1.5, 0.05);
+  for (int i = 0; i < n; ++i) {
+    forward_x = forward.Filter(track[i].raw[0].x(), times[i]);
+    if (i < 30 || (i > 90 && i < 150) || i > 210) continue;  // away from the runs' ends
+    const double truth = speed * times[i];
+    lag_forward += (truth - forward_x) / 60;
+    lag_two_sided += (truth - track[i].landmarks[0].x()) / 60;
+    raw_error += std::pow(track[i].raw[0].x() - truth, 2);
+    smooth_error += std::pow(track[i].landmarks[0].x() - truth, 2);
+  }
+  EXPECT_GT(lag_forward, 1.0);                                  // the forward filter draws the face over a pixel behind
+  EXPECT_LT(std::abs(lag_two_sided), 0.25);                     // the two-sided one where it is
+  EXPECT_LT(smooth_error, 0.5 * raw_error);                     // and steadier than the points found
+  EXPECT_EQ(track[120].landmarks[0], Eigen::Vector2d::Zero());  // the lost frame is left alone
+  // Irises found every other frame: runs of one frame, kept as found.
+  EXPECT_EQ(track[10].irises.left.center, Eigen::Vector2d(7, 8));
+  std::vector<double> backwards = times;
+  std::swap(backwards[3], backwards[4]);
+  EXPECT_THROW(SmoothTrackTwoSided(&track, backwards, 1.5, 0.05), std::invalid_argument);
+  EXPECT_THROW(SmoothTrackTwoSided(&track, std::vector<double>(5), 1.5, 0.05), std::invalid_argument);
+}
+
 Landmarks2d ReadPts(const std::string& path) {
   std::ifstream in(path);
   std::string line;
