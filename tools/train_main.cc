@@ -193,8 +193,8 @@ int main(int argc, char** argv) {
                  "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
                  "frame (no repair; drive the avatar the same way)");
   prep->add_option("--landmark-filter", p.landmark_filter,
-                   "tracking: the landmarks over time: causal (the live tracker's filter), off (as found) or "
-                   "two-sided (filtered forwards and backwards: no lag)")
+                   "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
+                   "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")
       ->check(CLI::IsMember({"causal", "off", "two-sided"}))
       ->capture_default_str();
   prep->add_option("--landmark-filter-hz", p.landmark_filter_hz,

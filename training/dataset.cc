@@ -311,7 +311,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"frames", track_report.value("frames", 0)},
         {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
         {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)},
-        {"gaze", o.gaze}}}};
+        {"gaze", o.gaze},
+        {"landmark_filter", o.landmark_filter}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }

@@ -65,14 +65,15 @@ struct PrepOptions {
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
-  // The landmarks' One-Euro filter (FaceTrackerOptions::filter_min_cutoff,
-  // filter_beta). It steadies a live picture but lags a moving face; the
-  // crops are not lagged, so a lag is a mismatch the avatar learns as blur.
-  double landmark_filter_hz = FaceTrackerOptions{}.filter_min_cutoff;
-  double landmark_filter_beta = FaceTrackerOptions{}.filter_beta;
-  // "causal": the live tracker's forward filter; "off": as found;
-  // "two-sided": forwards and backwards (OfflineTrackOptions::two_sided_filter).
-  std::string landmark_filter = "causal";
+  // The landmarks over time. "off": as the shape predictor found them;
+  // "causal": the live tracker's One-Euro filter, which steadies a live
+  // picture but draws a moving face (lips, lids) where it was a frame or two
+  // before, while the crops are not lagged, so the avatar learns the lag as
+  // blur; "two-sided": that filter forwards and backwards (no lag, but it
+  // still smooths fast blinks and lips). Off by measurement (DEFAULTS.md).
+  std::string landmark_filter = "off";
+  double landmark_filter_hz = FaceTrackerOptions{}.filter_min_cutoff;  // causal, two-sided: cutoff at rest
+  double landmark_filter_beta = FaceTrackerOptions{}.filter_beta;      // causal, two-sided: speed coefficient
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

@@ -610,6 +610,30 @@ TEST(FaceTracker, LandmarksMatchHumanAnnotations) {
   }
 }
 
+// A face that moved: the filtered landmarks lag behind the found ones, the
+// unfiltered (FaceTrackerOptions::filter off, what prep uses) are the found ones.
+TEST(FaceTracker, UnfilteredLandmarksDoNotLagAMovedFace) {
+  HEADCAST_REQUIRE_DATA("landmarks/einstein.jpg");
+  const cv::Mat image = ReadImage(testing::DataDir() + "/landmarks/einstein.jpg");
+  cv::Mat moved;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 8, 0, 1, 0);
+  cv::warpAffine(image, moved, shift, image.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  for (const bool filter : {true, false}) {
+    FaceTrackerOptions o;
+    o.filter = filter;
+    FaceTracker tracker(o);
+    ASSERT_EQ(tracker.Track(image, 0).status, FaceStatus::kDetected);
+    const FaceObservation obs = tracker.Track(moved, 1 / 30.0);
+    ASSERT_NE(obs.status, FaceStatus::kNoFace);
+    double lag = 0;
+    for (int l = 0; l < kNumLandmarks; ++l) lag += (obs.raw[l].x() - obs.landmarks[l].x()) / kNumLandmarks;
+    if (filter)
+      EXPECT_GT(lag, 3.0);  // of the 8 pixels moved, the filter shows less than 5
+    else
+      EXPECT_EQ(lag, 0.0);
+  }
+}
+
 // Tracking a still face from its own landmarks must stay where the detector
 // put it. A box of another convention than the detector's makes the shape
 // predictor see a bigger face every frame: on talking_d9 fixed margins let the
