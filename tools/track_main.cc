@@ -74,14 +74,10 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "frame, against a landmark (0: off)")
       ->capture_default_str();
   app.add_option_function<std::string>(
-         "--landmark-filter",
-         [&t](const std::string& mode) {
-           t.tracker.face.filter = mode == "causal";
-           t.two_sided_filter = mode == "two-sided";
-         },
+         "--landmark-filter", [&t](const std::string& mode) { SetLandmarkFilter(mode, &t); },
          "the landmarks over time: causal (filtered forwards, as live; the default), off (as found) or two-sided "
          "(recorded input: filtered forwards and backwards, no lag)")
-      ->check(CLI::IsMember({"causal", "off", "two-sided"}));
+      ->check(CLI::IsMember(kLandmarkFilterModes));
   app.add_option("--landmark-filter-hz", t.tracker.face.filter_min_cutoff,
                  "the landmarks' One-Euro filter at rest, Hz (higher: less lag, more jitter)")
       ->capture_default_str();

@@ -17,6 +17,7 @@
 #include "common/core/log.h"
 #include "common/core/program.h"
 #include "common/core/version.h"
+#include "common/tracking/offline_tracker.h"
 #include "receiver/display/display.h"
 #include "training/create.h"
 #include "training/run_report.h"
@@ -195,7 +196,7 @@ int main(int argc, char** argv) {
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")
-      ->check(CLI::IsMember({"causal", "off", "two-sided"}))
+      ->check(CLI::IsMember(kLandmarkFilterModes))
       ->capture_default_str();
   prep->add_option("--landmark-filter-hz", p.landmark_filter_hz,
                    "tracking: the landmarks' One-Euro filter at rest, Hz (higher: less lag, more jitter)")

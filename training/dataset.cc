@@ -41,7 +41,8 @@ void PrepOptions::Check() const {
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
-      .That(landmark_filter == "causal" || landmark_filter == "off" || landmark_filter == "two-sided",
+      .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
+                kLandmarkFilterModes.end(),
             "landmark_filter is causal, off or two-sided");
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
@@ -123,8 +124,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.filter_min_cutoff = o.landmark_filter_hz;
   track.tracker.face.filter_beta = o.landmark_filter_beta;
-  track.tracker.face.filter = o.landmark_filter == "causal";
-  track.two_sided_filter = o.landmark_filter == "two-sided";
+  SetLandmarkFilter(o.landmark_filter, &track);
   if (!o.intrinsics.empty()) track.intrinsics = ParseIntrinsics(o.intrinsics, "intrinsics");
   if (!o.identity_from.empty()) {
     track.identity = ReadTrackingIdentity(o.identity_from, model);

@@ -235,9 +235,8 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
   if (m.options.locate_irises) {
     obs.irises = LocateIrises(gray, obs.raw, m.options.iris);
     IrisObservation* irises[2] = {&obs.irises.left, &obs.irises.right};
-    for (int e = 0; e < 2; ++e) {
+    for (int e = 0; m.options.filter && e < 2; ++e) {
       OneEuroFilter* f = &m.filters[2 * kNumLandmarks + 2 * e];
-      if (!m.options.filter) continue;
       if (!irises[e]->found) {
         f[0].Reset();  // a blink: the iris comes back somewhere else
         f[1].Reset();

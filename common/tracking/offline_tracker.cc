@@ -223,6 +223,13 @@ void OfflineTrackOptions::Check() const {
   c.ThrowIfErrors();
 }
 
+void SetLandmarkFilter(const std::string& mode, OfflineTrackOptions* o) {
+  if (std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), mode) == kLandmarkFilterModes.end())
+    throw std::invalid_argument("landmark filter " + mode + ": causal, off or two-sided");
+  o->tracker.face.filter = mode == "causal";
+  o->two_sided_filter = mode == "two-sided";
+}
+
 OfflineTrack TrackVideo(const HeadModel& model, const OfflineTrackOptions& options,
                         const OfflineFrameObserver& observer) {
   return TrackFrames(

@@ -45,6 +45,12 @@ struct OfflineTrackOptions {
   void Check() const;
 };
 
+// How the landmarks are taken over time, by name (--landmark-filter of prep and
+// headcast-track): "causal" (the live filter), "off" (as found) or "two-sided"
+// (two_sided_filter). Throws std::invalid_argument for another name.
+inline const std::vector<std::string> kLandmarkFilterModes = {"causal", "off", "two-sided"};
+void SetLandmarkFilter(const std::string& mode, OfflineTrackOptions* options);
+
 // One readable frame, as the pass sees it. Frame numbers count readable frames
 // from 0 (a corrupt image is skipped and not counted). `mask` is set for
 // fitted frames when OfflineTrackOptions::masks.
