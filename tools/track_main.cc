@@ -87,6 +87,10 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--expression-prior", t.tracker.fit.expression_prior,
                  "weight of the expression's squared coefficients against squared landmark pixels")
       ->capture_default_str();
+  app.add_option("--expression-range-weight", t.tracker.fit.expression_range_weight,
+                 "weight of each expression coefficient's squared distance outside the model's range (ICT: 0..1), "
+                 "against squared landmark pixels")
+      ->capture_default_str();
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
                  "pixels): what every key frame shows goes into the shape")

@@ -45,6 +45,14 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--perceptual-weight", fit->loss.perceptual_weight, "weight of the VGG16 term")
       ->capture_default_str();
   app->add_option("--ssim-weight", fit->loss.ssim_weight, "weight of 1 - SSIM (without --vgg)")->capture_default_str();
+  app->add_option(
+         "--region-weight", fit->loss.regions.weight,
+         "the MSE weighs 1 + this around the fitted eyes with their brows and the mouth (0: every pixel alike)")
+      ->capture_default_str();
+  app->add_option("--expression-noise", fit->expression_noise,
+                  "standard deviation of noise added to real frames' expression coefficients as the networks see "
+                  "them (not the mesh; 0: off)")
+      ->capture_default_str();
   app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
       ->capture_default_str();
   app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");
@@ -173,6 +181,10 @@ int main(int argc, char** argv) {
   prep->add_option("--rigid-flow-weight", p.rigid_flow_weight,
                    "tracking: weight of each rigid head point (forehead, hairline) followed by optical flow, against a "
                    "landmark (0: off)")
+      ->capture_default_str();
+  prep->add_option("--expression-range-weight", p.expression_range_weight,
+                   "tracking: weight of each expression coefficient's squared distance outside the model's range "
+                   "(ICT: 0..1), against squared landmark pixels")
       ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "

@@ -14,6 +14,7 @@
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/head_render.h"
+#include "training/face_regions.h"
 #include "training/image_losses.h"
 
 namespace headcast {
@@ -37,6 +38,7 @@ void LossOptions::Check() const {
   c.NonNegative("ssim_weight", ssim_weight).NonNegative("offset_weight", offset_weight);
   c.NonNegative("matte_weight", matte_weight);
   c.ThrowIfErrors();
+  regions.Check();
 }
 
 void FitOptions::Check() const {
@@ -50,6 +52,7 @@ void FitOptions::Check() const {
             "weight_average is 0 (off) or a decay in (0, 1)")
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
       .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
+      .InRange("expression_noise", expression_noise, 0.0, 10.0)
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
       .InRange("z_scale_min", z_scale_min, 0.3, 1.0)
       .InRange("z_scale_max", z_scale_max, 1.0, 3.0)
@@ -87,16 +90,25 @@ struct PreparedSample {
   AvatarFrameInputs inputs;
   torch::Tensor target;  // (1, 3, R, R): the picture masked onto the background colour
   torch::Tensor mask;    // (1, 1, R, R) in {0, 1}
+  torch::Tensor weight;  // (1, 1, R, R) per-pixel weight of the MSE; undefined: all ones
 };
 
 // With a bounded matte the mask is cut to the bound too: a synthetic render
 // shows the neck, which an avatar bounded at the jaw line cannot.
 PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
                        const FrameParams& frame, const cv::Mat& image_bgr, const cv::Mat& mask, RaySampler* sampler,
-                       std::mt19937* rng) {
+                       const FaceRegionOptions& regions, std::mt19937* rng) {
   PreparedSample p;
   PrepareAvatarFrame(config, model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame, sampler, rng,
                      &p.inputs);
+  if (regions.weight > 0) {
+    Landmarks2d landmarks;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      landmarks[l] = subject.intrinsics.Project(
+          p.inputs.cam_from_head.Apply(p.inputs.posed.landmarks.row(l).transpose().cast<double>()));
+    const cv::Mat w = FaceRegionWeights(landmarks, image_bgr.size(), regions);
+    p.weight = torch::from_blob(w.data, {1, 1, w.rows, w.cols}, torch::kFloat).clone();
+  }
   cv::Mat m = mask;
   if (!p.inputs.matte_bound.empty()) cv::bitwise_and(mask, p.inputs.matte_bound, m);
   p.target = BgrToImageTensor(MaskedTarget(image_bgr, m));
@@ -328,7 +340,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       int real_index = -1;
       if (u01(rng) < p_synthetic) {
         const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
-        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, &rng);
+        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions, &rng);
         ++info.synthetic;
       } else {
         const std::vector<int>& train = data.real->train();
@@ -341,7 +353,14 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, data.real->subject().intrinsics, &frame, &image, &mask);
         }
-        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, &rng);
+        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, w.regions, &rng);
+      }
+      if (real_index >= 0 && options.expression_noise > 0) {
+        std::normal_distribution<float> noise(0.0f, static_cast<float>(options.expression_noise));
+        torch::Tensor psi = torch::empty({1, config.num_expression});
+        for (int k = 0; k < config.num_expression; ++k) psi[0][k] = noise(rng);
+        p.inputs.conditioning.geometry =
+            p.inputs.conditioning.geometry + torch::constant_pad_nd(psi, {config.num_shape + 12, 0});
       }
       torch::Tensor offset_penalty = torch::zeros({});
       if (real_index >= 0 && offsets.enabled()) {
@@ -353,7 +372,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       }
       const AvatarOutput out = RunAvatar(modules, p.inputs);
       const torch::Tensor mse = torch::mse_loss(out.image, p.target);
-      torch::Tensor loss = w.mse_weight * mse + offset_penalty;
+      const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - p.target).square()).mean() : mse;
+      torch::Tensor loss = w.mse_weight * weighted_mse + offset_penalty;
       if (vgg)
         loss = loss + w.perceptual_weight * (*vgg)(out.image, p.target);
       else if (w.ssim_weight > 0)

@@ -11,6 +11,7 @@
 #include "common/avatar/avatar.h"
 #include "training/data_parallel.h"
 #include "training/dataset.h"
+#include "training/face_regions.h"
 #include "training/synthetic_data.h"
 
 namespace headcast {
@@ -40,6 +41,9 @@ struct LossOptions {
   // sum_k w ||offset_k||^2 over the learnable per-frame offsets of real samples
   // (METHOD eq. 8); 0 on synthetic ones, which have exact parameters.
   double offset_weight = 1.0;
+  // The MSE weighted up around the fitted eyes, brows and mouth (their
+  // projected landmarks): where expressions are read; weight 0: off.
+  FaceRegionOptions regions;
   void Check() const;
 };
 
@@ -70,7 +74,12 @@ struct FitOptions {
   MixSchedule mix;               // used when both synthetic and real data are given
   bool learn_offsets = true;     // per-frame offsets on beta, theta, psi, tau, lambda of real frames
   bool freeze_identity = false;  // subject fine-tune: no offsets on beta and tau (frozen, METHOD §6)
-  int freeze_cnerf_layers = 0;   // subject fine-tune: 4 (METHOD §6)
+  // Standard deviation of Gaussian noise added to a real frame's expression
+  // coefficients as the networks see them (not to the mesh): a few hundred
+  // frames span few of psi's combinations, and an avatar that keys detail to
+  // exact ones draws unseen expressions badly. 0: off.
+  double expression_noise = 0;
+  int freeze_cnerf_layers = 0;  // subject fine-tune: 4 (METHOD §6)
   // z-augmentation of real frames (METHOD §5): with this probability the head's
   // distance is changed by a factor drawn in [1/z_scale_max, 1/z_scale_min]
   // (the picture scaled about the head's centre, the translation with it).

@@ -513,6 +513,36 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   EXPECT_THROW(TrainAvatar(wrong, Model(), TrainingData{nullptr, &real}, f), std::invalid_argument);
 }
 
+// The region weights and the expression noise change what a step sees, from
+// the same draws: the first step's loss with weights >= 1 around the eyes and
+// mouth is above the plain run's, the noise moves it, and each repeats exactly.
+TEST(TrainAvatar, RegionWeightsAndExpressionNoiseShapeTheLossRepeatably) {
+  const std::string dir = WriteRenderedDataset("dataset_regions", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  const auto first_loss = [&](double region_weight, double noise) {
+    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+    FitOptions f;
+    f.iterations = 1;
+    f.batch = 2;
+    f.loss.regions.weight = region_weight;
+    f.expression_noise = noise;
+    const TrainResult r = TrainAvatar(avatar, Model(), TrainingData{nullptr, &real}, f);
+    return std::make_pair(r.steps[0].loss, r.steps[0].mse);
+  };
+  const auto plain = first_loss(0, 0), weighted = first_loss(4, 0), noisy = first_loss(0, 0.5);
+  EXPECT_GT(weighted.first, plain.first * 1.01);
+  EXPECT_FLOAT_EQ(weighted.second, plain.second);  // the reported MSE is the plain one
+  EXPECT_NE(noisy.first, plain.first);
+  EXPECT_FLOAT_EQ(first_loss(4, 0).first, weighted.first);
+  EXPECT_FLOAT_EQ(first_loss(0, 0.5).first, noisy.first);
+  FitOptions bad;
+  bad.expression_noise = -0.1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad.expression_noise = 0;
+  bad.loss.regions.weight = -1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 // c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
 // loopback TCP) end with the weights of one process running the whole batch.
 TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
