@@ -6,6 +6,7 @@
 #include "common/headmodel/head_model_io.h"
 #include "training/avatar_fit.h"
 #include "training/image_losses.h"
+#include "training/runs.h"
 
 namespace headcast::bench {
 
@@ -45,7 +46,8 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
     Avatar avatar = Avatar::CreateRandom(config, model, real ? real->subject() : subject, 1);
     FitOptions f = fit;
     f.freeze_identity = true;
-    f.freeze_cnerf_layers = 4;
+    f.freeze_cnerf_layers = SubjectOptions{}.freeze_layers;
+    f.loss.regions = SubjectFitDefaults().loss.regions;
     f.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, 0.25};
     const TrainResult r = timed(avatar, TrainingData{&data, real ? &*real : nullptr}, f);
     out["finetune_samples_per_s"] = r.samples_per_s;

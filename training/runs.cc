@@ -183,6 +183,12 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
 
 }  // namespace
 
+FitOptions SubjectFitDefaults() {
+  FitOptions f;
+  f.loss.regions.weight = 4;
+  return f;
+}
+
 void SubjectOptions::Check() const {
   OptionsCheck c("SubjectOptions");
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");

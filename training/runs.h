@@ -43,6 +43,9 @@ nlohmann::json RunPretrain(PretrainOptions options);
 // Per-subject avatar (METHOD §6): from a general model, beta and tau frozen,
 // the first four CNeRF layers frozen, synthetic mixing decaying linearly to 0,
 // z-augmentation; trained on the dataset's training split, evaluated on its test split.
+// A fine-tune's optimiser and loss defaults where they differ from pretraining's:
+// the MSE weighted up around the eyes, brows and mouth (bench/DEFAULTS.md).
+FitOptions SubjectFitDefaults();
 struct SubjectOptions {
   std::string head_model = "builtin";
   std::string general;        // the general model .hcavatar; empty only with from_scratch
@@ -52,9 +55,9 @@ struct SubjectOptions {
   std::string identity_from;      // beta of an avatar or a headcast-fit-mesh PARAMS.json instead of the dataset's
   double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
   bool use_interpolated = true;   // train on the dataset's interpolated frames too, if it has them
-  int freeze_layers = 4;
-  AvatarConfig config;  // architecture when from_scratch
-  FitOptions fit;
+  int freeze_layers = 0;          // CNeRF layers kept from the general model (METHOD §6: 4)
+  AvatarConfig config;            // architecture when from_scratch
+  FitOptions fit = SubjectFitDefaults();
   RunOutputs outputs;
   void Check() const;
 };
