@@ -79,7 +79,7 @@ struct FitOptions {
   // frames span few of psi's combinations, and an avatar that keys detail to
   // exact ones draws unseen expressions badly. 0: off.
   double expression_noise = 0;
-  int freeze_cnerf_layers = 0;  // subject fine-tune: 4 (METHOD §6)
+  int freeze_cnerf_layers = 0;  // CNeRF layers not trained (METHOD §6 freezes 4; SubjectOptions::freeze_layers)
   // z-augmentation of real frames (METHOD §5): with this probability the head's
   // distance is changed by a factor drawn in [1/z_scale_max, 1/z_scale_min]
   // (the picture scaled about the head's centre, the translation with it).
