@@ -40,12 +40,14 @@ struct PretrainOptions {
 };
 nlohmann::json RunPretrain(PretrainOptions options);
 
-// Per-subject avatar (METHOD §6): from a general model, beta and tau frozen,
-// the first four CNeRF layers frozen, synthetic mixing decaying linearly to 0,
-// z-augmentation; trained on the dataset's training split, evaluated on its test split.
 // A fine-tune's optimiser and loss defaults where they differ from pretraining's:
 // the MSE weighted up around the eyes, brows and mouth (bench/DEFAULTS.md).
 FitOptions SubjectFitDefaults();
+
+// Per-subject avatar (METHOD §6): from a general model, beta and tau frozen,
+// every CNeRF layer fine-tuned unless freeze_layers says otherwise (the
+// thesis froze four), synthetic mixing decaying linearly to 0,
+// z-augmentation; trained on the dataset's training split, evaluated on its test split.
 struct SubjectOptions {
   std::string head_model = "builtin";
   std::string general;        // the general model .hcavatar; empty only with from_scratch
