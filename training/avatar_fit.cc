@@ -102,11 +102,8 @@ PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const
   PrepareAvatarFrame(config, model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame, sampler, rng,
                      &p.inputs);
   if (regions.weight > 0) {
-    Landmarks2d landmarks;
-    for (int l = 0; l < kNumLandmarks; ++l)
-      landmarks[l] = subject.intrinsics.Project(
-          p.inputs.cam_from_head.Apply(p.inputs.posed.landmarks.row(l).transpose().cast<double>()));
-    const cv::Mat w = FaceRegionWeights(landmarks, image_bgr.size(), regions);
+    const cv::Mat w = FaceRegionWeights(ProjectLandmarks(p.inputs.posed, p.inputs.cam_from_head, subject.intrinsics),
+                                        image_bgr.size(), regions);
     p.weight = torch::from_blob(w.data, {1, 1, w.rows, w.cols}, torch::kFloat).clone();
   }
   cv::Mat m = mask;

@@ -39,6 +39,11 @@ struct AvatarFrameInputs {
   RasterVertices v_cam;
 };
 
+// The posed model's 68 landmarks seen through `camera` (pixels): where the
+// frame's fit puts them in the picture the avatar draws.
+Landmarks2d ProjectLandmarks(const HeadModelOutput& posed, const RigidTransform& cam_from_head,
+                             const PinholeCamera& camera);
+
 // Runs CNeRF on the frame's samples, composites the feature map, looks up the
 // surface texture (when the avatar has one) and upsamples; with a matte, the
 // RGB is composited over the background colour by the coverage.

@@ -38,10 +38,7 @@ void MakeMatteBound(const AvatarConfig& config, const SurfaceBatch& surface, con
                     const RigidTransform& cam_from_head, const PinholeCamera& camera, AvatarFrameInputs* out) {
   cv::Mat silhouette(surface.height, surface.width, CV_8U, cv::Scalar(0));
   for (int i = 0; i < surface.mesh_pixels; ++i) silhouette.data[surface.pixel[i]] = 255;
-  Landmarks2d landmarks;
-  for (int l = 0; l < kNumLandmarks; ++l)
-    landmarks[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
-  out->matte_bound = MatteBound(silhouette, landmarks, config.matte_rules);
+  out->matte_bound = MatteBound(silhouette, ProjectLandmarks(posed, cam_from_head, camera), config.matte_rules);
   if (config.matte_core > 0)
     out->matte_core = MatteCore(silhouette, out->matte_bound, config.matte_core);
   else
@@ -149,6 +146,14 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
   }
   if (timings) timings->upsample_ms += watch.ElapsedMs();
   return out;
+}
+
+Landmarks2d ProjectLandmarks(const HeadModelOutput& posed, const RigidTransform& cam_from_head,
+                             const PinholeCamera& camera) {
+  Landmarks2d landmarks;
+  for (int l = 0; l < kNumLandmarks; ++l)
+    landmarks[l] = camera.Project(cam_from_head.Apply(posed.landmarks.row(l).transpose().cast<double>()));
+  return landmarks;
 }
 
 void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
