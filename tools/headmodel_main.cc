@@ -350,7 +350,8 @@ int main(int argc, char** argv) {
   ict->add_option("--identity", ict_options.max_identity, "identity components to read")->capture_default_str();
   ict->add_option(
       "--parts", ict_parts,
-      "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories (default all)");
+      "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories, or all "
+      "(default: all but eye_accessories, which would cover the eyeballs)");
   ict->add_option("--out", out, "output .npz")->required();
   HeadModelSaveOptions save;
   const char* step_help =
@@ -428,9 +429,14 @@ int main(int argc, char** argv) {
       }
       std::cout << LoadHeadModel(out).Summary();
     } else if (ict->parsed()) {
-      std::stringstream ss(ict_parts);
-      for (std::string part; std::getline(ss, part, ',');)
-        if (!part.empty()) ict_options.parts.push_back(part);
+      if (ict_parts == "all") {
+        ict_options.parts.clear();
+      } else if (!ict_parts.empty()) {
+        ict_options.parts.clear();
+        std::stringstream ss(ict_parts);
+        for (std::string part; std::getline(ss, part, ',');)
+          if (!part.empty()) ict_options.parts.push_back(part);
+      }
       const HeadModel model = ConvertIctFaceKit(ict_options);
       SaveHeadModel(model, out, save);
       std::cout << LoadHeadModel(out).Summary() << "wrote " << out << "\n";  // as read back

@@ -26,6 +26,13 @@ const std::vector<IctPart>& IctParts() {
   return parts;
 }
 
+std::vector<std::string> IctDefaultParts() {
+  std::vector<std::string> names;
+  for (const IctPart& p : IctParts())
+    if (std::string(p.name) != "eye_accessories") names.push_back(p.name);
+  return names;
+}
+
 const std::vector<int>& IctLandmarkVertices() {
   static const std::vector<int> ids = {
       1225, 1888, 1052, 367,  1719, 1722, 2199, 1447, 966,  3661, 4390, 3927, 3924, 2608, 3272, 4088, 3443,

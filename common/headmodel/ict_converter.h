@@ -15,10 +15,17 @@ struct IctPart {
 };
 const std::vector<IctPart>& IctParts();  // face, head, mouth, eyes, gums_tongue, teeth, eyeballs, eye_accessories
 
+// What a conversion keeps unless told otherwise: every part but
+// `eye_accessories`. Those are the occlusion shells and lashes that sit in front
+// of the eyeballs; upstream draws them translucent, but the avatar's rasteriser
+// draws every triangle opaque, so with them the eye opening shows a flat
+// membrane that follows the lids instead of the eyeball that follows the gaze.
+std::vector<std::string> IctDefaultParts();
+
 struct IctConvertOptions {
-  std::string folder;              // the FaceXModel folder (or its parent)
-  int max_identity = 100;          // identity components to read (identity000.obj ...)
-  std::vector<std::string> parts;  // empty: every part; else names from IctParts()
+  std::string folder;                                  // the FaceXModel folder (or its parent)
+  int max_identity = 100;                              // identity components to read (identity000.obj ...)
+  std::vector<std::string> parts = IctDefaultParts();  // names from IctParts(); empty: every part
   void Check() const;
 };
 

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include "common/headmodel/head_model_io.h"
 #include "tests/testing/test_data.h"
 
@@ -27,7 +29,7 @@ Eigen::RowVector3f EyeCentre(const HeadModelOutput& out, int first) {
 TEST(IctConverter, ConvertsTheSharedSubset) {
   HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
   const HeadModel& m = Ict();
-  EXPECT_EQ(m.num_vertices(), 26719);
+  EXPECT_EQ(m.num_vertices(), 24591);  // every part but the 2128 vertices of eye_accessories
   EXPECT_EQ(m.num_expression(), 53);
   EXPECT_EQ(m.num_shape(), 20);
   EXPECT_GE(m.ExpressionIndex("jawOpen"), 0);
@@ -104,6 +106,25 @@ TEST(IctConverter, PartsRestrictionAndRoundTrip) {
   EXPECT_LT(
       (back.Forward(HeadModelParams{}).landmarks - Ict().Forward(HeadModelParams{}).landmarks).cwiseAbs().maxCoeff(),
       1e-6);
+}
+
+TEST(IctConverter, KeepsTheEyeAccessoriesOnlyWhenAsked) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  const std::vector<std::string> defaults = IctDefaultParts();
+  EXPECT_EQ(defaults.size(), IctParts().size() - 1);
+  EXPECT_EQ(std::count(defaults.begin(), defaults.end(), "eye_accessories"), 0);
+  IctConvertOptions o;
+  o.folder = testing::DataDir() + "/head-models/ict-facekit";
+  o.max_identity = 0;
+  o.parts.clear();  // every part
+  const HeadModel all = ConvertIctFaceKit(o);
+  EXPECT_EQ(all.num_vertices(), 26719);
+  // The accessories are the last part: dropping them keeps every other vertex where it was.
+  const HeadModelOutput with = all.Forward(HeadModelParams{});
+  const HeadModelOutput without = Ict().Forward(HeadModelParams{});
+  ASSERT_EQ(without.vertices.rows(), 24591);
+  EXPECT_LT((with.vertices.topRows(24591) - without.vertices).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((with.landmarks - without.landmarks).cwiseAbs().maxCoeff(), 1e-6);
 }
 
 TEST(IctConverter, RefusesBadFolders) {

@@ -24,14 +24,13 @@ const HeadModel& Builtin() {
   return m;
 }
 
-// ICT-FaceKit without its eye accessories (transparent shells a renderer blends; ours would draw them opaque).
+// ICT-FaceKit as converted by default: without its eye accessories (IctDefaultParts).
 const HeadModel* Ict() {
   if (testing::DataDir().empty()) return nullptr;
   static const HeadModel m = [] {
     IctConvertOptions o;
     o.folder = testing::DataDir() + "/head-models/ict-facekit";
     o.max_identity = 0;
-    o.parts = {"face", "head", "mouth", "eyes", "gums_tongue", "teeth", "eyeballs"};
     return ConvertIctFaceKit(o);
   }();
   return &m;
