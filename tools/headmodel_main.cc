@@ -429,11 +429,9 @@ int main(int argc, char** argv) {
       }
       std::cout << LoadHeadModel(out).Summary();
     } else if (ict->parsed()) {
-      if (ict_parts == "all") {
+      if (!ict_parts.empty()) {  // else IctDefaultParts(); "all" leaves the list empty: every part
         ict_options.parts.clear();
-      } else if (!ict_parts.empty()) {
-        ict_options.parts.clear();
-        std::stringstream ss(ict_parts);
+        std::stringstream ss(ict_parts == "all" ? "" : ict_parts);
         for (std::string part; std::getline(ss, part, ',');)
           if (!part.empty()) ict_options.parts.push_back(part);
       }
