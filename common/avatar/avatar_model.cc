@@ -1,7 +1,10 @@
 // The neural avatar's networks.
 #include "common/avatar/avatar_model.h"
 
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace headcast {
 namespace F = torch::nn::functional;
@@ -107,11 +110,38 @@ SqueezeExcitationImpl::SqueezeExcitationImpl(int channels, int reduction) {
   up_ = register_module("up", torch::nn::Linear(hidden, channels));
 }
 
-torch::Tensor SqueezeExcitationImpl::forward(const torch::Tensor& x) {
+torch::Tensor SqueezeExcitationImpl::Scale(const torch::Tensor& x) {
   const torch::Tensor squeezed = x.mean({2, 3});  // (B, C)
-  const torch::Tensor scale = torch::sigmoid(up_->forward(torch::relu(down_->forward(squeezed))));
-  return x * scale.unsqueeze(2).unsqueeze(3);
+  return torch::sigmoid(up_->forward(torch::relu(down_->forward(squeezed)))).unsqueeze(2).unsqueeze(3);
 }
+
+torch::Tensor SqueezeExcitationImpl::forward(const torch::Tensor& x) { return x * Scale(x); }
+
+namespace {
+
+// `window` (even edges) of x (B, C, h, w) upsampled x2 bilinearly: the same
+// pixels as the whole picture upsampled, from the source pixels under the
+// window and one more on each side (the filter's reach).
+torch::Tensor UpsampleWindow(const torch::Tensor& x, const ImageWindow& window) {
+  const int64_t h = x.size(2), w = x.size(3);
+  const int64_t sy0 = std::max<int64_t>(window.y0 / 2 - 1, 0), sy1 = std::min<int64_t>(window.y1 / 2 + 1, h);
+  const int64_t sx0 = std::max<int64_t>(window.x0 / 2 - 1, 0), sx1 = std::min<int64_t>(window.x1 / 2 + 1, w);
+  const torch::Tensor up =
+      F::interpolate(x.slice(2, sy0, sy1).slice(3, sx0, sx1), F::InterpolateFuncOptions()
+                                                                  .scale_factor(std::vector<double>{2.0, 2.0})
+                                                                  .mode(torch::kBilinear)
+                                                                  .align_corners(false));
+  return up.slice(2, window.y0 - 2 * sy0, window.y1 - 2 * sy0).slice(3, window.x0 - 2 * sx0, window.x1 - 2 * sx0);
+}
+
+void CheckWindow(const ImageWindow& w, int64_t height, int64_t width) {
+  if (w.y0 < 0 || w.x0 < 0 || w.y1 > height || w.x1 > width || w.height() <= 0 || w.width() <= 0 || w.y0 % 2 ||
+      w.y1 % 2 || w.x0 % 2 || w.x1 % 2)
+    throw std::invalid_argument("NeuralRenderer: a window needs even edges inside the " + std::to_string(height) +
+                                " x " + std::to_string(width) + " output");
+}
+
+}  // namespace
 
 UpsamplingBlockImpl::UpsamplingBlockImpl(int in_channels, int out_channels) {
   global_se_ = register_module("global_se", SqueezeExcitation(in_channels));
@@ -128,13 +158,45 @@ UpsamplingBlockImpl::UpsamplingBlockImpl(int in_channels, int out_channels) {
 }
 
 torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x) {
-  const torch::Tensor g =
-      F::leaky_relu(global_->forward(global_se_->forward(x)), F::LeakyReLUFuncOptions().negative_slope(0.2));
+  return forward(x, ImageWindow::Whole(2 * x.size(2), 2 * x.size(3)));
+}
+
+torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWindow& window) {
+  const int64_t height = 2 * x.size(2), width = 2 * x.size(3);
+  CheckWindow(window, height, width);
+  // The blur reaches one output pixel beyond the window; the branches' pixels
+  // under those (input resolution) are computed, the dilated 3x3 reading two
+  // more input pixels on each side (zeros beyond the picture, as its padding).
+  const int64_t uy0 = std::max<int64_t>(window.y0 - 1, 0), uy1 = std::min<int64_t>(window.y1 + 1, height);
+  const int64_t ux0 = std::max<int64_t>(window.x0 - 1, 0), ux1 = std::min<int64_t>(window.x1 + 1, width);
+  const int64_t cy0 = uy0 / 2, cy1 = (uy1 + 1) / 2, cx0 = ux0 / 2, cx1 = (ux1 + 1) / 2;
+  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  // The dilated 3x3 on the input pixels it reads, with its own zero padding:
+  // right beyond the picture, and sliced off again where real pixels lay there.
+  const int64_t h = x.size(2), w = x.size(3);
+  const int64_t iy0 = std::max<int64_t>(cy0 - 2, 0), iy1 = std::min<int64_t>(cy1 + 2, h);
+  const int64_t ix0 = std::max<int64_t>(cx0 - 2, 0), ix1 = std::min<int64_t>(cx1 + 2, w);
+  const torch::Tensor g = F::leaky_relu(global_->forward(x.slice(2, iy0, iy1).slice(3, ix0, ix1) * global_se_->Scale(x))
+                                            .slice(2, cy0 - iy0, cy1 - iy0)
+                                            .slice(3, cx0 - ix0, cx1 - ix0),
+                                        leaky);
   const torch::Tensor l =
-      F::leaky_relu(local_->forward(local_se_->forward(x)), F::LeakyReLUFuncOptions().negative_slope(0.2));
-  const torch::Tensor up = shuffle_->forward(g + l);
-  // Anti-aliasing blur (depthwise binomial) against PixelShuffle's checkerboard.
-  const torch::Tensor padded = F::pad(up, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate));
+      F::leaky_relu(local_->forward(x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x)), leaky);
+  const torch::Tensor up =
+      shuffle_->forward(g + l).slice(2, uy0 - 2 * cy0, uy1 - 2 * cy0).slice(3, ux0 - 2 * cx0, ux1 - 2 * cx0);
+  // Anti-aliasing blur (depthwise binomial) against PixelShuffle's checkerboard,
+  // the picture's edge pixels repeated beyond it (copied: a replication pad is
+  // a slow loop on the CPU).
+  auto repeat_edges = [](torch::Tensor t, int dim, bool before, bool after) {
+    std::vector<torch::Tensor> parts;
+    if (before) parts.push_back(t.narrow(dim, 0, 1));
+    parts.push_back(t);
+    if (after) parts.push_back(t.narrow(dim, t.size(dim) - 1, 1));
+    return parts.size() == 1 ? t : torch::cat(parts, dim);
+  };
+  const torch::Tensor padded =
+      repeat_edges(repeat_edges(up, 2, window.y0 == 0, window.y1 == height), 3, window.x0 == 0, window.x1 == width)
+          .contiguous(up.suggest_memory_format());  // cat may change the layout
   return F::conv2d(padded, blur_, F::Conv2dFuncOptions().groups(up.size(1)));
 }
 
@@ -223,26 +285,40 @@ torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, con
   const torch::Tensor background = branch(torch::zeros({1, in}));  // (1, C3)
   torch::Tensor rows = background.expand({static_cast<int64_t>(height) * width, channels});
   if (features.size(0) > 0) rows = rows.index_copy(0, pixels, branch(features));
+  if (channels_last_) return rows.view({1, height, width, channels}).permute({0, 3, 1, 2});  // rows are pixels
   return rows.t().reshape({1, channels, height, width});
 }
 
+void NeuralRendererImpl::UseChannelsLast() {
+  torch::NoGradGuard no_grad;
+  for (auto& t : parameters())
+    if (t.dim() == 4) t.set_data(t.contiguous(torch::MemoryFormat::ChannelsLast));
+  for (auto& t : buffers())
+    if (t.dim() == 4) t.set_data(t.contiguous(torch::MemoryFormat::ChannelsLast));
+  channels_last_ = true;
+}
+
 torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term,
-                                          torch::Tensor* coverage_logit) {
-  const auto up2 = F::InterpolateFuncOptions()
-                       .scale_factor(std::vector<double>{2.0, 2.0})
-                       .mode(torch::kBilinear)
-                       .align_corners(false);
+                                          torch::Tensor* coverage_logit, const ImageWindow* window) {
+  const int64_t height = 8 * feature_map.size(2), width = 8 * feature_map.size(3);
+  const ImageWindow last = window ? *window : ImageWindow::Whole(height, width);
+  CheckWindow(last, height, width);
   const bool matte = input_alpha_ && coverage_logit;
-  torch::Tensor rgb = input_rgb_->forward(feature_map), alpha;
-  if (matte) alpha = input_alpha_->forward(feature_map);
-  torch::Tensor x = feature_map;
+  const torch::Tensor features =
+      channels_last_ ? feature_map.contiguous(torch::MemoryFormat::ChannelsLast) : feature_map;
+  torch::Tensor rgb = input_rgb_->forward(features), alpha;
+  if (matte) alpha = input_alpha_->forward(features);
+  torch::Tensor x = features;
   for (int k = 0; k < 3; ++k) {
-    rgb = F::interpolate(rgb, up2);
-    x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x);
-    if (k == 2 && surface_term.defined()) x = x + surface_term;
+    // The last level draws the window only; the ones before it the whole
+    // picture (its squeeze averages all of theirs).
+    const ImageWindow w = k == 2 ? last : ImageWindow::Whole(2 * x.size(2), 2 * x.size(3));
+    rgb = UpsampleWindow(rgb, w);
+    x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x, w);
+    if (k == 2 && surface_term.defined()) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
     x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
     rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
-    if (matte) alpha = F::interpolate(alpha, up2) + to_alpha_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
+    if (matte) alpha = UpsampleWindow(alpha, w) + to_alpha_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
   }
   if (matte) *coverage_logit = alpha;
   return torch::sigmoid(rgb);

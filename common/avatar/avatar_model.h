@@ -50,10 +50,19 @@ struct VolumeRenderResult {
 VolumeRenderResult VolumeRender(const torch::Tensor& density, const torch::Tensor& features, const torch::Tensor& z,
                                 const torch::Tensor& ray_length);
 
+// A window of an image, pixels: rows [y0, y1), columns [x0, x1).
+struct ImageWindow {
+  int64_t y0 = 0, y1 = 0, x0 = 0, x1 = 0;
+  int64_t height() const { return y1 - y0; }
+  int64_t width() const { return x1 - x0; }
+  static ImageWindow Whole(int64_t height, int64_t width) { return {0, height, 0, width}; }
+};
+
 class SqueezeExcitationImpl : public torch::nn::Module {
  public:
   SqueezeExcitationImpl(int channels, int reduction = 4);
   torch::Tensor forward(const torch::Tensor& x);
+  torch::Tensor Scale(const torch::Tensor& x);  // (B, C, 1, 1): what forward multiplies x by
 
  private:
   torch::nn::Linear down_{nullptr}, up_{nullptr};
@@ -66,6 +75,9 @@ class UpsamplingBlockImpl : public torch::nn::Module {
  public:
   UpsamplingBlockImpl(int in_channels, int out_channels);
   torch::Tensor forward(const torch::Tensor& x);
+  // Only `window` of the output (even edges, inside it): the same pixels as
+  // forward's there (the squeeze still averages all of x).
+  torch::Tensor forward(const torch::Tensor& x, const ImageWindow& window);
 
  private:
   SqueezeExcitation global_se_{nullptr}, local_se_{nullptr};
@@ -103,8 +115,10 @@ class NeuralRendererImpl : public torch::nn::Module {
   explicit NeuralRendererImpl(const AvatarConfig& config);
   // (B, C0, h, w) [, surface_term (B, C3, 8h, 8w) from SurfaceTerm] -> (B, 3, 8h, 8w), RGB in [0, 1].
   // With a matte, `coverage_logit` gets (B, 1, 8h, 8w): where the head covers the picture.
+  // With `window` (even edges, inside 8h x 8w), the last x2 level runs on that
+  // window only and both outputs are its size: the same pixels as without.
   torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term = torch::Tensor(),
-                        torch::Tensor* coverage_logit = nullptr);
+                        torch::Tensor* coverage_logit = nullptr, const ImageWindow* window = nullptr);
   // The surface branch (two 1x1 layers) on the covered pixels only: texture
   // features (P, Cs) at flat pixel indices `pixels` (P) of an h x w image ->
   // (1, C3, h, w). Uncovered pixels get the branch's value for zero features,
@@ -113,8 +127,13 @@ class NeuralRendererImpl : public torch::nn::Module {
   // and shift the hidden layer when the branch is conditioned (else unused).
   torch::Tensor SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height, int width,
                             const torch::Tensor& motion = torch::Tensor());
+  // Inference: keeps the convolutions' weights and images channels-last
+  // (pixel after pixel), the layout the CPU convolutions work in, instead of
+  // reordering every image on every call. The same pixels either way.
+  void UseChannelsLast();
 
  private:
+  bool channels_last_ = false;
   torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr}, input_alpha_{nullptr};
   torch::nn::Linear surface_film_{nullptr};  // motion -> (scale, shift) of the surface branch's hidden layer
   torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_;

@@ -3,6 +3,8 @@
 
 #include <malloc.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
 #include "common/core/options.h"
@@ -48,6 +50,16 @@ void MakeMatteBound(const AvatarConfig& config, const SurfaceBatch& surface, con
 // (1, 1, H, W) in {0, 1} from a CV_8U mask.
 torch::Tensor MaskTensor(const cv::Mat& m) {
   return torch::from_blob(m.data, {1, 1, m.rows, m.cols}, torch::kUInt8).to(torch::kFloat) / 255.f;
+}
+
+// The smallest window with even edges around the mask's pixels (a 2 x 2 one at
+// the top left when it has none: everything is background then).
+ImageWindow WindowAround(const cv::Mat& mask) {
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.empty()) return {0, 2, 0, 2};
+  auto down = [](int v) { return static_cast<int64_t>(v - v % 2); };
+  auto up = [](int v, int limit) { return static_cast<int64_t>(std::min(v + v % 2, limit)); };
+  return {down(box.y), up(box.y + box.height, mask.rows), down(box.x), up(box.x + box.width, mask.cols)};
 }
 
 }  // namespace
@@ -134,15 +146,27 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
   if (!modules.cnerf->config().has_matte()) {
     out.image = modules.renderer->forward(out.feature_map, surface_term);
   } else {
+    // Beyond a bound the picture is the background whatever the networks say:
+    // the last level draws only the window around it.
+    const int64_t height = 8 * out.feature_map.size(2), width = 8 * out.feature_map.size(3);
+    const ImageWindow window =
+        inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
+    auto windowed = [&](const cv::Mat& m) {
+      return MaskTensor(m).slice(2, window.y0, window.y1).slice(3, window.x0, window.x1);
+    };
     torch::Tensor logit;
-    const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit);
-    out.coverage = torch::sigmoid(logit);
+    const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit, &window);
+    torch::Tensor coverage = torch::sigmoid(logit);
     if (!inputs.matte_core.empty()) {
-      const torch::Tensor core = MaskTensor(inputs.matte_core);
-      out.coverage = core + (1 - core) * out.coverage;
+      const torch::Tensor core = windowed(inputs.matte_core);
+      coverage = core + (1 - core) * coverage;
     }
-    if (!inputs.matte_bound.empty()) out.coverage = out.coverage * MaskTensor(inputs.matte_bound);
-    out.image = out.coverage * rgb + (1 - out.coverage) * BackgroundColour();
+    if (!inputs.matte_bound.empty()) coverage = coverage * windowed(inputs.matte_bound);
+    const torch::Tensor background = BackgroundColour();
+    const torch::Tensor image = coverage * rgb + (1 - coverage) * background;
+    const std::vector<int64_t> beyond = {window.x0, width - window.x1, window.y0, height - window.y1};
+    out.coverage = torch::constant_pad_nd(coverage, beyond);
+    out.image = torch::constant_pad_nd(image - background, beyond) + background;
   }
   if (timings) timings->upsample_ms += watch.ElapsedMs();
   return out;
@@ -239,6 +263,7 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   SetComputeThreads(options.threads);
   impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
   impl_->avatar.modules().eval();
+  impl_->avatar.modules().renderer->UseChannelsLast();
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
   impl_->identity = impl_->model->MakeIdentity(beta);
 }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <optional>
+#include <stdexcept>
 #include <vector>
 
 #include "common/core/options.h"
@@ -70,6 +71,67 @@ std::optional<Eigen::Vector2d> FaceUp(const Landmarks2d& lm) {
 
 }  // namespace
 
+cv::Mat DilateEllipse(const cv::Mat& mask, int radius) {
+  if (mask.type() != CV_8U) throw std::invalid_argument("DilateEllipse: a CV_8U mask is needed");
+  if (radius <= 0) return mask.clone();
+  const cv::Mat element = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1});
+  if (radius <= kDilateEllipseOwnRadius) {  // a small element: OpenCV's walk is the faster
+    cv::Mat out;
+    cv::dilate(mask, out, element);
+    return out;
+  }
+  // Half-width of each element row's run about the centre (-1: an empty row).
+  std::vector<int> half(2 * radius + 1, -1);
+  for (int i = 0; i <= 2 * radius; ++i) {
+    const uint8_t* row = element.ptr<uint8_t>(i);
+    int first = -1, last = -1, count = 0;
+    for (int j = 0; j <= 2 * radius; ++j)
+      if (row[j]) {
+        if (first < 0) first = j;
+        last = j;
+        ++count;
+      }
+    if (count == 0) continue;
+    if (count != last - first + 1 || first + last != 2 * radius) {  // not a centred run: OpenCV's own way
+      cv::Mat out;
+      cv::dilate(mask, out, element);
+      return out;
+    }
+    half[i] = radius - first;
+  }
+  // Per row, each pixel's distance to the nearest set pixel of its row (cols + 1: none).
+  const int rows = mask.rows, cols = mask.cols;
+  if (cols >= 65535) throw std::invalid_argument("DilateEllipse: the mask is too wide");
+  const int none = cols + 1;
+  cv::Mat distance(mask.size(), CV_16U);
+  for (int y = 0; y < rows; ++y) {
+    const uint8_t* in = mask.ptr<uint8_t>(y);
+    uint16_t* d = distance.ptr<uint16_t>(y);
+    int run = none;
+    for (int x = 0; x < cols; ++x) {
+      run = in[x] ? 0 : std::min(run + 1, none);
+      d[x] = static_cast<uint16_t>(run);
+    }
+    run = none;
+    for (int x = cols - 1; x >= 0; --x) {
+      run = in[x] ? 0 : std::min(run + 1, none);
+      d[x] = static_cast<uint16_t>(std::min<int>(d[x], run));
+    }
+  }
+  cv::Mat out(mask.size(), CV_8U, cv::Scalar(0));
+  for (int y = 0; y < rows; ++y) {
+    uint8_t* o = out.ptr<uint8_t>(y);
+    for (int i = 0; i <= 2 * radius; ++i) {
+      const int source = y + i - radius;
+      if (half[i] < 0 || source < 0 || source >= rows) continue;
+      const uint16_t* d = distance.ptr<uint16_t>(source);
+      const uint16_t w = static_cast<uint16_t>(std::min(half[i], cols));
+      for (int x = 0; x < cols; ++x) o[x] |= d[x] <= w ? 255 : 0;
+    }
+  }
+  return out;
+}
+
 void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
   const std::optional<Eigen::Vector2d> up = FaceUp(lm);
   if (!up) return;
@@ -90,12 +152,7 @@ void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
 }
 
 cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px, int side_px) {
-  auto grown = [&](int radius) {
-    cv::Mat out = silhouette.clone();
-    if (radius > 0)
-      cv::dilate(out, out, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
-    return out;
-  };
+  auto grown = [&](int radius) { return DilateEllipse(silhouette, radius); };
   cv::Mat reach = grown(side_px);
   Eigen::Vector2d eyes = Eigen::Vector2d::Zero();
   for (int l = 36; l <= 47; ++l) eyes += lm[l] / 12.0;

@@ -37,6 +37,17 @@ struct MatteRules {
 // shirt's colour cannot be learnt, one that stops at the jaw can.
 void ClearBelowJawLine(const Landmarks2d& landmarks, cv::Mat* mask);
 
+// `mask` (CV_8U, 0 or 255) dilated by the elliptical structuring element of
+// radius `radius` (cv::getStructuringElement(MORPH_ELLIPSE, 2r+1 square)):
+// the same pixels as cv::dilate, which walks every point of the element for
+// every pixel (the hair margin's element has over a thousand); here each
+// element row is a run, so a row's distance to its nearest set pixel answers
+// it with one comparison per element row.
+// Radii up to this one go to cv::dilate (the rows' distances cost more than a
+// small element's walk).
+inline constexpr int kDilateEllipseOwnRadius = 8;
+cv::Mat DilateEllipse(const cv::Mat& mask, int radius);
+
 // Where a training mask may reach: `silhouette` (CV_8U, the fitted model
 // rasterised) grown by `hair_px` above the eye line (landmarks 36..47; the
 // face's up direction is brows minus chin) and by `side_px` below it.

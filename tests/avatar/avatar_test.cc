@@ -130,6 +130,51 @@ TEST(NeuralRenderer, UpsamplesEightTimesAndEveryParameterLearns) {
   for (const auto& b : net->named_buffers()) EXPECT_FALSE(b.value().requires_grad());
 }
 
+TEST(NeuralRenderer, AWindowOrChannelsLastDrawTheSamePixels) {
+  AvatarConfig c = Tiny();
+  c.matte = MatteMode::kLearned;
+  c.surface_features = 4;
+  NeuralRenderer net(c);
+  torch::manual_seed(3);
+  {  // a matte and a surface branch that start at zero would hide a misplaced window: make them speak
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->parameters()) p.copy_(0.3 * torch::randn_like(p));
+  }
+  const torch::Tensor x = torch::randn({1, 8, 16, 16}), surface = torch::randn({1, 4, 128, 128});
+  torch::Tensor whole_alpha;
+  const torch::Tensor whole = net->forward(x, surface, &whole_alpha);
+  for (const ImageWindow w : {ImageWindow{0, 128, 0, 128}, ImageWindow{0, 2, 126, 128}, ImageWindow{10, 64, 0, 50},
+                              ImageWindow{36, 128, 82, 128}, ImageWindow{2, 4, 6, 8}}) {
+    torch::Tensor alpha;
+    const torch::Tensor part = net->forward(x, surface, &alpha, &w);
+    ASSERT_EQ(part.sizes(), (std::vector<int64_t>{1, 3, w.height(), w.width()}));
+    ASSERT_EQ(alpha.sizes(), (std::vector<int64_t>{1, 1, w.height(), w.width()}));
+    const auto same = [&](const torch::Tensor& a, const torch::Tensor& b) {
+      return (a - b.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1)).abs().max().item<float>();
+    };
+    EXPECT_LT(same(part, whole), 1e-5) << w.y0 << " " << w.x0;
+    EXPECT_LT(same(alpha, whole_alpha), 1e-4) << w.y0 << " " << w.x0;
+  }
+  for (const ImageWindow bad : {ImageWindow{1, 8, 0, 8}, ImageWindow{0, 130, 0, 8}, ImageWindow{4, 4, 0, 8}}) {
+    torch::Tensor alpha;
+    EXPECT_THROW(net->forward(x, surface, &alpha, &bad), std::invalid_argument);
+  }
+  // Channels-last (the receiver's layout): the same picture, and the surface term
+  // built from texture features lands on the same pixels.
+  const torch::Tensor features = torch::randn({50, 4}), pixels = torch::randperm(128 * 128).narrow(0, 0, 50);
+  const torch::Tensor term = net->SurfaceTerm(features, pixels, 128, 128);
+  torch::Tensor alpha_before;
+  const torch::Tensor before = net->forward(x, term, &alpha_before);
+  net->UseChannelsLast();
+  const torch::Tensor term_last = net->SurfaceTerm(features, pixels, 128, 128);
+  EXPECT_TRUE(term_last.is_contiguous(torch::MemoryFormat::ChannelsLast));
+  EXPECT_LT((term_last - term).abs().max().item<float>(), 1e-6);
+  torch::Tensor alpha_after;
+  const torch::Tensor after = net->forward(x, term_last, &alpha_after);
+  EXPECT_LT((after - before).abs().max().item<float>(), 1e-5);
+  EXPECT_LT((alpha_after - alpha_before).abs().max().item<float>(), 1e-4);
+}
+
 TEST(RaySampler, MeshGuidedRaysCoverTheHeadAndSkipTheRest) {
   AvatarConfig c = Tiny();
   const HeadModel& m = *Builtin();

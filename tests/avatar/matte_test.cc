@@ -5,6 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/imgproc.hpp>
+#include <random>
+
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
@@ -67,6 +70,27 @@ cv::Vec3b BackgroundBgr() {
 }
 
 }  // namespace
+
+TEST(DilateEllipse, EqualsOpenCvsDilationWithTheEllipticalElement) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> coin(0, 999);
+  const PosedView view = View(Turned(), 256);
+  for (const cv::Size size : {cv::Size(256, 256), cv::Size(97, 61), cv::Size(5, 300)}) {
+    cv::Mat sparse(size, CV_8U);
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) sparse.at<uint8_t>(y, x) = coin(rng) < 3 ? 255 : 0;
+    for (const cv::Mat& mask : {sparse, size == view.silhouette.size() ? view.silhouette : sparse})
+      for (int radius : {0, 1, 5, kDilateEllipseOwnRadius, kDilateEllipseOwnRadius + 1, 20, 41, 300}) {
+        cv::Mat expected;
+        cv::dilate(mask, expected, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
+        const cv::Mat got = DilateEllipse(mask, radius);
+        ASSERT_EQ(got.size(), mask.size());
+        EXPECT_EQ(cv::countNonZero(got != expected), 0) << size << " radius " << radius;
+      }
+  }
+  EXPECT_EQ(cv::countNonZero(DilateEllipse(cv::Mat::zeros(40, 40, CV_8U), 9)), 0);
+  EXPECT_THROW(DilateEllipse(cv::Mat::zeros(4, 4, CV_32F), 1), std::invalid_argument);
+}
 
 TEST(MatteRules, TravelAsJsonAndRefuseBadMargins) {
   const MatteRules r{0.1, 0.03, true};
