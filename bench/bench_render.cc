@@ -32,10 +32,10 @@ FrameParams MovingHead(const HeadModel& model, int i) {
   return p;
 }
 
-nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& config, int frames) {
+nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& config, int frames,
+                             AvatarRendererOptions renderer_options = {}) {
   auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
   Avatar avatar = Avatar::CreateRandom(config, *model, DefaultSubject(*model, config.output_size), 1);
-  AvatarRendererOptions renderer_options;
   renderer_options.threads = options.threads;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
   cv::Mat image;
@@ -113,6 +113,15 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
                             {"ms_p95", with_matte["ms_p95"]},
                             {"fps_median", with_matte["fps_median"]},
                             {"stage_ms_median", with_matte["stage_ms_median"]}};
+  // The subject's default again with the convolutions on images in libtorch's
+  // default layout (channels first), side by side: what channels-last buys.
+  AvatarRendererOptions channels_first;
+  channels_first.channels_last = false;
+  const nlohmann::json first = MeasureConfig(options, subject, frames, channels_first);
+  out["subject_default_channels_first"] = {{"ms_median", first["ms_median"]},
+                                           {"ms_p95", first["ms_p95"]},
+                                           {"fps_median", first["fps_median"]},
+                                           {"stage_ms_median", first["stage_ms_median"]}};
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

@@ -25,7 +25,7 @@ struct RenderArgs {
   DisplayFlags display;
   int synthetic = 0, frames = 0, threads = 1;
   double orbit_deg = 0, fps = 30;
-  bool transfer_pose = false, paced = true, no_overlay = false;
+  bool transfer_pose = false, paced = true, no_overlay = false, channels_first = false;
 };
 
 std::vector<FrameParams> LoadFrames(const std::string& path, const HeadModel& model) {
@@ -81,6 +81,7 @@ int Render(const RenderArgs& a) {
   }
   AvatarRendererOptions renderer_options;
   renderer_options.threads = a.threads;
+  renderer_options.channels_last = !a.channels_first;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
   DisplayOptions display_options = MakeDisplayOptions(a.display, a.fps, "headcast — " + a.avatar);
   display_options.draw_overlay = !a.no_overlay;
@@ -164,6 +165,8 @@ int main(int argc, char** argv) {
   render->add_flag("--no-overlay", r.no_overlay, "do not draw fps/latency text");
   AddMaxFramesFlag(*render, &r.frames, "render at most this many frames", {"--frames"});
   render->add_option("--threads", r.threads, "libtorch threads")->capture_default_str();
+  render->add_flag("--channels-first", r.channels_first,
+                   "convolutions on images in libtorch's default layout (the same picture, slower: measurements)");
   AddJsonFlag(*render, &r.stats_json, "the render statistics", {"--stats-json"});
 
   CLI11_PARSE(app, argc, argv);

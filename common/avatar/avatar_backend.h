@@ -70,6 +70,9 @@ struct AvatarBackendOptions {
   // 1 by default: the receiver's other core decodes, displays and serves the
   // network; two render faster alone (`headcast-bench render` reports both).
   int threads = 1;
+  // Convolutions on channels-last images (NeuralRenderer::UseChannelsLast):
+  // the same pixels; off only to measure what the layout buys.
+  bool channels_last = true;
   void Check() const;
 };
 

@@ -263,7 +263,7 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   SetComputeThreads(options.threads);
   impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
   impl_->avatar.modules().eval();
-  impl_->avatar.modules().renderer->UseChannelsLast();
+  if (options.channels_last) impl_->avatar.modules().renderer->UseChannelsLast();
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
   impl_->identity = impl_->model->MakeIdentity(beta);
 }
