@@ -157,10 +157,6 @@ UpsamplingBlockImpl::UpsamplingBlockImpl(int in_channels, int out_channels) {
   blur_ = register_buffer("blur", k2.view({1, 1, 3, 3}).repeat({out_channels, 1, 1, 1}));
 }
 
-torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x) {
-  return forward(x, ImageWindow::Whole(2 * x.size(2), 2 * x.size(3)));
-}
-
 torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWindow& window) {
   const int64_t height = 2 * x.size(2), width = 2 * x.size(3);
   CheckWindow(window, height, width);

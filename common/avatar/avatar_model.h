@@ -74,9 +74,9 @@ TORCH_MODULE(SqueezeExcitation);
 class UpsamplingBlockImpl : public torch::nn::Module {
  public:
   UpsamplingBlockImpl(int in_channels, int out_channels);
-  torch::Tensor forward(const torch::Tensor& x);
-  // Only `window` of the output (even edges, inside it): the same pixels as
-  // forward's there (the squeeze still averages all of x).
+  // `window` of the output (even edges, inside it; ImageWindow::Whole for all
+  // of it): the same pixels there as the whole output's (the squeeze still
+  // averages all of x).
   torch::Tensor forward(const torch::Tensor& x, const ImageWindow& window);
 
  private:

@@ -47,9 +47,13 @@ void MakeMatteBound(const AvatarConfig& config, const SurfaceBatch& surface, con
     out->matte_core.release();
 }
 
-// (1, 1, H, W) in {0, 1} from a CV_8U mask.
-torch::Tensor MaskTensor(const cv::Mat& m) {
-  return torch::from_blob(m.data, {1, 1, m.rows, m.cols}, torch::kUInt8).to(torch::kFloat) / 255.f;
+// (1, 1, h, w) in {0, 1} from `window` of a CV_8U mask.
+torch::Tensor MaskTensor(const cv::Mat& m, const ImageWindow& window) {
+  return torch::from_blob(m.data, {1, 1, m.rows, m.cols}, torch::kUInt8)
+             .slice(2, window.y0, window.y1)
+             .slice(3, window.x0, window.x1)
+             .to(torch::kFloat) /
+         255.f;
 }
 
 // The smallest window with even edges around the mask's pixels (a 2 x 2 one at
@@ -151,17 +155,14 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     const int64_t height = 8 * out.feature_map.size(2), width = 8 * out.feature_map.size(3);
     const ImageWindow window =
         inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
-    auto windowed = [&](const cv::Mat& m) {
-      return MaskTensor(m).slice(2, window.y0, window.y1).slice(3, window.x0, window.x1);
-    };
     torch::Tensor logit;
     const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit, &window);
     torch::Tensor coverage = torch::sigmoid(logit);
     if (!inputs.matte_core.empty()) {
-      const torch::Tensor core = windowed(inputs.matte_core);
+      const torch::Tensor core = MaskTensor(inputs.matte_core, window);
       coverage = core + (1 - core) * coverage;
     }
-    if (!inputs.matte_bound.empty()) coverage = coverage * windowed(inputs.matte_bound);
+    if (!inputs.matte_bound.empty()) coverage = coverage * MaskTensor(inputs.matte_bound, window);
     const torch::Tensor background = BackgroundColour();
     const torch::Tensor image = coverage * rgb + (1 - coverage) * background;
     const std::vector<int64_t> beyond = {window.x0, width - window.x1, window.y0, height - window.y1};

@@ -75,11 +75,12 @@ cv::Mat DilateEllipse(const cv::Mat& mask, int radius) {
   if (mask.type() != CV_8U) throw std::invalid_argument("DilateEllipse: a CV_8U mask is needed");
   if (radius <= 0) return mask.clone();
   const cv::Mat element = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1});
-  if (radius <= kDilateEllipseOwnRadius) {  // a small element: OpenCV's walk is the faster
+  auto opencv = [&] {
     cv::Mat out;
     cv::dilate(mask, out, element);
     return out;
-  }
+  };
+  if (radius <= kDilateEllipseOwnRadius) return opencv();  // a small element: OpenCV's walk is the faster
   // Half-width of each element row's run about the centre (-1: an empty row).
   std::vector<int> half(2 * radius + 1, -1);
   for (int i = 0; i <= 2 * radius; ++i) {
@@ -92,11 +93,7 @@ cv::Mat DilateEllipse(const cv::Mat& mask, int radius) {
         ++count;
       }
     if (count == 0) continue;
-    if (count != last - first + 1 || first + last != 2 * radius) {  // not a centred run: OpenCV's own way
-      cv::Mat out;
-      cv::dilate(mask, out, element);
-      return out;
-    }
+    if (count != last - first + 1 || first + last != 2 * radius) return opencv();  // not a centred run
     half[i] = radius - first;
   }
   // Per row, each pixel's distance to the nearest set pixel of its row (cols + 1: none).
@@ -152,14 +149,13 @@ void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
 }
 
 cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px, int side_px) {
-  auto grown = [&](int radius) { return DilateEllipse(silhouette, radius); };
-  cv::Mat reach = grown(side_px);
+  cv::Mat reach = DilateEllipse(silhouette, side_px);
   Eigen::Vector2d eyes = Eigen::Vector2d::Zero();
   for (int l = 36; l <= 47; ++l) eyes += lm[l] / 12.0;
   const std::optional<Eigen::Vector2d> up = FaceUp(lm);
   if (!up || !eyes.allFinite()) return reach;
   cv::Mat upper = HalfPlane(silhouette.size(), eyes, *up);
-  cv::bitwise_and(upper, grown(hair_px), upper);
+  cv::bitwise_and(upper, DilateEllipse(silhouette, hair_px), upper);
   cv::bitwise_or(reach, upper, reach);
   return reach;
 }
