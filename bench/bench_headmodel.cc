@@ -1,8 +1,10 @@
 // Benchmark suite "headmodel": the single-frame Eigen forward pass.
 #include <random>
+#include <thread>
 
 #include "bench/bench.h"
 #include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_model_io.h"
 
 namespace headcast::bench {
 namespace {
@@ -54,6 +56,16 @@ void Measure(const BenchOptions& options, const HeadModel& model, const std::str
   const HeadIdentity id = model.MakeIdentity(shape);
   HeadModelOutput result;
   AddStats(out, prefix + "forward_us", TimeUs(options, [&] { model.Forward(id, expr, pose, &result); }));
+  // Two halves of the vertices on two threads (the receiver's pass shares
+  // libtorch's; here threads of their own, started per call).
+  const ParallelTasks two_threads = [](int n, const std::function<void(int)>& task) {
+    std::vector<std::thread> threads;
+    for (int k = 1; k < n; ++k) threads.emplace_back([&task, k] { task(k); });
+    task(0);
+    for (std::thread& t : threads) t.join();
+  };
+  AddStats(out, prefix + "forward_two_threads_us",
+           TimeUs(options, [&] { model.Forward(id, expr, pose, &result, &two_threads); }));
   AddStats(out, prefix + "identity_us", TimeUs(options, [&] { (void)model.MakeIdentity(shape); }));
   (*out)[prefix + "vertices"] = model.num_vertices();
   (*out)[prefix + "shape_components"] = model.num_shape();
@@ -70,6 +82,7 @@ nlohmann::json RunHeadModelSuite(const BenchOptions& options) {
   const HeadModel builtin = MakeBuiltinHead();
   Measure(options, builtin, "", &out);  // headline: forward_us_median on the built-in head
   Measure(options, FlameSizedModel(builtin), "flame_sized_", &out);
+  if (options.head_model != "builtin") Measure(options, LoadHeadModelSpec(options.head_model), "given_", &out);
   return out;
 }
 

@@ -41,13 +41,14 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
   cv::Mat image;
   AvatarTimings t;
   for (int i = 0; i < std::min(options.warmup, 5); ++i) renderer.Render(MovingHead(*model, i), &image, &t);
-  SampleStats total, head, sample, mlp, composite, upsample, convert, rays, samples;
+  SampleStats total, head, sample, surface, mlp, composite, upsample, convert, rays, samples;
   const long faults_before = MinorFaults();
   for (int i = 0; i < frames; ++i) {
     if (!renderer.Render(MovingHead(*model, i), &image, &t)) throw std::runtime_error("render refused its parameters");
     total.Add(t.total_ms);
     head.Add(t.head_model_ms);
     sample.Add(t.sample_ms);
+    surface.Add(t.surface_ms);
     mlp.Add(t.mlp_ms);
     composite.Add(t.composite_ms);
     upsample.Add(t.upsample_ms);
@@ -62,9 +63,10 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
   out["ms_median"] = total.Median();
   out["ms_p95"] = total.Percentile(95);
   out["fps_median"] = 1000.0 / total.Median();
-  out["stage_ms_median"] = {{"head_model", head.Median()},   {"sample", sample.Median()},
-                            {"mlp", mlp.Median()},           {"composite", composite.Median()},
-                            {"upsample", upsample.Median()}, {"convert", convert.Median()}};
+  out["stage_ms_median"] = {{"head_model", head.Median()},     {"sample", sample.Median()},
+                            {"surface", surface.Median()},     {"mlp", mlp.Median()},
+                            {"composite", composite.Median()}, {"upsample", upsample.Median()},
+                            {"convert", convert.Median()}};
   out["rays_median"] = rays.Median();
   out["samples_median"] = samples.Median();
   out["minor_page_faults_per_frame"] = static_cast<double>(MinorFaults() - faults_before) / frames;
@@ -122,6 +124,16 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
                                            {"ms_p95", first["ms_p95"]},
                                            {"fps_median", first["fps_median"]},
                                            {"stage_ms_median", first["stage_ms_median"]}};
+  if (options.threads > 1) {
+    // And with the stages one after the other (AvatarBackendOptions::parallel_stages off).
+    AvatarRendererOptions serial;
+    serial.parallel_stages = false;
+    const nlohmann::json alone = MeasureConfig(options, subject, frames, serial);
+    out["subject_default_serial_stages"] = {{"ms_median", alone["ms_median"]},
+                                            {"ms_p95", alone["ms_p95"]},
+                                            {"fps_median", alone["fps_median"]},
+                                            {"stage_ms_median", alone["stage_ms_median"]}};
+  }
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
     out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));

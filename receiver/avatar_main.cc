@@ -25,7 +25,7 @@ struct RenderArgs {
   DisplayFlags display;
   int synthetic = 0, frames = 0, threads = 1;
   double orbit_deg = 0, fps = 30;
-  bool transfer_pose = false, paced = true, no_overlay = false, channels_first = false;
+  bool transfer_pose = false, paced = true, no_overlay = false, channels_first = false, serial_stages = false;
 };
 
 std::vector<FrameParams> LoadFrames(const std::string& path, const HeadModel& model) {
@@ -82,6 +82,7 @@ int Render(const RenderArgs& a) {
   AvatarRendererOptions renderer_options;
   renderer_options.threads = a.threads;
   renderer_options.channels_last = !a.channels_first;
+  renderer_options.parallel_stages = !a.serial_stages;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
   DisplayOptions display_options = MakeDisplayOptions(a.display, a.fps, "headcast — " + a.avatar);
   display_options.draw_overlay = !a.no_overlay;
@@ -102,6 +103,7 @@ int Render(const RenderArgs& a) {
                            {"stage_ms_median",
                             {{"head_model", s.head_model_ms.Median()},
                              {"sample", s.sample_ms.Median()},
+                             {"surface", s.surface_ms.Median()},
                              {"mlp", s.mlp_ms.Median()},
                              {"composite", s.composite_ms.Median()},
                              {"upsample", s.upsample_ms.Median()},
@@ -167,6 +169,9 @@ int main(int argc, char** argv) {
   render->add_option("--threads", r.threads, "libtorch threads")->capture_default_str();
   render->add_flag("--channels-first", r.channels_first,
                    "convolutions on images in libtorch's default layout (the same picture, slower: measurements)");
+  render->add_flag("--serial-stages", r.serial_stages,
+                   "with --threads 2: the head model and the raster one after the other, not beside the network (the "
+                   "same picture, slower: measurements)");
   AddJsonFlag(*render, &r.stats_json, "the render statistics", {"--stats-json"});
 
   CLI11_PARSE(app, argc, argv);

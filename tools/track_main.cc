@@ -59,6 +59,12 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
       ->capture_default_str();
   app.add_option("--mask-head-width", t.mask.head_width, "head masks: the head's width, in jaw widths")
       ->capture_default_str();
+  app.add_option("--mask-min-face-height", t.mask.min_face_height,
+                 "head masks: a face's height is at least this many jaw widths (a pitched head looks short)")
+      ->capture_default_str();
+  app.add_option("--mask-background-ring", t.mask.background_ring,
+                 "head masks: probable (not certain) background this far beyond the head's region, in face heights")
+      ->capture_default_str();
   app.add_flag("!--no-appearance", t.fit_appearance, "skip the texture/light fit (stored in the recording's header)");
   app.add_flag("--calibrate", t.calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "

@@ -40,6 +40,7 @@ struct AvatarCommonConfig {
 struct AvatarTimings {
   double head_model_ms = 0;  // head-model forward pass and transform to the camera
   double sample_ms = 0;      // rasterising at feature resolution and choosing rays/depths
+  double surface_ms = 0;     // the output-size raster and matte bound (beside the network when threads > 1)
   double mlp_ms = 0;         // the network over every sample
   double composite_ms = 0;   // volume rendering into the feature map
   double upsample_ms = 0;    // the 2D neural renderer
@@ -70,6 +71,10 @@ struct AvatarBackendOptions {
   // 1 by default: the receiver's other core decodes, displays and serves the
   // network; two render faster alone (`headcast-bench render` reports both).
   int threads = 1;
+  // With threads > 1, the head model's pass in two halves and the output-size
+  // raster and matte bound beside the network, on libtorch's threads: the
+  // same pixels; off only to measure what it buys.
+  bool parallel_stages = true;
   // Convolutions on channels-last images (NeuralRenderer::UseChannelsLast):
   // the same pixels; off only to measure what the layout buys.
   bool channels_last = true;

@@ -8,6 +8,7 @@
 #include "common/avatar/avatar_model.h"
 #include "common/avatar/avatar_renderer.h"
 #include "common/avatar/ray_sampler.h"
+#include "common/core/parallel_tasks.h"
 
 namespace headcast {
 
@@ -47,22 +48,45 @@ Landmarks2d ProjectLandmarks(const HeadModelOutput& posed, const RigidTransform&
 // Runs CNeRF on the frame's samples, composites the feature map, looks up the
 // surface texture (when the avatar has one) and upsamples; with a matte, the
 // RGB is composited over the background colour by the coverage.
+// RunAvatarFeatures then RunAvatarUpsampling.
 AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings = nullptr);
+// The feature map and opacity: needs only the rays, the conditioning and the
+// placement of `inputs` (what PrepareAvatarRays makes).
+void RunAvatarFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                       AvatarTimings* timings = nullptr);
+// The image (and coverage) from out's feature map: needs the surface and the
+// bound too (PrepareAvatarSurface).
+void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                         AvatarTimings* timings = nullptr);
 
 // The head model posed by `frame` with `identity` (the subject's shape), seen
 // through the subject's intrinsics at feature resolution: rays and depths
 // (jittered within their strata when `rng` is given: training), placement
 // and conditioning; with surface features, the covered output pixels on the
 // canonical mesh (`identity`'s neutral shape); with a bounded matte, its bound.
+// PrepareAvatarRays then PrepareAvatarSurface.
 void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
                         const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
                         AvatarFrameInputs* out, AvatarTimings* timings = nullptr);
+// The posed head, rays, canonical maps and conditioning (`parallel`: the head
+// model's pass in two tasks).
+void PrepareAvatarRays(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                       const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
+                       AvatarFrameInputs* out, AvatarTimings* timings = nullptr,
+                       const ParallelTasks* parallel = nullptr);
+// From out's posed head: the output-size surface lookup and the matte bound
+// and core. Touches only those fields of `out` and the sampler's surface
+// buffers, so it may run beside RunAvatarFeatures.
+void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                          const SubjectParams& subject, RaySampler* sampler, AvatarFrameInputs* out,
+                          AvatarTimings* timings = nullptr);
 
 // What the receiver shows for `frame`: PrepareAvatarFrame, RunAvatar, then
-// 8-bit BGR in *image_bgr (reused).
+// 8-bit BGR in *image_bgr (reused). With `parallel`, the head model's pass
+// runs as two tasks, then the surface preparation as one task beside the network.
 void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,
                        const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
                        RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr,
-                       AvatarTimings* timings = nullptr);
+                       AvatarTimings* timings = nullptr, const ParallelTasks* parallel = nullptr);
 
 }  // namespace headcast

@@ -85,7 +85,8 @@ torch::Tensor BgrToImageTensor(const cv::Mat& bgr) {
          255.f;
 }
 
-AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings) {
+void RunAvatarFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                       AvatarTimings* timings) {
   const RayBatch& rays = inputs.rays;
   const RigidTransform& cam_from_head = inputs.cam_from_head;
   const AvatarConditioning& conditioning = inputs.conditioning;
@@ -122,15 +123,19 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     feature_rows = feature_rows.index_copy(0, index, vr.features);
     opacity_rows = opacity_rows.index_copy(0, index, vr.opacity);
   }
-  AvatarOutput out;
-  out.feature_map = feature_rows.t().reshape({1, channels, rays.height, rays.width});
-  out.opacity = opacity_rows.view({1, 1, rays.height, rays.width});
+  out->feature_map = feature_rows.t().reshape({1, channels, rays.height, rays.width});
+  out->opacity = opacity_rows.view({1, 1, rays.height, rays.width});
   if (timings) {
     timings->composite_ms += watch.ElapsedMs();
     timings->rays = static_cast<int>(r);
     timings->samples = static_cast<int>(r * s);
   }
-  watch.Restart();
+}
+
+void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                         AvatarTimings* timings) {
+  Stopwatch watch;
+  const AvatarConditioning& conditioning = inputs.conditioning;
   torch::Tensor surface_term;
   if (modules.surface) {
     const SurfaceBatch& surface = inputs.surface;
@@ -148,15 +153,15 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width, motion);
   }
   if (!modules.cnerf->config().has_matte()) {
-    out.image = modules.renderer->forward(out.feature_map, surface_term);
+    out->image = modules.renderer->forward(out->feature_map, surface_term);
   } else {
     // Beyond a bound the picture is the background whatever the networks say:
     // the last level draws only the window around it.
-    const int64_t height = 8 * out.feature_map.size(2), width = 8 * out.feature_map.size(3);
+    const int64_t height = 8 * out->feature_map.size(2), width = 8 * out->feature_map.size(3);
     const ImageWindow window =
         inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
     torch::Tensor logit;
-    const torch::Tensor rgb = modules.renderer->forward(out.feature_map, surface_term, &logit, &window);
+    const torch::Tensor rgb = modules.renderer->forward(out->feature_map, surface_term, &logit, &window);
     torch::Tensor coverage = torch::sigmoid(logit);
     if (!inputs.matte_core.empty()) {
       const torch::Tensor core = MaskTensor(inputs.matte_core, window);
@@ -166,10 +171,16 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
     const torch::Tensor background = BackgroundColour();
     const torch::Tensor image = coverage * rgb + (1 - coverage) * background;
     const std::vector<int64_t> beyond = {window.x0, width - window.x1, window.y0, height - window.y1};
-    out.coverage = torch::constant_pad_nd(coverage, beyond);
-    out.image = torch::constant_pad_nd(image - background, beyond) + background;
+    out->coverage = torch::constant_pad_nd(coverage, beyond);
+    out->image = torch::constant_pad_nd(image - background, beyond) + background;
   }
   if (timings) timings->upsample_ms += watch.ElapsedMs();
+}
+
+AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarTimings* timings) {
+  AvatarOutput out;
+  RunAvatarFeatures(modules, inputs, &out, timings);
+  RunAvatarUpsampling(modules, inputs, &out, timings);
   return out;
 }
 
@@ -181,40 +192,66 @@ Landmarks2d ProjectLandmarks(const HeadModelOutput& posed, const RigidTransform&
   return landmarks;
 }
 
-void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
-                        const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
-                        AvatarFrameInputs* out, AvatarTimings* timings) {
+void PrepareAvatarRays(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                       const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
+                       AvatarFrameInputs* out, AvatarTimings* timings, const ParallelTasks* parallel) {
   Stopwatch watch;
   out->cam_from_head = frame.CamFromHead();
-  model.Forward(identity, frame.expression.cast<double>(), frame.HeadPose(), &out->posed);
+  model.Forward(identity, frame.expression.cast<double>(), frame.HeadPose(), &out->posed, parallel);
   TransformToCamera(out->posed.vertices, out->cam_from_head, &out->v_cam);
   if (timings) timings->head_model_ms = watch.ElapsedMs();
   watch.Restart();
   const int f = config.feature_size();
   sampler->Sample(out->v_cam, model.data().faces, subject.intrinsics.Resized(f, f), out->cam_from_head, rng,
                   &out->rays);
-  if (config.has_surface())
-    sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
   out->to_canonical.clear();
   if (config.canonical_samples)
     CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical);
+  out->conditioning = MakeConditioning(config, subject, frame);
+  if (timings) timings->sample_ms = watch.ElapsedMs();
+}
+
+void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                          const SubjectParams& subject, RaySampler* sampler, AvatarFrameInputs* out,
+                          AvatarTimings* timings) {
+  Stopwatch watch;
+  // The bound needs the full-resolution silhouette the surface lookup makes.
+  if (config.has_surface() || config.matte == MatteMode::kBounded)
+    sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
   if (config.matte == MatteMode::kBounded) {
-    if (!config.has_surface())  // the bound needs the full-resolution silhouette the surface lookup makes
-      sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
     MakeMatteBound(config, out->surface, out->posed, out->cam_from_head, subject.intrinsics, out);
   } else {
     out->matte_bound.release();
     out->matte_core.release();
   }
-  out->conditioning = MakeConditioning(config, subject, frame);
-  if (timings) timings->sample_ms = watch.ElapsedMs();
+  if (timings) timings->surface_ms = watch.ElapsedMs();
+}
+
+void PrepareAvatarFrame(const AvatarConfig& config, const HeadModel& model, const HeadIdentity& identity,
+                        const SubjectParams& subject, const FrameParams& frame, RaySampler* sampler, std::mt19937* rng,
+                        AvatarFrameInputs* out, AvatarTimings* timings) {
+  PrepareAvatarRays(config, model, identity, subject, frame, sampler, rng, out, timings);
+  PrepareAvatarSurface(config, model, identity, subject, sampler, out, timings);
 }
 
 void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,
                        const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
-                       RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr, AvatarTimings* timings) {
-  PrepareAvatarFrame(config, model, identity, subject, frame, sampler, nullptr, buffers, timings);
-  const AvatarOutput out = RunAvatar(modules, *buffers, timings);
+                       RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr, AvatarTimings* timings,
+                       const ParallelTasks* parallel) {
+  PrepareAvatarRays(config, model, identity, subject, frame, sampler, nullptr, buffers, timings, parallel);
+  // The network needs only the rays; the output-size raster and the matte
+  // bound only the upsampling: with `parallel`, the pool's other thread draws
+  // them meanwhile (the network's operations then run on one thread).
+  AvatarOutput out;
+  auto surface = [&] { PrepareAvatarSurface(config, model, identity, subject, sampler, buffers, timings); };
+  auto features = [&] { RunAvatarFeatures(modules, *buffers, &out, timings); };
+  if (parallel && *parallel) {
+    (*parallel)(2, [&](int k) { k == 0 ? features() : surface(); });
+  } else {
+    surface();
+    features();
+  }
+  RunAvatarUpsampling(modules, *buffers, &out, timings);
   Stopwatch watch;
   ImageTensorToBgr(out.image, image_bgr);
   if (timings) timings->convert_ms = watch.ElapsedMs();
@@ -247,6 +284,7 @@ struct AvatarRenderer::Impl {
   RaySampler sampler;
   HeadIdentity identity;
   AvatarFrameInputs buffers;
+  ParallelTasks parallel;  // with two threads or more
 };
 
 AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar avatar,
@@ -263,6 +301,7 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
   SetComputeThreads(options.threads);
   impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
+  if (options.threads > 1 && options.parallel_stages) impl_->parallel = TorchParallelTasks();
   impl_->avatar.modules().eval();
   if (options.channels_last) impl_->avatar.modules().renderer->UseChannelsLast();
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
@@ -282,7 +321,7 @@ bool AvatarRenderer::Render(const FrameParams& params, cv::Mat* image, AvatarTim
   Stopwatch total;
   torch::InferenceMode inference;
   RenderAvatarFrame(m.avatar.modules(), m.avatar.config(), *m.model, m.identity, m.avatar.subject(), params, &m.sampler,
-                    &m.buffers, image, &t);
+                    &m.buffers, image, &t, &m.parallel);
   t.total_ms = total.ElapsedMs();
   return true;
 }

@@ -196,31 +196,22 @@ HeadIdentity HeadModel::MakeIdentity(const Eigen::VectorXd& shape) const {
 }
 
 void HeadModel::Forward(const HeadIdentity& identity, const Eigen::VectorXd& expression, const PoseVector& pose,
-                        HeadModelOutput* out) const {
+                        HeadModelOutput* out, const ParallelTasks* parallel) const {
   const int n = num_vertices();
   const int e = std::min<int>(static_cast<int>(expression.size()), num_expression());
-  out->vertices.resize(n, 3);
-  Eigen::Map<Eigen::VectorXf> v(out->vertices.data(), 3 * n);
-  v = identity.v_shaped;
+  const Eigen::VectorXf psi = expression.head(e).cast<float>();
   Eigen::Matrix<float, kNumHeadJoints * 3, 1> jflat =
       Eigen::Map<const Eigen::Matrix<float, 15, 1>>(identity.joints.data());
-  if (e > 0) {
-    const Eigen::VectorXf psi = expression.head(e).cast<float>();
-    v.noalias() += data_.expressiondirs.leftCols(e) * psi;
-    jflat.noalias() += j_expressiondirs_.leftCols(e) * psi;
-  }
+  if (e > 0) jflat.noalias() += j_expressiondirs_.leftCols(e) * psi;
   const Eigen::Map<const Eigen::Matrix<float, kNumHeadJoints, 3, Eigen::RowMajor>> J(jflat.data());
 
   std::array<Eigen::Matrix3f, kNumHeadJoints> R;
   for (int k = 0; k < kNumHeadJoints; ++k) R[k] = AxisAngleToMatrix(pose.segment<3>(3 * k)).cast<float>();
-  if (has_posedirs_) {
-    Eigen::Matrix<float, kNumPoseFeatures, 1> feature;
-    for (int k = 1; k < kNumHeadJoints; ++k) {
-      const Eigen::Matrix3f d = R[k] - Eigen::Matrix3f::Identity();
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) feature[9 * (k - 1) + 3 * r + c] = d(r, c);
-    }
-    v.noalias() += data_.posedirs * feature;
+  Eigen::Matrix<float, kNumPoseFeatures, 1> feature;
+  for (int k = 1; k < kNumHeadJoints; ++k) {
+    const Eigen::Matrix3f d = R[k] - Eigen::Matrix3f::Identity();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) feature[9 * (k - 1) + 3 * r + c] = d(r, c);
   }
 
   // Kinematic chain: world_from_joint G_k, then skinning transforms A_k = G_k * T(-J_k).
@@ -240,12 +231,27 @@ void HeadModel::Forward(const HeadIdentity& identity, const Eigen::VectorXd& exp
     A[k] = RigidToMatrix(GR[k], Gt[k] - GR[k] * jk);
     out->joints.row(k) = Gt[k].transpose();
   }
-  for (int i = 0; i < n; ++i) {
-    Eigen::Matrix<float, 3, 4> T = Eigen::Matrix<float, 3, 4>::Zero();
-    for (int s = skin_begin_[i]; s < skin_begin_[i + 1]; ++s) T += skin_weight_[s] * A[skin_joint_[s]];
-    const Eigen::Vector3f p = v.segment<3>(3 * i);
-    out->vertices.row(i) = (T.leftCols<3>() * p + T.col(3)).transpose();
-  }
+
+  // Blend and skin vertices [begin, end): the blend, a product with the whole
+  // expression basis, is the bulk of the pass, and vertices are independent.
+  out->vertices.resize(n, 3);
+  auto blend_and_skin = [&](int begin, int end) {
+    const int rows = 3 * (end - begin);
+    Eigen::Map<Eigen::VectorXf> v(out->vertices.data() + 3 * begin, rows);
+    v = identity.v_shaped.segment(3 * begin, rows);
+    if (e > 0) v.noalias() += data_.expressiondirs.block(3 * begin, 0, rows, e) * psi;
+    if (has_posedirs_) v.noalias() += data_.posedirs.middleRows(3 * begin, rows) * feature;
+    for (int i = begin; i < end; ++i) {
+      Eigen::Matrix<float, 3, 4> T = Eigen::Matrix<float, 3, 4>::Zero();
+      for (int s = skin_begin_[i]; s < skin_begin_[i + 1]; ++s) T += skin_weight_[s] * A[skin_joint_[s]];
+      const Eigen::Vector3f p = out->vertices.row(i).transpose();
+      out->vertices.row(i) = (T.leftCols<3>() * p + T.col(3)).transpose();
+    }
+  };
+  if (parallel && *parallel)
+    (*parallel)(2, [&](int k) { k == 0 ? blend_and_skin(0, n / 2) : blend_and_skin(n / 2, n); });
+  else
+    blend_and_skin(0, n);
   ComputeLandmarks(out->vertices, pose, &out->landmarks);
 }
 

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "common/core/parallel_tasks.h"
+
 namespace headcast {
 
 // Joints in FLAME order. The root is the whole head+neck; "pose" in the
@@ -117,8 +119,10 @@ class HeadModel {
   const std::string& fingerprint() const { return fingerprint_; }
 
   HeadIdentity MakeIdentity(const Eigen::VectorXd& shape) const;
+  // With `parallel`, the vertices are blended and skinned in two halves as two
+  // tasks (the receiver's per-frame pass); the result is the same either way.
   void Forward(const HeadIdentity& identity, const Eigen::VectorXd& expression, const PoseVector& pose,
-               HeadModelOutput* out) const;
+               HeadModelOutput* out, const ParallelTasks* parallel = nullptr) const;
   HeadModelOutput Forward(const HeadModelParams& params) const;
 
   // Landmark positions for already posed vertices and a given pose (the

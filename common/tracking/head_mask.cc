@@ -12,7 +12,8 @@ void HeadMaskOptions::Check() const {
   OptionsCheck c("HeadMaskOptions");
   c.InRange("iterations", iterations, 1, 20).InRange("working_size", working_size, 32, 2048);
   c.InRange("hair_height", hair_height, 0, 3).InRange("head_width", head_width, 1, 3);
-  c.InRange("neck_height", neck_height, 0, 3);
+  c.InRange("neck_height", neck_height, 0, 3).InRange("min_face_height", min_face_height, 0, 2);
+  c.InRange("background_ring", background_ring, 0, 2);
   c.ThrowIfErrors();
 }
 
@@ -29,9 +30,10 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   cv::Point2f brow(0, 0);
   for (int k = 17; k <= 26; ++k) brow += pts[k] * 0.1f;
   const cv::Point2f up_vec = brow - chin;
-  const float face_h = std::max(1.f, static_cast<float>(cv::norm(up_vec)));
-  const cv::Point2f up = up_vec / face_h, right(-up.y, up.x);
+  const float brow_to_chin = std::max(1.f, static_cast<float>(cv::norm(up_vec)));
+  const cv::Point2f up = up_vec / brow_to_chin, right(-up.y, up.x);
   const float jaw_w = static_cast<float>(cv::norm(pts[16] - pts[0]));
+  const float face_h = std::max(brow_to_chin, static_cast<float>(o.min_face_height) * jaw_w);
   // The probable head: an ellipse from above the hair to the chin, then the neck.
   const cv::Point2f top = brow + up * (o.hair_height * face_h);
   // A turned head extends behind the face, away from where the nose points:
@@ -60,6 +62,13 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   cv::resize(bgr(roi), image, cv::Size(), scale, scale, cv::INTER_AREA);
   auto to_work = [&](cv::Point2f p) { return cv::Point2f((p.x - roi.x) * scale, (p.y - roi.y) * scale); };
   cv::Mat seeds(image.size(), CV_8U, cv::Scalar(cv::GC_BGD));
+  const float ring = static_cast<float>(2 * o.background_ring * face_h * scale);
+  if (ring > 0)
+    cv::ellipse(
+        seeds,
+        cv::RotatedRect(to_work(head.center),
+                        cv::Size2f(head.size.width * scale + ring, head.size.height * scale + ring), head.angle),
+        cv::Scalar(cv::GC_PR_BGD), cv::FILLED);
   cv::ellipse(
       seeds,
       cv::RotatedRect(to_work(head.center), cv::Size2f(head.size.width * scale, head.size.height * scale), head.angle),

@@ -16,6 +16,13 @@ struct HeadMaskOptions {
   double head_width = 1.35;                   // probable head width, in jaw widths
   double neck_height = 0.45;                  // probable neck below the chin, in face heights
   double turn_shift = 1.0, turn_widen = 1.5;  // how far the region follows the back of a turned head
+  // A face seen from above or below looks shorter than it is: its height is
+  // taken as at least this many jaw widths (frontal faces measure about 0.9–1.1).
+  double min_face_height = 0.9;
+  // Beyond the probable head, a ring this wide (in face heights) is probable
+  // background rather than certain: hair the region misses can still join the
+  // head instead of teaching GrabCut that hair is background.
+  double background_ring = 0.3;
   void Check() const;
 };
 

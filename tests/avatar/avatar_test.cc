@@ -3,9 +3,12 @@
 #include <dlfcn.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <opencv2/imgproc.hpp>
+#include <thread>
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
@@ -44,6 +47,46 @@ TEST(ComputeThreads, LibtorchGetsTheCountAndOpenBlasOne) {
   SetComputeThreads(1);
   EXPECT_EQ(torch::get_num_threads(), 1);
   EXPECT_EQ(get(), 1);
+}
+
+TEST(ComputeThreads, TasksRunAtOnceOnLibtorchsThreadsInTheCallersModes) {
+  SetComputeThreads(2);
+  const ParallelTasks parallel = TorchParallelTasks();
+  // Each task waits until the other has begun: they must run at the same time.
+  std::atomic<int> begun{0};
+  std::array<std::thread::id, 2> ids;
+  std::array<bool, 2> inference{}, grad{true, true};
+  {
+    const c10::InferenceMode mode;
+    parallel(2, [&](int k) {
+      ++begun;
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+      while (begun.load() < 2 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+      ids[k] = std::this_thread::get_id();
+      inference[k] = c10::InferenceMode::is_enabled();
+      grad[k] = at::GradMode::is_enabled();
+    });
+  }
+  EXPECT_EQ(begun.load(), 2);
+  EXPECT_NE(ids[0], ids[1]);
+  EXPECT_TRUE(inference[0] && inference[1]);
+  EXPECT_FALSE(grad[0] || grad[1]);
+  // A task's error reaches the caller.
+  EXPECT_THROW(parallel(2,
+                        [](int k) {
+                          if (k == 1) throw std::runtime_error("task");
+                        }),
+               std::runtime_error);
+  // One thread: in order, on the caller's thread.
+  SetComputeThreads(1);
+  std::vector<int> order;
+  std::vector<std::thread::id> where;
+  parallel(3, [&](int k) {
+    order.push_back(k);
+    where.push_back(std::this_thread::get_id());
+  });
+  EXPECT_EQ(order, (std::vector<int>{0, 1, 2}));
+  EXPECT_EQ(where, std::vector<std::thread::id>(3, std::this_thread::get_id()));
 }
 
 TEST(PositionalEncoding, ShapeAndValues) {
@@ -377,6 +420,30 @@ TEST(AvatarRenderer, EveryExpressionComponentOfTheModelConditionsTheAvatar) {
   p.expression[e - 1] = 3.f;
   ASSERT_TRUE(r.Render(p, &last));
   EXPECT_GT(cv::norm(neutral, last, cv::NORM_L1), 0) << "the last expression component did not reach the network";
+}
+
+TEST(AvatarRenderer, TheParallelStagesDrawTheSamePicture) {
+  // A subject's avatar (surface texture, bounded matte with a core, canonical
+  // samples): everything the helper prepares is used.
+  AvatarConfig c = Tiny();
+  ApplySubjectDefaults(&c);
+  c.matte_core = 0.02;
+  c.canonical_samples = true;
+  auto make = [&] { return Avatar::CreateRandom(c, *Builtin(), DefaultSubject(*Builtin(), 128), 4); };
+  AvatarRendererOptions with, without;
+  with.threads = without.threads = 2;
+  without.parallel_stages = false;
+  AvatarRenderer helped(Builtin(), make(), with), alone(Builtin(), make(), without);
+  for (float jaw : {0.f, 0.2f, 0.05f}) {
+    FrameParams p = Frontal(jaw);
+    p.neck = Eigen::Vector3f(0.1f * jaw, 0.3f * jaw, 0);
+    cv::Mat a, b;
+    AvatarTimings t;
+    ASSERT_TRUE(helped.Render(p, &a, &t));
+    ASSERT_TRUE(alone.Render(p, &b));
+    EXPECT_GT(t.surface_ms, 0);
+    EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0) << "jaw " << jaw;
+  }
 }
 
 TEST(AvatarRenderer, RendersAndRefusesBadParameters) {

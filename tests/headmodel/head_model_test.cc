@@ -1,5 +1,7 @@
-// HeadModel's forward pass: rest pose, skinning, linearity, landmarks.
+// HeadModel's forward pass: rest pose, skinning, linearity, landmarks, a shared pass.
 #include <gtest/gtest.h>
+
+#include <thread>
 
 #include "common/core/rotation.h"
 #include "tests/headmodel/test_models.h"
@@ -99,6 +101,29 @@ TEST(HeadModel, IdentityCacheMatchesTheFullPass) {
   full.expression = Eigen::VectorXd::Zero(m.num_expression());
   full.expression[0] = 1;
   EXPECT_LT((m.Forward(short_params).vertices - m.Forward(full).vertices).cwiseAbs().maxCoeff(), 1e-7);
+}
+
+TEST(HeadModel, TheTwoTaskPassGivesTheSameVertices) {
+  const HeadModel& m = Builtin();
+  // Tasks on threads of their own, the first started last: any order works.
+  std::vector<int> ran;
+  const ParallelTasks parallel = [&](int n, const std::function<void(int)>& task) {
+    std::vector<std::thread> threads;
+    for (int k = n - 1; k >= 0; --k) threads.emplace_back([&task, k] { task(k); });
+    for (std::thread& t : threads) t.join();
+    ran.push_back(n);
+  };
+  for (unsigned seed : {1u, 2u, 3u}) {
+    const HeadModelParams p = RandomParams(m, seed);
+    const HeadIdentity id = m.MakeIdentity(p.shape);
+    HeadModelOutput alone, shared;
+    m.Forward(id, p.expression, p.pose, &alone);
+    m.Forward(id, p.expression, p.pose, &shared, &parallel);
+    EXPECT_EQ(alone.vertices, shared.vertices) << "seed " << seed;
+    EXPECT_EQ(alone.joints, shared.joints);
+    EXPECT_EQ(alone.landmarks, shared.landmarks);
+  }
+  EXPECT_EQ(ran, (std::vector<int>{2, 2, 2}));
 }
 
 TEST(HeadModel, ContourYawBinsFollowFlame) {

@@ -1,6 +1,6 @@
 // The head mask against renders whose mask is known: the built-in head at
-// several turns over a cluttered background, seeded with exact projected
-// landmarks and with the face tracker's own.
+// several turns and pitches over a cluttered background, seeded with exact
+// projected landmarks and with the face tracker's own.
 #include "common/tracking/head_mask.h"
 
 #include <gtest/gtest.h>
@@ -55,6 +55,42 @@ TEST(HeadMask, IouOnRendersWithKnownMasks) {
   EXPECT_GT(mean_exact, 0.9);
   ASSERT_GE(tracked, 3);
   EXPECT_GT(sum_tracked / tracked, 0.85);
+}
+
+// A head pitched chin-down looks short from brow to chin, and a region sized by
+// that height alone left the top of the head out as certain background.
+TEST(HeadMask, APitchedHeadKeepsItsTop) {
+  const HeadModel model = MakeBuiltinHead();
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
+  cv::Mat background(480, 640, CV_8UC3);
+  cv::RNG rng(5);
+  rng.fill(background, cv::RNG::UNIFORM, 0, 255);
+  cv::GaussianBlur(background, background, {0, 0}, 9);
+  cv::normalize(background, background, 0, 255, cv::NORM_MINMAX);
+  HeadMaskOptions before;  // the region before the face height had a floor and the ring existed
+  before.min_face_height = 0;
+  before.background_ring = 0;
+  double sum_now = 0, sum_before = 0;
+  const double pitches[] = {-15, 20, 30, 40};
+  for (double pitch : pitches) {
+    const HeadModelOutput out = model.Forward(HeadModelParams{});
+    const RigidTransform cam_from_head = FrontalCamFromHead(0.7, 0, pitch, model.rest_landmark_centroid());
+    const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
+    cv::Mat image = background.clone();
+    r.image_bgr.copyTo(image, r.mask);
+    Landmarks2d exact;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      exact[l] = cam.Project(cam_from_head.Apply(out.landmarks.row(l).cast<double>().transpose()));
+    const cv::Mat now = HeadMask(image, exact), old = HeadMask(image, exact, before);
+    const int true_top = cv::boundingRect(r.mask).y, top = cv::boundingRect(now).y;
+    std::printf("pitch %+.0f: IoU %.3f (before: %.3f), top row %d (truth %d, before %d)\n", pitch, MaskIou(now, r.mask),
+                MaskIou(old, r.mask), top, true_top, cv::boundingRect(old).y);
+    sum_now += MaskIou(now, r.mask);
+    sum_before += MaskIou(old, r.mask);
+    EXPECT_LE(top - true_top, 12) << "pitch " << pitch;  // 2.5 % of the picture
+    EXPECT_GT(MaskIou(now, r.mask), 0.9) << "pitch " << pitch;
+  }
+  EXPECT_GT(sum_now, sum_before);
 }
 
 TEST(HeadMask, BadInputIsRefused) {
