@@ -84,55 +84,42 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
   const int frames = std::max(1, std::min(options.repeats, 1000));
   const nlohmann::json ours = MeasureConfig(options, AvatarConfig::Default(options.resolution), frames);
   for (auto& [k, v] : ours.items()) out[k] = v;
+  // A variant's timings, with `extra` fields that say what it is.
+  auto timings = [](const nlohmann::json& m, nlohmann::json extra) {
+    for (const char* k : {"ms_median", "ms_p95", "fps_median", "stage_ms_median"}) extra[k] = m[k];
+    return extra;
+  };
   // The same frames with the other libtorch thread count, side by side.
   BenchOptions other = options;
   other.threads = options.threads == 1 ? 2 : 1;
-  const nlohmann::json alt = MeasureConfig(other, AvatarConfig::Default(options.resolution), frames);
-  out["other_thread_count"] = {{"threads", other.threads},
-                               {"ms_median", alt["ms_median"]},
-                               {"ms_p95", alt["ms_p95"]},
-                               {"fps_median", alt["fps_median"]},
-                               {"stage_ms_median", alt["stage_ms_median"]}};
+  out["other_thread_count"] =
+      timings(MeasureConfig(other, AvatarConfig::Default(options.resolution), frames), {{"threads", other.threads}});
   // The same frames with the surface texture a subject's avatar adds (its
   // raster at output resolution, texture look-up and per-pixel branch).
   AvatarConfig surface = AvatarConfig::Default(options.resolution);
   surface.surface_features = kSubjectSurfaceFeatures;
-  const nlohmann::json with_surface = MeasureConfig(options, surface, frames);
-  out["with_surface"] = {{"surface_features", surface.surface_features},
-                         {"ms_median", with_surface["ms_median"]},
-                         {"ms_p95", with_surface["ms_p95"]},
-                         {"fps_median", with_surface["fps_median"]},
-                         {"stage_ms_median", with_surface["stage_ms_median"]}};
+  out["with_surface"] =
+      timings(MeasureConfig(options, surface, frames), {{"surface_features", surface.surface_features}});
   // And a subject's default avatar: the texture, its conditioned branch and the
   // bounded matte (its bound's dilations and polygon per frame, the coverage's convolutions).
   AvatarConfig subject = AvatarConfig::Default(options.resolution);
   ApplySubjectDefaults(&subject);
-  const nlohmann::json with_matte = MeasureConfig(options, subject, frames);
-  out["subject_default"] = {{"surface_features", subject.surface_features},
-                            {"surface_conditioned", subject.surface_conditioned},
-                            {"matte", MatteModeName(subject.matte)},
-                            {"ms_median", with_matte["ms_median"]},
-                            {"ms_p95", with_matte["ms_p95"]},
-                            {"fps_median", with_matte["fps_median"]},
-                            {"stage_ms_median", with_matte["stage_ms_median"]}};
+  out["subject_default"] =
+      timings(MeasureConfig(options, subject, frames), {{"surface_features", subject.surface_features},
+                                                        {"surface_conditioned", subject.surface_conditioned},
+                                                        {"matte", MatteModeName(subject.matte)}});
   // The subject's default again with the convolutions on images in libtorch's
   // default layout (channels first), side by side: what channels-last buys.
   AvatarRendererOptions channels_first;
   channels_first.channels_last = false;
-  const nlohmann::json first = MeasureConfig(options, subject, frames, channels_first);
-  out["subject_default_channels_first"] = {{"ms_median", first["ms_median"]},
-                                           {"ms_p95", first["ms_p95"]},
-                                           {"fps_median", first["fps_median"]},
-                                           {"stage_ms_median", first["stage_ms_median"]}};
+  out["subject_default_channels_first"] =
+      timings(MeasureConfig(options, subject, frames, channels_first), nlohmann::json::object());
   if (options.threads > 1) {
     // And with the stages one after the other (AvatarBackendOptions::parallel_stages off).
     AvatarRendererOptions serial;
     serial.parallel_stages = false;
-    const nlohmann::json alone = MeasureConfig(options, subject, frames, serial);
-    out["subject_default_serial_stages"] = {{"ms_median", alone["ms_median"]},
-                                            {"ms_p95", alone["ms_p95"]},
-                                            {"fps_median", alone["fps_median"]},
-                                            {"stage_ms_median", alone["stage_ms_median"]}};
+    out["subject_default_serial_stages"] =
+        timings(MeasureConfig(options, subject, frames, serial), nlohmann::json::object());
   }
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
