@@ -1,6 +1,7 @@
 // A head mask (face, hair, ears, neck) for training losses: GrabCut seeded by
 // the 68 landmarks — the face hull is certain foreground, a head-shaped region
-// around it (hair above, neck below) probable foreground, the rest background.
+// around it (hair above, neck below) probable foreground, a ring around that
+// probable background, the rest background.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -17,7 +18,7 @@ struct HeadMaskOptions {
   double neck_height = 0.45;                  // probable neck below the chin, in face heights
   double turn_shift = 1.0, turn_widen = 1.5;  // how far the region follows the back of a turned head
   // A face seen from above or below looks shorter than it is: its height is
-  // taken as at least this many jaw widths (frontal faces measure about 0.9–1.1).
+  // taken as at least this many jaw widths (about a frontal face's ratio).
   double min_face_height = 0.9;
   // Beyond the probable head, a ring this wide (in face heights) is probable
   // background rather than certain: hair the region misses can still join the
