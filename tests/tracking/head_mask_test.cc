@@ -14,6 +14,22 @@
 namespace headcast {
 namespace {
 
+// Clutter: blurred coloured blobs, the background the renders are put on.
+cv::Mat ClutteredBackground(cv::RNG& rng) {
+  cv::Mat background(480, 640, CV_8UC3);
+  rng.fill(background, cv::RNG::UNIFORM, 0, 255);
+  cv::GaussianBlur(background, background, {0, 0}, 9);
+  cv::normalize(background, background, 0, 255, cv::NORM_MINMAX);
+  return background;
+}
+
+Landmarks2d ExactLandmarks(const HeadModelOutput& out, const RigidTransform& cam_from_head, const PinholeCamera& cam) {
+  Landmarks2d exact;
+  for (int l = 0; l < kNumLandmarks; ++l)
+    exact[l] = cam.Project(cam_from_head.Apply(out.landmarks.row(l).cast<double>().transpose()));
+  return exact;
+}
+
 TEST(HeadMask, IouOnRendersWithKnownMasks) {
   const HeadModel model = MakeBuiltinHead();
   const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
@@ -28,16 +44,9 @@ TEST(HeadMask, IouOnRendersWithKnownMasks) {
     const HeadModelOutput out = model.Forward(p);
     const RigidTransform cam_from_head = FrontalCamFromHead(0.7, yaw, 0, model.rest_landmark_centroid());
     const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
-    // Clutter: blurred coloured blobs behind the head.
-    cv::Mat background(480, 640, CV_8UC3);
-    rng.fill(background, cv::RNG::UNIFORM, 0, 255);
-    cv::GaussianBlur(background, background, {0, 0}, 9);
-    cv::normalize(background, background, 0, 255, cv::NORM_MINMAX);
-    cv::Mat image = background.clone();
+    cv::Mat image = ClutteredBackground(rng);
     r.image_bgr.copyTo(image, r.mask);
-    Landmarks2d exact;
-    for (int l = 0; l < kNumLandmarks; ++l)
-      exact[l] = cam.Project(cam_from_head.Apply(out.landmarks.row(l).cast<double>().transpose()));
+    const Landmarks2d exact = ExactLandmarks(out, cam_from_head, cam);
     const double iou = MaskIou(HeadMask(image, exact), r.mask);
     sum_exact += iou;
     const FaceObservation obs = tracker.Track(image, 0);
@@ -62,25 +71,20 @@ TEST(HeadMask, IouOnRendersWithKnownMasks) {
 TEST(HeadMask, APitchedHeadKeepsItsTop) {
   const HeadModel model = MakeBuiltinHead();
   const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
-  cv::Mat background(480, 640, CV_8UC3);
   cv::RNG rng(5);
-  rng.fill(background, cv::RNG::UNIFORM, 0, 255);
-  cv::GaussianBlur(background, background, {0, 0}, 9);
-  cv::normalize(background, background, 0, 255, cv::NORM_MINMAX);
+  const cv::Mat background = ClutteredBackground(rng);
+  const HeadModelOutput out = model.Forward(HeadModelParams{});
   HeadMaskOptions before;  // the region before the face height had a floor and the ring existed
   before.min_face_height = 0;
   before.background_ring = 0;
   double sum_now = 0, sum_before = 0;
   const double pitches[] = {-15, 20, 30, 40};
   for (double pitch : pitches) {
-    const HeadModelOutput out = model.Forward(HeadModelParams{});
     const RigidTransform cam_from_head = FrontalCamFromHead(0.7, 0, pitch, model.rest_landmark_centroid());
     const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
     cv::Mat image = background.clone();
     r.image_bgr.copyTo(image, r.mask);
-    Landmarks2d exact;
-    for (int l = 0; l < kNumLandmarks; ++l)
-      exact[l] = cam.Project(cam_from_head.Apply(out.landmarks.row(l).cast<double>().transpose()));
+    const Landmarks2d exact = ExactLandmarks(out, cam_from_head, cam);
     const cv::Mat now = HeadMask(image, exact), old = HeadMask(image, exact, before);
     const int true_top = cv::boundingRect(r.mask).y, top = cv::boundingRect(now).y;
     std::printf("pitch %+.0f: IoU %.3f (before: %.3f), top row %d (truth %d, before %d)\n", pitch, MaskIou(now, r.mask),
