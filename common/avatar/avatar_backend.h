@@ -75,8 +75,9 @@ struct AvatarBackendOptions {
   // raster and matte bound beside the network, on libtorch's threads: the
   // same pixels; off only to measure what it buys.
   bool parallel_stages = true;
-  // Convolutions on channels-last images (NeuralRenderer::UseChannelsLast):
-  // the same pixels; off only to measure what the layout buys.
+  // Convolutions on channels-last images (NeuralRenderer::UseChannelsLast)
+  // and the surface texture looked up texel-major (SurfaceTexture::
+  // UseChannelsLast): the same pixels; off only to measure what the layout buys.
   bool channels_last = true;
   void Check() const;
 };

@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "common/avatar/triplane_lookup.h"
+
 namespace headcast {
 namespace F = torch::nn::functional;
 
@@ -202,9 +204,22 @@ SurfaceTextureImpl::SurfaceTextureImpl(const AvatarConfig& config) : extent_(con
   planes_ = register_parameter("planes", torch::zeros({3, config.surface_features, r, r}));
 }
 
+void SurfaceTextureImpl::UseChannelsLast() {
+  torch::NoGradGuard no_grad;
+  planes_.set_data(planes_.contiguous(torch::MemoryFormat::ChannelsLast));
+  channels_last_ = true;
+}
+
 torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical) {
   const int64_t p = canonical.size(0);
   const torch::Tensor u = (canonical / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
+  if (channels_last_ && !torch::GradMode::is_enabled() && planes_.is_contiguous(torch::MemoryFormat::ChannelsLast)) {
+    const torch::Tensor points = u.to(torch::kFloat).contiguous();
+    torch::Tensor features = torch::empty({p, planes_.size(1)}, points.options());
+    LookUpTriplanes({planes_.data_ptr<float>(), planes_.size(2), planes_.size(1)}, points.data_ptr<float>(), p,
+                    features.data_ptr<float>());
+    return features;
+  }
   const torch::Tensor x = u.select(1, 0), y = u.select(1, 1), z = u.select(1, 2);
   // (3, 1, P, 2): the point's coordinates in the xy, xz and yz planes.
   const torch::Tensor grid =

@@ -95,9 +95,15 @@ class SurfaceTextureImpl : public torch::nn::Module {
   explicit SurfaceTextureImpl(const AvatarConfig& config);
   // canonical points (P, 3), model frame, metres -> features (P, C).
   torch::Tensor forward(const torch::Tensor& canonical);
+  // Inference: keeps the planes texel after texel (channels-last), so that a
+  // lookup without gradients reads a texel's channels side by side
+  // (LookUpTriplanes) instead of grid_sample's walk channel after channel.
+  // The same features up to float rounding; training is unchanged.
+  void UseChannelsLast();
 
  private:
   double extent_;
+  bool channels_last_ = false;
   torch::Tensor planes_;  // (3, C, R, R)
 };
 TORCH_MODULE(SurfaceTexture);

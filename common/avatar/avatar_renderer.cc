@@ -303,7 +303,10 @@ AvatarRenderer::AvatarRenderer(std::shared_ptr<const HeadModel> model, Avatar av
   impl_ = std::make_unique<Impl>(std::move(model), std::move(avatar));
   if (options.threads > 1 && options.parallel_stages) impl_->parallel = TorchParallelTasks();
   impl_->avatar.modules().eval();
-  if (options.channels_last) impl_->avatar.modules().renderer->UseChannelsLast();
+  if (options.channels_last) {
+    impl_->avatar.modules().renderer->UseChannelsLast();
+    if (impl_->avatar.modules().surface) impl_->avatar.modules().surface->UseChannelsLast();
+  }
   Eigen::VectorXd beta = impl_->avatar.subject().shape.cast<double>();
   impl_->identity = impl_->model->MakeIdentity(beta);
 }

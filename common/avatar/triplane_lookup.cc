@@ -1,0 +1,64 @@
+#include "common/avatar/triplane_lookup.h"
+
+#include <ATen/Parallel.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace headcast {
+namespace {
+
+// One plane's bilinear taps for a point: texel offsets (in floats) and weights.
+struct Taps {
+  int64_t offset[4];
+  float weight[4];
+};
+
+Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
+  // grid_sample's unnormalisation (align_corners false) and border clipping.
+  const float size = static_cast<float>(resolution), last = size - 1;
+  const float ix = std::clamp(((a + 1) * size - 1) / 2, 0.f, last);
+  const float iy = std::clamp(((b + 1) * size - 1) / 2, 0.f, last);
+  const float x0 = std::floor(ix), y0 = std::floor(iy);
+  const float fx = ix - x0, fy = iy - y0;
+  // At the last texel the far taps weigh nothing: clamped to stay in the plane.
+  const int64_t c0 = static_cast<int64_t>(x0), r0 = static_cast<int64_t>(y0);
+  const int64_t c1 = std::min(c0 + 1, resolution - 1), r1 = std::min(r0 + 1, resolution - 1);
+  Taps t;
+  t.offset[0] = (r0 * resolution + c0) * channels;
+  t.offset[1] = (r0 * resolution + c1) * channels;
+  t.offset[2] = (r1 * resolution + c0) * channels;
+  t.offset[3] = (r1 * resolution + c1) * channels;
+  t.weight[0] = (1 - fx) * (1 - fy);
+  t.weight[1] = fx * (1 - fy);
+  t.weight[2] = (1 - fx) * fy;
+  t.weight[3] = fx * fy;
+  return t;
+}
+
+}  // namespace
+
+void LookUpTriplanes(const TexelMajorPlanes& planes, const float* points, int64_t count, float* features) {
+  if (!planes.data || planes.resolution < 1 || planes.channels < 1)
+    throw std::invalid_argument("LookUpTriplanes: no planes");
+  const int64_t r = planes.resolution, c = planes.channels, plane_size = r * r * c;
+  at::parallel_for(0, count, 256, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      const float* p = points + 3 * i;
+      const float pairs[3][2] = {{p[0], p[1]}, {p[0], p[2]}, {p[1], p[2]}};
+      float* out = features + i * c;
+      std::fill(out, out + c, 0.f);
+      for (int k = 0; k < 3; ++k) {
+        const Taps t = PlaneTaps(pairs[k][0], pairs[k][1], r, c);
+        const float* plane = planes.data + k * plane_size;
+        const float *v0 = plane + t.offset[0], *v1 = plane + t.offset[1], *v2 = plane + t.offset[2],
+                    *v3 = plane + t.offset[3];
+        for (int64_t ch = 0; ch < c; ++ch)
+          out[ch] += v0[ch] * t.weight[0] + v1[ch] * t.weight[1] + v2[ch] * t.weight[2] + v3[ch] * t.weight[3];
+      }
+    }
+  });
+}
+
+}  // namespace headcast
