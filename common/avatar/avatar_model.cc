@@ -121,6 +121,18 @@ torch::Tensor SqueezeExcitationImpl::forward(const torch::Tensor& x) { return x 
 
 namespace {
 
+// A 1x1 convolution. Without gradients on a channels-last image, oneDNN's
+// kernel: on one thread libtorch sends a small batch's 1x1 convolutions
+// through im2col and a matrix product with layout copies around it, slower
+// at these channel counts (on two it picks oneDNN itself).
+torch::Tensor Conv1x1(torch::nn::Conv2dImpl& conv, const torch::Tensor& x) {
+  if (at::hasMKLDNN() && !torch::GradMode::is_enabled() && x.dim() == 4 &&
+      x.suggest_memory_format() == torch::MemoryFormat::ChannelsLast)
+    return torch::mkldnn_convolution(x.contiguous(torch::MemoryFormat::ChannelsLast), conv.weight, conv.bias, {0, 0},
+                                     {1, 1}, {1, 1}, 1);
+  return conv.forward(x);
+}
+
 // `window` (even edges) of x (B, C, h, w) upsampled x2 bilinearly: the same
 // pixels as the whole picture upsampled, from the source pixels under the
 // window and one more on each side (the filter's reach).
@@ -179,7 +191,7 @@ torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWi
                                             .slice(3, cx0 - ix0, cx1 - ix0),
                                         leaky);
   const torch::Tensor l =
-      F::leaky_relu(local_->forward(x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x)), leaky);
+      F::leaky_relu(Conv1x1(*local_, x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x)), leaky);
   const torch::Tensor up =
       shuffle_->forward(g + l).slice(2, uy0 - 2 * cy0, uy1 - 2 * cy0).slice(3, ux0 - 2 * cx0, ux1 - 2 * cx0);
   // Anti-aliasing blur (depthwise binomial) against PixelShuffle's checkerboard,
@@ -317,8 +329,8 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
   const bool matte = input_alpha_ && coverage_logit;
   const torch::Tensor features =
       channels_last_ ? feature_map.contiguous(torch::MemoryFormat::ChannelsLast) : feature_map;
-  torch::Tensor rgb = input_rgb_->forward(features), alpha;
-  if (matte) alpha = input_alpha_->forward(features);
+  torch::Tensor rgb = Conv1x1(*input_rgb_, features), alpha;
+  if (matte) alpha = Conv1x1(*input_alpha_, features);
   torch::Tensor x = features;
   for (int k = 0; k < 3; ++k) {
     // The last level draws the window only; the ones before it the whole
@@ -327,9 +339,10 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
     rgb = UpsampleWindow(rgb, w);
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x, w);
     if (k == 2 && surface_term.defined()) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
-    x = F::leaky_relu(post_[k]->as<torch::nn::Conv2dImpl>()->forward(x), F::LeakyReLUFuncOptions().negative_slope(0.2));
-    rgb = rgb + to_rgb_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
-    if (matte) alpha = UpsampleWindow(alpha, w) + to_alpha_[k]->as<torch::nn::Conv2dImpl>()->forward(x);
+    x = F::leaky_relu(Conv1x1(*post_[k]->as<torch::nn::Conv2dImpl>(), x),
+                      F::LeakyReLUFuncOptions().negative_slope(0.2));
+    rgb = rgb + Conv1x1(*to_rgb_[k]->as<torch::nn::Conv2dImpl>(), x);
+    if (matte) alpha = UpsampleWindow(alpha, w) + Conv1x1(*to_alpha_[k]->as<torch::nn::Conv2dImpl>(), x);
   }
   if (matte) *coverage_logit = alpha;
   return torch::sigmoid(rgb);

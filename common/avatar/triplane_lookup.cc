@@ -16,10 +16,11 @@ struct Taps {
 };
 
 Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
-  // grid_sample's unnormalisation (align_corners false) and border clipping.
-  const float size = static_cast<float>(resolution), last = size - 1;
-  const float ix = std::clamp(((a + 1) * size - 1) / 2, 0.f, last);
-  const float iy = std::clamp(((b + 1) * size - 1) / 2, 0.f, last);
+  // grid_sample's unnormalisation (align_corners false) and border clipping,
+  // in its order of operations.
+  const float half = static_cast<float>(resolution) / 2, last = static_cast<float>(resolution - 1);
+  const float ix = std::clamp((a + 1) * half - 0.5f, 0.f, last);
+  const float iy = std::clamp((b + 1) * half - 0.5f, 0.f, last);
   const float x0 = std::floor(ix), y0 = std::floor(iy);
   const float fx = ix - x0, fy = iy - y0;
   // At the last texel the far taps weigh nothing: clamped to stay in the plane.
@@ -37,27 +38,36 @@ Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
   return t;
 }
 
+// One point's features, summed over the three planes in grid_sample's order.
+// kChannels > 0: the count known at compile time (kept in registers).
+template <int kChannels>
+void LookUpPoint(const float* planes, int64_t resolution, int64_t channels, const float* p, float* out) {
+  const int64_t c = kChannels > 0 ? kChannels : channels, plane_size = resolution * resolution * c;
+  const float pairs[3][2] = {{p[0], p[1]}, {p[0], p[2]}, {p[1], p[2]}};
+  float sum[kChannels > 0 ? kChannels : 1];
+  float* acc = kChannels > 0 ? sum : out;
+  std::fill(acc, acc + c, 0.f);
+  for (int k = 0; k < 3; ++k) {
+    const Taps t = PlaneTaps(pairs[k][0], pairs[k][1], resolution, c);
+    const float* plane = planes + k * plane_size;
+    const float *v0 = plane + t.offset[0], *v1 = plane + t.offset[1], *v2 = plane + t.offset[2],
+                *v3 = plane + t.offset[3];
+    for (int64_t ch = 0; ch < c; ++ch)
+      acc[ch] += v0[ch] * t.weight[0] + v1[ch] * t.weight[1] + v2[ch] * t.weight[2] + v3[ch] * t.weight[3];
+  }
+  if (kChannels > 0) std::copy(sum, sum + c, out);
+}
+
 }  // namespace
 
 void LookUpTriplanes(const TexelMajorPlanes& planes, const float* points, int64_t count, float* features) {
   if (!planes.data || planes.resolution < 1 || planes.channels < 1)
     throw std::invalid_argument("LookUpTriplanes: no planes");
-  const int64_t r = planes.resolution, c = planes.channels, plane_size = r * r * c;
+  const int64_t r = planes.resolution, c = planes.channels;
+  // Shipped avatars have 8 channels: that count gets its own loop.
+  const auto point = c == 8 ? &LookUpPoint<8> : &LookUpPoint<0>;
   at::parallel_for(0, count, 256, [&](int64_t begin, int64_t end) {
-    for (int64_t i = begin; i < end; ++i) {
-      const float* p = points + 3 * i;
-      const float pairs[3][2] = {{p[0], p[1]}, {p[0], p[2]}, {p[1], p[2]}};
-      float* out = features + i * c;
-      std::fill(out, out + c, 0.f);
-      for (int k = 0; k < 3; ++k) {
-        const Taps t = PlaneTaps(pairs[k][0], pairs[k][1], r, c);
-        const float* plane = planes.data + k * plane_size;
-        const float *v0 = plane + t.offset[0], *v1 = plane + t.offset[1], *v2 = plane + t.offset[2],
-                    *v3 = plane + t.offset[3];
-        for (int64_t ch = 0; ch < c; ++ch)
-          out[ch] += v0[ch] * t.weight[0] + v1[ch] * t.weight[1] + v2[ch] * t.weight[2] + v3[ch] * t.weight[3];
-      }
-    }
+    for (int64_t i = begin; i < end; ++i) point(planes.data, r, c, points + 3 * i, features + i * c);
   });
 }
 

@@ -254,32 +254,35 @@ TEST(SurfaceTexture, SamplesItsPlanesAtCanonicalPoints) {
 // features as grid_sample: inside the planes, on texel centres and edges, and
 // beyond the extent (the border repeated); with gradients it stays grid_sample.
 TEST(SurfaceTexture, TheTexelMajorLookupReadsWhatGridSampleReads) {
-  AvatarConfig c = TinyWithSurface();
-  c.surface_features = 5;  // not a multiple of a vector's width
-  SurfaceTexture texture(c);
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& t : texture->parameters()) t.uniform_(-1, 1);
+  for (const int channels : {8, 5}) {  // the shipped count has a loop of its own
+    AvatarConfig c = TinyWithSurface();
+    c.surface_features = channels;
+    SurfaceTexture texture(c);
+    {
+      torch::NoGradGuard no_grad;
+      for (auto& t : texture->parameters()) t.uniform_(-1, 1);
+    }
+    const double e = c.surface_extent, texel = 2 * e / c.surface_resolution;
+    const torch::Tensor points =
+        torch::cat({(torch::rand({2000, 3}) * 2 - 1) * (1.2 * e),  // some beyond the extent
+                    torch::tensor({0.f, 0.f, 0.f}).view({1, 3}),
+                    torch::full({1, 3}, static_cast<float>(-e + texel / 2)),  // the first texel's centre
+                    torch::full({1, 3}, static_cast<float>(e - texel / 2)),   // the last texel's centre
+                    torch::full({1, 3}, static_cast<float>(e)), torch::full({1, 3}, -9.f)});
+    const torch::Tensor expected = texture->forward(points).detach();
+    texture->UseChannelsLast();
+    torch::Tensor looked_up;
+    {
+      torch::NoGradGuard no_grad;
+      looked_up = texture->forward(points);
+    }
+    ASSERT_EQ(looked_up.sizes(), expected.sizes());
+    EXPECT_LT((looked_up - expected).abs().max().item<float>(), 1e-6) << channels;
+    EXPECT_GT(expected.abs().max().item<float>(), 0.5f) << "a lookup of random planes is not zero";
+    // Training after the switch: grid_sample's gradients still reach the planes.
+    texture->forward(points).sum().backward();
+    EXPECT_GT(texture->parameters()[0].grad().abs().sum().item<float>(), 0.f) << channels;
   }
-  const double e = c.surface_extent, texel = 2 * e / c.surface_resolution;
-  torch::Tensor points = torch::cat({(torch::rand({2000, 3}) * 2 - 1) * (1.2 * e),  // some beyond the extent
-                                     torch::tensor({0.f, 0.f, 0.f}).view({1, 3}),
-                                     torch::full({1, 3}, static_cast<float>(-e + texel / 2)),  // first texel centre
-                                     torch::full({1, 3}, static_cast<float>(e - texel / 2)),   // last texel centre
-                                     torch::full({1, 3}, static_cast<float>(e)), torch::full({1, 3}, -9.f)});
-  const torch::Tensor expected = texture->forward(points).detach();
-  texture->UseChannelsLast();
-  torch::Tensor looked_up;
-  {
-    torch::NoGradGuard no_grad;
-    looked_up = texture->forward(points);
-  }
-  ASSERT_EQ(looked_up.sizes(), expected.sizes());
-  EXPECT_LT((looked_up - expected).abs().max().item<float>(), 1e-6);
-  EXPECT_GT(expected.abs().max().item<float>(), 0.5f) << "a lookup of random planes is not zero";
-  // Training after the switch: grid_sample's gradients still reach the planes.
-  texture->forward(points).sum().backward();
-  EXPECT_GT(texture->parameters()[0].grad().abs().sum().item<float>(), 0.f);
 }
 
 // Adding a texture to an avatar without one (a fine-tune of a general model)
