@@ -47,6 +47,13 @@ void ClearBelowJawLine(const Landmarks2d& lm, cv::Mat* mask) {
   cv::fillPoly(*mask, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
 }
 
+void KeepHeadPiece(const Landmarks2d& landmarks, cv::Mat* mask) {
+  const cv::Point nose(cvRound(landmarks[kNoseTipLandmark].x()), cvRound(landmarks[kNoseTipLandmark].y()));
+  if (!cv::Rect(0, 0, mask->cols, mask->rows).contains(nose) || mask->at<uchar>(nose) == 0) return;
+  cv::floodFill(*mask, nose, cv::Scalar(128), nullptr, cv::Scalar(), cv::Scalar(), 8);
+  *mask = *mask == 128;
+}
+
 namespace {
 
 // The half-plane on `up`'s side of the line through `point`, as a mask of `size`.
@@ -165,6 +172,7 @@ cv::Mat MatteBound(const cv::Mat& silhouette, const Landmarks2d& landmarks, cons
   cv::Mat bound = MaskReach(silhouette, landmarks, static_cast<int>(std::lround(rules.hair_margin * size)),
                             static_cast<int>(std::lround(rules.side_margin * size)));
   if (!rules.keep_neck) ClearBelowJawLine(landmarks, &bound);
+  KeepHeadPiece(landmarks, &bound);
   return bound;
 }
 

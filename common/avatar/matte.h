@@ -37,6 +37,14 @@ struct MatteRules {
 // shirt's colour cannot be learnt, one that stops at the jaw can.
 void ClearBelowJawLine(const Landmarks2d& landmarks, cv::Mat* mask);
 
+// Keeps the connected piece of `mask` (CV_8U, 0 or 255; 8-connected) that
+// holds the nose tip (landmark 30) and clears the rest; leaves a mask without
+// it alone. The jaw line's cut leaves the model's shoulders beyond the jaw's
+// ends apart from the head: GrabCut takes the skin there in some frames, and an
+// avatar trained on such masks drew skin-coloured fragments below its ears.
+inline constexpr int kNoseTipLandmark = 30;
+void KeepHeadPiece(const Landmarks2d& landmarks, cv::Mat* mask);
+
 // `mask` (CV_8U, 0 or 255) dilated by the elliptical structuring element of
 // radius `radius` (cv::getStructuringElement(MORPH_ELLIPSE, 2r+1 square)):
 // the same pixels as cv::dilate, which walks every point of the element for
@@ -61,7 +69,8 @@ void FillHairNotches(const Landmarks2d& landmarks, cv::Mat* mask);
 
 // The region (CV_8U, 255 inside) a mask cut by `rules` may cover for a head
 // with this silhouette (CV_8U, square) and these landmarks: MaskReach with the
-// margins scaled to the image, minus what lies below the jaw line.
+// margins scaled to the image, minus what lies below the jaw line, then only
+// the head's piece (KeepHeadPiece).
 cv::Mat MatteBound(const cv::Mat& silhouette, const Landmarks2d& landmarks, const MatteRules& rules);
 
 // What is always covered: `silhouette` eroded by `erosion` times its edge, within `bound` (CV_8U each).

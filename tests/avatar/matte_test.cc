@@ -148,6 +148,42 @@ TEST(MatteBound, ReachesTheMarginsAndStopsAtTheJawLine) {
   EXPECT_EQ(at(with_neck, cheek + 3.0 * rules.side_margin * size * side), 0);
 }
 
+// Shoulders beyond the jaw's ends survive the jaw line's cut apart from the
+// head: the bound keeps only the head's piece, and loses none of the head.
+TEST(MatteBound, DropsWhatTheJawLinesCutLeavesApartFromTheHead) {
+  const int size = 128;
+  const PosedView v = View(Turned(), size);
+  const int neck_row = static_cast<int>(std::lround(v.landmarks[8].y())) + 4;
+  ASSERT_LT(neck_row, size - 8);
+  ASSERT_GT(v.silhouette.at<uchar>(neck_row, static_cast<int>(std::lround(v.landmarks[8].x()))), 0)
+      << "the shoulders must join the head through the neck for the test to prove anything";
+  cv::Mat with_shoulders = v.silhouette.clone();
+  with_shoulders.rowRange(neck_row, size).setTo(255);
+  const MatteRules rules;
+  const cv::Mat bound = MatteBound(with_shoulders, v.landmarks, rules);
+  const cv::Point left(1, size - 2), right(size - 2, size - 2);  // beyond the jaw's ends
+  EXPECT_EQ(bound.at<uchar>(left), 0);
+  EXPECT_EQ(bound.at<uchar>(right), 0);
+  // The cut alone leaves them (what the bound was before the head's piece was kept).
+  cv::Mat cut = MaskReach(with_shoulders, v.landmarks, static_cast<int>(std::lround(rules.hair_margin * size)),
+                          static_cast<int>(std::lround(rules.side_margin * size)));
+  ClearBelowJawLine(v.landmarks, &cut);
+  EXPECT_EQ(cut.at<uchar>(left), 255);
+  EXPECT_EQ(cut.at<uchar>(right), 255);
+  // Every pixel of the head's bound without shoulders is still in it.
+  const cv::Mat head = MatteBound(v.silhouette, v.landmarks, rules);
+  EXPECT_EQ(cv::countNonZero(head & ~bound), 0);
+  EXPECT_GT(cv::countNonZero(head), size * size / 8);
+  // With the neck kept the shoulders are joined to the head, and stay.
+  const cv::Mat with_neck = MatteBound(with_shoulders, v.landmarks, MatteRules{0.08, 0.02, true});
+  EXPECT_EQ(with_neck.at<uchar>(left), 255);
+  // A mask without the nose tip is left alone.
+  cv::Mat empty(size, size, CV_8U, cv::Scalar(0)), patch = empty.clone();
+  patch(cv::Rect(0, 0, 10, 10)).setTo(255);
+  KeepHeadPiece(v.landmarks, &patch);
+  EXPECT_EQ(cv::countNonZero(patch), 100);
+}
+
 // A learned matte added to an avatar without one starts from its picture; a
 // bounded one shows exactly the background outside the bound, and the bound is
 // the one the mask rules give for the frame.
@@ -246,9 +282,11 @@ TEST(Matte, CoverageLearnsTheMask) {
   };
   const torch::Tensor first_loss = loss();
   first_loss.backward();
-  for (const auto& p : a.modules().renderer->named_parameters())
-    if (p.key().find("alpha") != std::string::npos)
+  for (const auto& p : a.modules().renderer->named_parameters()) {
+    if (p.key().find("alpha") != std::string::npos) {
       EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
+    }
+  }
   const float first = first_loss.item<float>();
   for (int step = 0; step < 120; ++step) {
     adam.zero_grad();
