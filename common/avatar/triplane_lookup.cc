@@ -15,12 +15,18 @@ struct Taps {
   float weight[4];
 };
 
-Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
-  // grid_sample's unnormalisation (align_corners false) and border clipping,
-  // in its order of operations.
+// A coordinate in [-1, 1] as a texel position in [0, resolution - 1]:
+// grid_sample's unnormalisation (align_corners false) and border clipping, in
+// its order of operations. Not a number reads the first texel rather than
+// memory outside the plane.
+float TexelPosition(float coordinate, int64_t resolution) {
+  if (std::isnan(coordinate)) return 0;
   const float half = static_cast<float>(resolution) / 2, last = static_cast<float>(resolution - 1);
-  const float ix = std::clamp((a + 1) * half - 0.5f, 0.f, last);
-  const float iy = std::clamp((b + 1) * half - 0.5f, 0.f, last);
+  return std::clamp((coordinate + 1) * half - 0.5f, 0.f, last);
+}
+
+Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
+  const float ix = TexelPosition(a, resolution), iy = TexelPosition(b, resolution);
   const float x0 = std::floor(ix), y0 = std::floor(iy);
   const float fx = ix - x0, fy = iy - y0;
   // At the last texel the far taps weigh nothing: clamped to stay in the plane.

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <limits>
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/core/zip_archive.h"
@@ -279,6 +280,12 @@ TEST(SurfaceTexture, TheTexelMajorLookupReadsWhatGridSampleReads) {
     ASSERT_EQ(looked_up.sizes(), expected.sizes());
     EXPECT_LT((looked_up - expected).abs().max().item<float>(), 1e-6) << channels;
     EXPECT_GT(expected.abs().max().item<float>(), 0.5f) << "a lookup of random planes is not zero";
+    // Not a number (the receiver refuses such frames before) reads inside the planes.
+    {
+      torch::NoGradGuard no_grad;
+      const float nan = std::numeric_limits<float>::quiet_NaN();
+      EXPECT_TRUE(torch::isfinite(texture->forward(torch::tensor({nan, 0.f, nan}).view({1, 3}))).all().item<bool>());
+    }
     // Training after the switch: grid_sample's gradients still reach the planes.
     texture->forward(points).sum().backward();
     EXPECT_GT(texture->parameters()[0].grad().abs().sum().item<float>(), 0.f) << channels;
