@@ -65,6 +65,9 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--mask-background-ring", t.mask.background_ring,
                  "head masks: probable (not certain) background this far beyond the head's region, in face heights")
       ->capture_default_str();
+  app.add_option("--mask-working-size", t.mask.working_size,
+                 "head masks: GrabCut segments the head region at about this many pixels across")
+      ->capture_default_str();
   app.add_flag("!--no-appearance", t.fit_appearance, "skip the texture/light fit (stored in the recording's header)");
   app.add_flag("--calibrate", t.calibrate,
                "RGB, recorded input: calibrate identity (shape) and focal length over key frames spread over the "

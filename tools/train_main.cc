@@ -200,6 +200,9 @@ int main(int argc, char** argv) {
   prep->add_option("--side-margin", p.side_margin,
                    "below the eye line the silhouette grows only this much (raise it for long hair)")
       ->capture_default_str();
+  prep->add_option("--mask-working-size", p.mask_working_size,
+                   "training masks: GrabCut segments the head region at about this many pixels across")
+      ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
   prep->add_flag("!--no-gaze", p.gaze, "do not locate the irises: the eyes look straight ahead");
   prep->add_flag("!--no-landmark-repair", p.landmark_repair,

@@ -36,6 +36,7 @@ void PrepOptions::Check() const {
       .InRange("crop_scale", crop_scale, 1.0, 6.0)
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
       .InRange("side_margin", side_margin, 0.0, mask_margin)
+      .InRange("mask_working_size", mask_working_size, 32, 2048)
       .NonNegative("shape_prior", shape_prior)
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
@@ -133,6 +134,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
     track.identity_source = o.identity_from;
   }
   track.masks = true;
+  track.mask.working_size = o.mask_working_size;
   track.overlay = (dir / "preview.mp4").string();
   spdlog::info("prep: tracking {}", o.input);
   const OfflineTrack tracked = TrackVideo(model, track, [&](const OfflineFrame& f) {
@@ -314,6 +316,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
         {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)},
         {"gaze", o.gaze},
+        {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;

@@ -29,6 +29,7 @@
 #include "common/headmodel/params.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/head_mask.h"
 
 namespace headcast {
 
@@ -64,6 +65,11 @@ struct PrepOptions {
   // Keep what GrabCut finds below the jaw line (the neck). Off by default: it
   // finds the neck in some frames only, which no avatar can learn.
   bool keep_neck = false;
+  // GrabCut segments the head region at about this many pixels across
+  // (HeadMaskOptions::working_size); the live default is coarser than a 256²
+  // crop of a 512-pixel video, and the mask's outline is then drawn on that
+  // coarser grid.
+  int mask_working_size = HeadMaskOptions{}.working_size;
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)

@@ -97,6 +97,34 @@ TEST(HeadMask, APitchedHeadKeepsItsTop) {
   EXPECT_GT(sum_now, sum_before);
 }
 
+// GrabCut's grid is the outline's: segmented coarser than the picture, the
+// mask's edge is a staircase of the coarse pixels, up to half of one off.
+TEST(HeadMask, AFinerWorkingGridDrawsTheOutlineCloser) {
+  const HeadModel model = MakeBuiltinHead();
+  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
+  cv::RNG rng(7);
+  const cv::Mat background = ClutteredBackground(rng);
+  const HeadModelOutput out = model.Forward(HeadModelParams{});
+  HeadMaskOptions coarse, fine;
+  coarse.working_size = 100;
+  fine.working_size = 400;
+  int wrong_coarse = 0, wrong_fine = 0;
+  for (double yaw : {-20.0, 0.0, 25.0}) {
+    const RigidTransform cam_from_head = FrontalCamFromHead(0.6, yaw, 0, model.rest_landmark_centroid());
+    const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
+    cv::Mat image = background.clone();
+    r.image_bgr.copyTo(image, r.mask);
+    const Landmarks2d exact = ExactLandmarks(out, cam_from_head, cam);
+    const int c = cv::countNonZero(HeadMask(image, exact, coarse) != r.mask),
+              f = cv::countNonZero(HeadMask(image, exact, fine) != r.mask);
+    std::printf("yaw %+.0f: %d pixels wrong at working size %d, %d at %d\n", yaw, c, coarse.working_size, f,
+                fine.working_size);
+    wrong_coarse += c;
+    wrong_fine += f;
+  }
+  EXPECT_LT(wrong_fine, wrong_coarse);
+}
+
 TEST(HeadMask, BadInputIsRefused) {
   Landmarks2d l;
   for (auto& p : l) p = Eigen::Vector2d(10, 10);
