@@ -56,6 +56,9 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
       ->capture_default_str();
   app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");
+  app->add_option("--rare-expressions", fit->rare_expressions.strength,
+                  "real frames drawn by how rare their expression is, weight (isolation / median)^S (0: uniformly)")
+      ->capture_default_str();
   app->add_option("--z-augmentation", fit->z_augmentation, "probability of the distance augmentation on real frames")
       ->capture_default_str();
   app->add_option("--checkpoint-dir", fit->checkpoint_dir,

@@ -6,7 +6,10 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numeric>
 #include <opencv2/imgproc.hpp>
+#include <optional>
+#include <random>
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
@@ -61,6 +64,7 @@ void FitOptions::Check() const {
   c.ThrowIfErrors();
   loss.Check();
   mix.Check();
+  rare_expressions.Check();
   distributed.Check();
 }
 
@@ -320,6 +324,21 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   std::unique_ptr<GradientAllReduce> group;
   if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);
   const LossOptions& w = options.loss;
+  std::optional<std::discrete_distribution<size_t>> draw_frame;
+  if (data.real && options.rare_expressions.strength > 0) {
+    std::vector<Eigen::VectorXf> expressions;
+    for (int i : data.real->train()) expressions.push_back(data.real->params(i).expression);
+    const std::vector<double> weights = RareExpressionWeights(expressions, options.rare_expressions);
+    std::vector<double> sorted = weights;
+    std::sort(sorted.begin(), sorted.end(), std::greater<>());
+    const size_t tenth = std::max<size_t>(1, sorted.size() / 10);
+    spdlog::info(
+        "rare expressions: the rarest tenth of the {} training frames gets {:.0f} % of the draws (uniform: "
+        "10 %), weights {:.2f}..{:.2f}",
+        sorted.size(), 100 * std::accumulate(sorted.begin(), sorted.begin() + tenth, 0.0) / sorted.size(),
+        sorted.back(), sorted.front());
+    draw_frame.emplace(weights.begin(), weights.end());
+  }
   Stopwatch watch;
   for (int step = result.first_step; step < options.iterations; ++step) {
     modules.train();
@@ -341,7 +360,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         ++info.synthetic;
       } else {
         const std::vector<int>& train = data.real->train();
-        real_index = train[std::uniform_int_distribution<size_t>(0, train.size() - 1)(rng)];
+        real_index =
+            train[draw_frame ? (*draw_frame)(rng) : std::uniform_int_distribution<size_t>(0, train.size() - 1)(rng)];
         const RealSample& s = data.real->At(real_index);
         FrameParams frame = s.params;
         cv::Mat image = s.image_bgr, mask = s.mask;

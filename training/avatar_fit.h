@@ -11,6 +11,7 @@
 #include "common/avatar/avatar.h"
 #include "training/data_parallel.h"
 #include "training/dataset.h"
+#include "training/expression_balance.h"
 #include "training/face_regions.h"
 #include "training/synthetic_data.h"
 
@@ -79,6 +80,9 @@ struct FitOptions {
   // frames span few of psi's combinations, and an avatar that keys detail to
   // exact ones draws unseen expressions badly. 0: off.
   double expression_noise = 0;
+  // Real training frames are drawn by how rare their expression is among
+  // them (RareExpressionWeights); strength 0: uniformly.
+  RareExpressionOptions rare_expressions;
   int freeze_cnerf_layers = 0;  // CNeRF layers not trained (METHOD §6 freezes 4; SubjectOptions::freeze_layers)
   // z-augmentation of real frames (METHOD §5): with this probability the head's
   // distance is changed by a factor drawn in [1/z_scale_max, 1/z_scale_min]

@@ -397,6 +397,11 @@ std::optional<CameraContract> PreparedDataset::camera_contract() const {
   return c;
 }
 
+const FrameParams& PreparedDataset::params(int i) const {
+  HEADCAST_CHECK(i >= 0 && i < size()) << "PreparedDataset::params(" << i << ") of " << size() << " frames";
+  return frames_[static_cast<size_t>(i)];
+}
+
 const RealSample& PreparedDataset::At(int i) const {
   HEADCAST_CHECK(i >= 0 && i < size()) << "PreparedDataset::At(" << i << ") of " << size() << " frames";
   auto it = cache_.find(i);

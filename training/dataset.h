@@ -129,6 +129,8 @@ class PreparedDataset {
   const std::string& dir() const { return dir_; }
   // Reads (and caches) the crop and mask of position i.
   const RealSample& At(int i) const;
+  // The fitted parameters of position i, without reading its pictures.
+  const FrameParams& params(int i) const;
 
  private:
   std::string dir_;

@@ -101,6 +101,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
   if (real) {  // only real frames are augmented and get offsets
     j["z_augmentation"] = f.z_augmentation;
     j["learned_offsets"] = f.learn_offsets;
+    j["rare_expressions"] = f.rare_expressions.strength;
   }
   return j;
 }

@@ -1,0 +1,48 @@
+#include "training/expression_balance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "common/core/options.h"
+
+namespace headcast {
+
+void RareExpressionOptions::Check() const {
+  OptionsCheck c("RareExpressionOptions");
+  c.InRange("strength", strength, 0.0, 4.0).InRange("neighbours", neighbours, 1, 1000).InRange("cap", cap, 1.0, 100.0);
+  c.ThrowIfErrors();
+}
+
+std::vector<double> RareExpressionWeights(const std::vector<Eigen::VectorXf>& expressions,
+                                          const RareExpressionOptions& o) {
+  o.Check();
+  const size_t n = expressions.size();
+  std::vector<double> w(n, 1.0);
+  if (n < 2 || o.strength == 0) return w;
+  for (const Eigen::VectorXf& e : expressions)
+    if (e.size() != expressions[0].size() || !e.allFinite())
+      throw std::invalid_argument("RareExpressionWeights: expressions of different sizes or not finite");
+  const size_t k = std::min<size_t>(static_cast<size_t>(o.neighbours), n - 1);
+  std::vector<double> isolation(n), row(n);
+  for (size_t i = 0; i < n; ++i) {
+    row.clear();
+    for (size_t j = 0; j < n; ++j)
+      if (j != i) row.push_back((expressions[i] - expressions[j]).cast<double>().norm());
+    std::nth_element(row.begin(), row.begin() + static_cast<std::ptrdiff_t>(k - 1), row.end());
+    isolation[i] = row[k - 1];
+  }
+  std::vector<double> sorted = isolation;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n / 2), sorted.end());
+  const double median = sorted[n / 2];
+  if (!(median > 0)) return w;  // most frames repeat one expression exactly: nothing to weigh by
+  double sum = 0;
+  for (size_t i = 0; i < n; ++i) {
+    w[i] = std::clamp(std::pow(isolation[i] / median, o.strength), 1 / o.cap, o.cap);
+    sum += w[i];
+  }
+  for (double& x : w) x *= static_cast<double>(n) / sum;
+  return w;
+}
+
+}  // namespace headcast
