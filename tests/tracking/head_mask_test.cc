@@ -30,6 +30,32 @@ Landmarks2d ExactLandmarks(const HeadModelOutput& out, const RigidTransform& cam
   return exact;
 }
 
+// The built-in head at rest over one cluttered background, where its mask and
+// landmarks are known exactly.
+class RestingHeadScenes {
+ public:
+  explicit RestingHeadScenes(int seed) : rng_(seed), background_(ClutteredBackground(rng_)) {}
+  struct Scene {
+    cv::Mat image, mask;
+    Landmarks2d landmarks;
+  };
+  Scene At(double distance, double yaw_deg, double pitch_deg) const {
+    const RigidTransform cam_from_head =
+        FrontalCamFromHead(distance, yaw_deg, pitch_deg, model_.rest_landmark_centroid());
+    const HeadRender r = RenderHead(model_, out_.vertices, cam_from_head, cam_, AlbedoTexture(model_));
+    Scene s{background_.clone(), r.mask, ExactLandmarks(out_, cam_from_head, cam_)};
+    r.image_bgr.copyTo(s.image, r.mask);
+    return s;
+  }
+
+ private:
+  const HeadModel model_ = MakeBuiltinHead();
+  const PinholeCamera cam_ = PinholeCamera::FromFovY(640, 480, 40);
+  const HeadModelOutput out_ = model_.Forward(HeadModelParams{});
+  cv::RNG rng_;
+  cv::Mat background_;
+};
+
 TEST(HeadMask, IouOnRendersWithKnownMasks) {
   const HeadModel model = MakeBuiltinHead();
   const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
@@ -69,23 +95,15 @@ TEST(HeadMask, IouOnRendersWithKnownMasks) {
 // A head pitched chin-down looks short from brow to chin, and a region sized by
 // that height alone left the top of the head out as certain background.
 TEST(HeadMask, APitchedHeadKeepsItsTop) {
-  const HeadModel model = MakeBuiltinHead();
-  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
-  cv::RNG rng(5);
-  const cv::Mat background = ClutteredBackground(rng);
-  const HeadModelOutput out = model.Forward(HeadModelParams{});
+  const RestingHeadScenes scenes(5);
   HeadMaskOptions before;  // the region before the face height had a floor and the ring existed
   before.min_face_height = 0;
   before.background_ring = 0;
   double sum_now = 0, sum_before = 0;
   const double pitches[] = {-15, 20, 30, 40};
   for (double pitch : pitches) {
-    const RigidTransform cam_from_head = FrontalCamFromHead(0.7, 0, pitch, model.rest_landmark_centroid());
-    const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
-    cv::Mat image = background.clone();
-    r.image_bgr.copyTo(image, r.mask);
-    const Landmarks2d exact = ExactLandmarks(out, cam_from_head, cam);
-    const cv::Mat now = HeadMask(image, exact), old = HeadMask(image, exact, before);
+    const RestingHeadScenes::Scene r = scenes.At(0.7, 0, pitch);
+    const cv::Mat now = HeadMask(r.image, r.landmarks), old = HeadMask(r.image, r.landmarks, before);
     const int true_top = cv::boundingRect(r.mask).y, top = cv::boundingRect(now).y;
     std::printf("pitch %+.0f: IoU %.3f (before: %.3f), top row %d (truth %d, before %d)\n", pitch, MaskIou(now, r.mask),
                 MaskIou(old, r.mask), top, true_top, cv::boundingRect(old).y);
@@ -100,23 +118,15 @@ TEST(HeadMask, APitchedHeadKeepsItsTop) {
 // GrabCut's grid is the outline's: segmented coarser than the picture, the
 // mask's edge is a staircase of the coarse pixels, up to half of one off.
 TEST(HeadMask, AFinerWorkingGridDrawsTheOutlineCloser) {
-  const HeadModel model = MakeBuiltinHead();
-  const PinholeCamera cam = PinholeCamera::FromFovY(640, 480, 40);
-  cv::RNG rng(7);
-  const cv::Mat background = ClutteredBackground(rng);
-  const HeadModelOutput out = model.Forward(HeadModelParams{});
+  const RestingHeadScenes scenes(7);
   HeadMaskOptions coarse, fine;
   coarse.working_size = 100;
   fine.working_size = 400;
   int wrong_coarse = 0, wrong_fine = 0;
   for (double yaw : {-20.0, 0.0, 25.0}) {
-    const RigidTransform cam_from_head = FrontalCamFromHead(0.6, yaw, 0, model.rest_landmark_centroid());
-    const HeadRender r = RenderHead(model, out.vertices, cam_from_head, cam, AlbedoTexture(model));
-    cv::Mat image = background.clone();
-    r.image_bgr.copyTo(image, r.mask);
-    const Landmarks2d exact = ExactLandmarks(out, cam_from_head, cam);
-    const int c = cv::countNonZero(HeadMask(image, exact, coarse) != r.mask),
-              f = cv::countNonZero(HeadMask(image, exact, fine) != r.mask);
+    const RestingHeadScenes::Scene r = scenes.At(0.6, yaw, 0);
+    const int c = cv::countNonZero(HeadMask(r.image, r.landmarks, coarse) != r.mask),
+              f = cv::countNonZero(HeadMask(r.image, r.landmarks, fine) != r.mask);
     std::printf("yaw %+.0f: %d pixels wrong at working size %d, %d at %d\n", yaw, c, coarse.working_size, f,
                 fine.working_size);
     wrong_coarse += c;
