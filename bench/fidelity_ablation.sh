@@ -4,8 +4,8 @@
 # held-out frames through the receiver's render path.
 #   bench/fidelity_ablation.sh OUT [--general G.hcavatar] [--iterations N] [--video V] [--ict DIR]
 #       [--dataset DS] [--variant NAME=FLAGS]... [--reuse]
-# Without --variant: "thesis" (no surface texture, the thesis's avatar) and
-# "surface" (the default subject avatar). FLAGS are extra `headcast-train
+# Without --variant: "thesis" (no surface texture, head-frame CNeRF samples,
+# no matte: the thesis's avatar) and "default" (the default subject avatar). FLAGS are extra `headcast-train
 # subject` flags, e.g. --variant 'surface16=--surface-features 16'. With
 # --dataset, a prepared dataset (256² crops) is used instead of preparing the video.
 # --reuse: variants whose avatar is already in OUT are evaluated again, not retrained.
@@ -29,7 +29,7 @@ while [ $# -gt 0 ]; do
 done
 source "$root/bench/person_args.sh"
 parse_person_args "${person[@]}"
-[ ${#variants[@]} -gt 0 ] || variants=("thesis=--surface-features 0" "surface=")
+[ ${#variants[@]} -gt 0 ] || variants=("thesis=--surface-features 0 --no-canonical-samples --matte none" "default=")
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 source "$root/bench/avatar_runs.sh"

@@ -227,7 +227,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     Avatar general = Avatar::Load(o.general, model);
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
-    c.canonical_samples = c.canonical_samples || o.config.canonical_samples;
+    c.canonical_samples = o.config.canonical_samples;  // the subject's choice, whatever the general model's
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }

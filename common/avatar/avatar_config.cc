@@ -162,6 +162,7 @@ AvatarConfig AvatarConfig::HeadNeRFSized() {
 void ApplySubjectDefaults(AvatarConfig* config) {
   config->surface_features = kSubjectSurfaceFeatures;
   config->surface_conditioned = true;
+  config->canonical_samples = true;
   config->matte = kSubjectMatte;
 }
 

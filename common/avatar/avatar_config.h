@@ -116,7 +116,8 @@ struct AvatarConfig : AvatarCommonConfig {
 
 // A subject's avatar by default (headcast-train subject and create, the render
 // benchmark's subject row): the surface texture with its branch conditioned
-// per frame, and the bounded matte. The thesis's avatar has none of them.
+// per frame, CNeRF samples in the canonical head, and the bounded matte. The
+// thesis's avatar has none of them.
 void ApplySubjectDefaults(AvatarConfig* config);
 
 }  // namespace headcast

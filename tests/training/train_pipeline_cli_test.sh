@@ -86,15 +86,19 @@ interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
   ok "interpolation: 11 in-between frames for 12 training frames, trained on, never tested on" ||
   bad "interpolation: $interp frames, $(json "$tmp/i.json" "j['interpolated_frames']")"
 
-# A subject's texture branch is conditioned per frame by default; without a texture (the thesis's avatar) there is
-# nothing to condition, and asking for both is refused.
+# A subject's texture branch is conditioned per frame and its CNeRF samples are canonical by default (the general
+# model has head-frame samples); without a texture there is nothing to condition, and asking for both is refused.
+# --surface-features 0 --no-canonical-samples is the thesis's avatar.
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
-  --eval 2 --surface-features 0 --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
+  --eval 2 --surface-features 0 --no-canonical-samples --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
 config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('$1').read('manifest.json'))['config']$2)"; }
-[ "$(config "$tmp/i.hcavatar" "['surface_conditioned']")" = True ] &&
+[ "$(config "$tmp/general.hcavatar" "['canonical_samples']")" = False ] &&
+  [ "$(config "$tmp/i.hcavatar" "['surface_conditioned']")" = True ] &&
+  [ "$(config "$tmp/i.hcavatar" "['canonical_samples']")" = True ] &&
   [ "$(config "$tmp/t.hcavatar" "['surface_features']")" = 0 ] &&
   [ "$(config "$tmp/t.hcavatar" "['surface_conditioned']")" = False ] &&
-  ok "subject: the texture's branch conditioned by default; --surface-features 0 has neither" ||
+  [ "$(config "$tmp/t.hcavatar" "['canonical_samples']")" = False ] &&
+  ok "subject: conditioned texture and canonical samples by default; the thesis's flags have neither" ||
   bad "subject conditioning: $(tail -3 "$tmp/t.err")"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-features 0 --surface-conditioned --out "$tmp/u.hcavatar" 2>&1)
