@@ -5,9 +5,10 @@
 #   bench/fidelity_ablation.sh OUT [--general G.hcavatar] [--iterations N] [--video V] [--ict DIR]
 #       [--dataset DS] [--variant NAME=FLAGS]... [--reuse]
 # Without --variant: "thesis" (no surface texture, head-frame CNeRF samples,
-# no matte: the thesis's avatar) and "default" (the default subject avatar). FLAGS are extra `headcast-train
-# subject` flags, e.g. --variant 'surface16=--surface-features 16'. With
-# --dataset, a prepared dataset (256² crops) is used instead of preparing the video.
+# no matte: the thesis's avatar) and "default" (the default subject avatar).
+# FLAGS are extra `headcast-train subject` flags, e.g. --variant
+# 'surface16=--surface-features 16'. With --dataset, a prepared dataset (256²
+# crops) is used instead of preparing the video.
 # --reuse: variants whose avatar is already in OUT are evaluated again, not retrained.
 # Writes OUT/ablation.{json,md} and prints the table.
 set -euo pipefail
