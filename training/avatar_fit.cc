@@ -95,20 +95,27 @@ struct PreparedSample {
   torch::Tensor target;  // (1, 3, R, R): the picture masked onto the background colour
   torch::Tensor mask;    // (1, 1, R, R) in {0, 1}
   torch::Tensor weight;  // (1, 1, R, R) per-pixel weight of the MSE; undefined: all ones
+  torch::Tensor blind;   // (1, 1, R, R) bool: pixels the loss ignores; undefined: none
 };
 
 // With a bounded matte the mask is cut to the bound too: a synthetic render
 // shows the neck, which an avatar bounded at the jaw line cannot.
 PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const SubjectParams& subject,
                        const FrameParams& frame, const cv::Mat& image_bgr, const cv::Mat& mask, RaySampler* sampler,
-                       const FaceRegionOptions& regions, std::mt19937* rng) {
+                       const FaceRegionOptions& regions, bool blind_regions, std::mt19937* rng) {
   PreparedSample p;
   PrepareAvatarFrame(config, model, model.MakeIdentity(subject.shape.cast<double>()), subject, frame, sampler, rng,
                      &p.inputs);
-  if (regions.weight > 0) {
-    const cv::Mat w = FaceRegionWeights(ProjectLandmarks(p.inputs.posed, p.inputs.cam_from_head, subject.intrinsics),
-                                        image_bgr.size(), regions);
-    p.weight = torch::from_blob(w.data, {1, 1, w.rows, w.cols}, torch::kFloat).clone();
+  if (regions.weight > 0 || blind_regions) {
+    const Landmarks2d landmarks = ProjectLandmarks(p.inputs.posed, p.inputs.cam_from_head, subject.intrinsics);
+    if (regions.weight > 0) {
+      const cv::Mat w = FaceRegionWeights(landmarks, image_bgr.size(), regions);
+      p.weight = torch::from_blob(w.data, {1, 1, w.rows, w.cols}, torch::kFloat).clone();
+    }
+    if (blind_regions) {
+      const cv::Mat b = FaceRegionMask(landmarks, image_bgr.size(), regions);
+      p.blind = torch::from_blob(b.data, {1, 1, b.rows, b.cols}, torch::kUInt8).gt(127);
+    }
   }
   cv::Mat m = mask;
   if (!p.inputs.matte_bound.empty()) cv::bitwise_and(mask, p.inputs.matte_bound, m);
@@ -356,7 +363,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       int real_index = -1;
       if (u01(rng) < p_synthetic) {
         const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
-        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions, &rng);
+        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions,
+                    w.blind_synthetic_face, &rng);
         ++info.synthetic;
       } else {
         const std::vector<int>& train = data.real->train();
@@ -370,7 +378,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, data.real->subject().intrinsics, &frame, &image, &mask);
         }
-        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, w.regions, &rng);
+        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, w.regions, false, &rng);
       }
       if (real_index >= 0 && options.expression_noise > 0) {
         std::normal_distribution<float> noise(0.0f, static_cast<float>(options.expression_noise));
@@ -388,13 +396,17 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
       }
       const AvatarOutput out = RunAvatar(modules, p.inputs);
-      const torch::Tensor mse = torch::mse_loss(out.image, p.target);
-      const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - p.target).square()).mean() : mse;
+      // Blind pixels take the output itself as their target: every term (MSE,
+      // SSIM, VGG) then sees no error there and sends no gradient through them.
+      const torch::Tensor target =
+          p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
+      const torch::Tensor mse = torch::mse_loss(out.image, target);
+      const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - target).square()).mean() : mse;
       torch::Tensor loss = w.mse_weight * weighted_mse + offset_penalty;
       if (vgg)
-        loss = loss + w.perceptual_weight * (*vgg)(out.image, p.target);
+        loss = loss + w.perceptual_weight * (*vgg)(out.image, target);
       else if (w.ssim_weight > 0)
-        loss = loss + w.ssim_weight * (1 - Ssim(out.image, p.target));
+        loss = loss + w.ssim_weight * (1 - Ssim(out.image, target));
       if (out.coverage.defined() && w.matte_weight > 0)
         loss = loss + w.matte_weight * torch::binary_cross_entropy(out.coverage.clamp(1e-5, 1 - 1e-5), p.mask);
       (loss / options.batch).backward();

@@ -45,6 +45,12 @@ struct LossOptions {
   // The MSE weighted up around the fitted eyes, brows and mouth (their
   // projected landmarks): where expressions are read; weight 0: off.
   FaceRegionOptions regions;
+  // Synthetic renders (the head model painted with the subject's texture)
+  // teach the outline, hair and poses the video lacks, but their eyes and
+  // mouth are painted: no real lids, irises or teeth. When set, their loss
+  // inside the same regions is zero (the target there is the avatar's own
+  // output), so those regions learn from real frames only.
+  bool blind_synthetic_face = false;
   void Check() const;
 };
 

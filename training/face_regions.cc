@@ -44,23 +44,35 @@ std::vector<cv::Point> GrownHull(const Landmarks2d& l, std::initializer_list<std
   return out;
 }
 
+// The three regions (each eye with its brow, the mouth) as grown hulls; none
+// when the landmarks are not finite or the eyes coincide.
+std::vector<std::vector<cv::Point>> RegionHulls(const Landmarks2d& landmarks, double margin) {
+  for (const auto& p : landmarks)
+    if (!p.allFinite() || p.cwiseAbs().maxCoeff() > 1e6) return {};
+  const double eye_distance = (Mean(landmarks, 42, 47) - Mean(landmarks, 36, 41)).norm();
+  if (eye_distance < 1) return {};
+  const double grow = margin * eye_distance;
+  // dlib's order: brows 17-21 (right) and 22-26 (left), eyes 36-41 and 42-47, mouth 48-59.
+  return {GrownHull(landmarks, {{17, 21}, {36, 41}}, grow), GrownHull(landmarks, {{22, 26}, {42, 47}}, grow),
+          GrownHull(landmarks, {{48, 59}}, grow)};
+}
+
 }  // namespace
 
 cv::Mat FaceRegionWeights(const Landmarks2d& landmarks, cv::Size size, const FaceRegionOptions& options) {
   options.Check();
   cv::Mat weights(size, CV_32F, cv::Scalar(1.0f));
   if (options.weight == 0) return weights;
-  for (const auto& p : landmarks)
-    if (!p.allFinite() || p.cwiseAbs().maxCoeff() > 1e6) return weights;
-  const double eye_distance = (Mean(landmarks, 42, 47) - Mean(landmarks, 36, 41)).norm();
-  if (eye_distance < 1) return weights;
-  const double grow = options.margin * eye_distance;
-  // dlib's order: brows 17-21 (right) and 22-26 (left), eyes 36-41 and 42-47, mouth 48-59.
-  const std::vector<std::vector<cv::Point>> regions = {GrownHull(landmarks, {{17, 21}, {36, 41}}, grow),
-                                                       GrownHull(landmarks, {{22, 26}, {42, 47}}, grow),
-                                                       GrownHull(landmarks, {{48, 59}}, grow)};
-  for (const auto& r : regions) cv::fillConvexPoly(weights, r, cv::Scalar(1.0 + options.weight), cv::LINE_8);
+  for (const auto& r : RegionHulls(landmarks, options.margin))
+    cv::fillConvexPoly(weights, r, cv::Scalar(1.0 + options.weight), cv::LINE_8);
   return weights;
+}
+
+cv::Mat FaceRegionMask(const Landmarks2d& landmarks, cv::Size size, const FaceRegionOptions& options) {
+  options.Check();
+  cv::Mat mask(size, CV_8U, cv::Scalar(0));
+  for (const auto& r : RegionHulls(landmarks, options.margin)) cv::fillConvexPoly(mask, r, cv::Scalar(255), cv::LINE_8);
+  return mask;
 }
 
 }  // namespace headcast

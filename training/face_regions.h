@@ -23,4 +23,8 @@ struct FaceRegionOptions {
 // finite, or whose eyes coincide, give all ones.
 cv::Mat FaceRegionWeights(const Landmarks2d& landmarks, cv::Size size, const FaceRegionOptions& options);
 
+// CV_8U map of `size`: 255 inside the same regions (options.margin; the
+// weight does not matter), 0 elsewhere; all 0 for unusable landmarks.
+cv::Mat FaceRegionMask(const Landmarks2d& landmarks, cv::Size size, const FaceRegionOptions& options);
+
 }  // namespace headcast

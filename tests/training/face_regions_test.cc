@@ -79,6 +79,19 @@ TEST(FaceRegionWeights, OffOrUnusableLandmarksGiveOnes) {
   EXPECT_FLOAT_EQ(At(FaceRegionWeights(shifted, {256, 256}, o), 8, 180), 3.0f);
 }
 
+TEST(FaceRegionMask, TheWeightedRegionsWhateverTheWeight) {
+  FaceRegionOptions o;  // weight 0: the mask does not depend on it
+  const cv::Mat m = FaceRegionMask(Face(), {256, 256}, o);
+  ASSERT_EQ(m.type(), CV_8U);
+  o.weight = 4;
+  const cv::Mat w = FaceRegionWeights(Face(), {256, 256}, o);
+  EXPECT_EQ(cv::countNonZero(m != (w > 1.5f)), 0);
+  EXPECT_GT(cv::countNonZero(m), 1000);
+  Landmarks2d nan = Face();
+  nan[40].y() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(cv::countNonZero(FaceRegionMask(nan, {256, 256}, o)), 0);
+}
+
 TEST(FaceRegionWeights, OptionsAreChecked) {
   FaceRegionOptions o;
   o.weight = -1;

@@ -100,6 +100,15 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
   [ "$(config "$tmp/t.hcavatar" "['canonical_samples']")" = False ] &&
   ok "subject: conditioned texture and canonical samples by default; the thesis's flags have neither" ||
   bad "subject conditioning: $(tail -3 "$tmp/t.err")"
+# Synthetic renders blind in the face regions: the first step's samples are all synthetic (start 1), its loss finite.
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --synthetic-start 1 --blind-synthetic-face --out "$tmp/b.hcavatar" --json "$tmp/b.json" \
+  > /dev/null 2> "$tmp/b.err"
+[ "$(json "$tmp/b.json" "j['synthetic_mix']['face_regions']")" = "not learned from them" ] &&
+  [ "$(json "$tmp/i.json" "j['synthetic_mix']['face_regions']")" = "learned from them" ] &&
+  [ "$(json "$tmp/b.json" "j['fit']['region_weight']")" = 4.0 ] &&
+  [ "$(json "$tmp/b.json" "0 < j['fit']['final_loss'] < 10")" = True ] &&
+  ok "subject --blind-synthetic-face: trained and recorded" || bad "blind synthetic face: $(tail -3 "$tmp/b.err")"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-features 0 --surface-conditioned --out "$tmp/u.hcavatar" 2>&1)
 [ $? -ne 0 ] && grep -q "surface-conditioned needs --surface-features" <<<"$out" &&
