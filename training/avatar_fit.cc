@@ -363,8 +363,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       int real_index = -1;
       if (u01(rng) < p_synthetic) {
         const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
-        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions,
-                    w.blind_synthetic_face, &rng);
+        p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions, w.blind_synthetic_face,
+                    &rng);
         ++info.synthetic;
       } else {
         const std::vector<int>& train = data.real->train();
@@ -398,8 +398,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       const AvatarOutput out = RunAvatar(modules, p.inputs);
       // Blind pixels take the output itself as their target: every term (MSE,
       // SSIM, VGG) then sees no error there and sends no gradient through them.
-      const torch::Tensor target =
-          p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
+      const torch::Tensor target = p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
       const torch::Tensor mse = torch::mse_loss(out.image, target);
       const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - target).square()).mean() : mse;
       torch::Tensor loss = w.mse_weight * weighted_mse + offset_penalty;
