@@ -36,6 +36,9 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--final-lr", fit->final_lr_fraction,
                   "learning rate at the last step as a fraction of --lr (exponential fall; 1 = constant)")
       ->capture_default_str();
+  app->add_option("--warmup", fit->warmup_steps,
+                  "the rate rises linearly to --lr over this many first steps (0: from the first step)")
+      ->capture_default_str();
   app->add_option("--weight-average", fit->weight_average,
                   "keep and save a moving average of the weights with this decay per step (0 = off; "
                   "pretrain's default 0, subject's 1 - 8/iterations, at most 0.999)");

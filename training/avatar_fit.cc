@@ -50,6 +50,7 @@ void FitOptions::Check() const {
       .InRange("batch", batch, 1, 4096)
       .Positive("learning_rate", learning_rate)
       .InRange("final_lr_fraction", final_lr_fraction, 1e-4, 1.0)
+      .InRange("warmup_steps", warmup_steps, 0, 100000000)
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .That(weight_average == 0 || (weight_average > 0 && weight_average < 1),
             "weight_average is 0 (off) or a decay in (0, 1)")
@@ -69,8 +70,9 @@ void FitOptions::Check() const {
 }
 
 double FitOptions::LearningRateAt(int step) const {
-  if (iterations <= 1) return learning_rate;
-  return learning_rate * std::pow(final_lr_fraction, static_cast<double>(step) / (iterations - 1));
+  const double warmup = step < warmup_steps ? (step + 1.0) / warmup_steps : 1.0;
+  if (iterations <= 1) return learning_rate * warmup;
+  return learning_rate * warmup * std::pow(final_lr_fraction, static_cast<double>(step) / (iterations - 1));
 }
 
 double FitOptions::WeightAverageDecayAt(int step) const {

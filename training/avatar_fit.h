@@ -64,6 +64,11 @@ struct FitOptions {
   // talking_d9 (256², 2000 steps) a fall to 0.1 gave 24.73 dB against 24.97
   // constant — the fine-tune is still underfitting when it ends.
   double final_lr_fraction = 1;
+  // The rate rises linearly over the first warmup_steps steps, from
+  // 1/warmup_steps of the schedule's to all of it: Adam's moment estimates
+  // start from one batch, and a fine-tune at twice the default rate
+  // diverged within its first steps without a warm-up. 0: none.
+  int warmup_steps = 0;
   double LearningRateAt(int step) const;
   // The surface texture's rate over the networks' (its texels each see a
   // small part of every picture; bench/DEFAULTS.md has the measurement).

@@ -226,6 +226,22 @@ TEST(FitOptions, LearningRateFallsExponentiallyToItsFinalFraction) {
   EXPECT_THROW(f.Check(), std::invalid_argument);
 }
 
+TEST(FitOptions, AWarmUpRampsTheFirstStepsThenLeavesTheSchedule) {
+  FitOptions f;
+  f.iterations = 1001;
+  f.learning_rate = 2e-3;
+  f.warmup_steps = 100;
+  EXPECT_NEAR(f.LearningRateAt(0), 2e-5, 1e-15);
+  EXPECT_NEAR(f.LearningRateAt(49), 1e-3, 1e-15);
+  EXPECT_DOUBLE_EQ(f.LearningRateAt(99), 2e-3);
+  EXPECT_DOUBLE_EQ(f.LearningRateAt(700), 2e-3);
+  f.final_lr_fraction = 0.01;
+  EXPECT_NEAR(f.LearningRateAt(500), 2e-4, 1e-12);
+  EXPECT_NO_THROW(f.Check());
+  f.warmup_steps = -1;
+  EXPECT_THROW(f.Check(), std::invalid_argument);
+}
+
 TEST(ImageLosses, SsimAndPsnr) {
   torch::manual_seed(3);
   const torch::Tensor a = torch::rand({1, 3, 32, 32});
