@@ -41,7 +41,8 @@ struct PretrainOptions {
 nlohmann::json RunPretrain(PretrainOptions options);
 
 // A fine-tune's optimiser and loss defaults where they differ from pretraining's:
-// the MSE weighted up around the eyes, brows and mouth (bench/DEFAULTS.md).
+// the MSE weighted up around the eyes, brows and mouth, a higher rate reached
+// through a warm-up (bench/DEFAULTS.md).
 FitOptions SubjectFitDefaults();
 
 // Per-subject avatar (METHOD §6): from a general model, beta and tau frozen,

@@ -100,6 +100,11 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
   [ "$(config "$tmp/t.hcavatar" "['canonical_samples']")" = False ] &&
   ok "subject: conditioned texture and canonical samples by default; the thesis's flags have neither" ||
   bad "subject conditioning: $(tail -3 "$tmp/t.err")"
+# A subject's optimiser: twice pretraining's rate, reached over a 200-step warm-up (pretraining: none).
+[ "$(json "$tmp/i.json" "j['fit']['learning_rate'] == 0.004 and j['fit']['warmup_steps'] == 200")" = True ] &&
+  [ "$(json "$tmp/two.json" "j['fit']['learning_rate'] == 0.002 and j['fit']['warmup_steps'] == 0")" = True ] &&
+  ok "subject: rate 0.004 after a 200-step warm-up by default; pretrain 0.002 without" ||
+  bad "subject rate: $(json "$tmp/i.json" "j['fit']")"
 # Synthetic renders blind in the face regions: the first step's samples are all synthetic (start 1), its loss finite.
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
   --eval 2 --synthetic-start 1 --blind-synthetic-face --out "$tmp/b.hcavatar" --json "$tmp/b.json" \
