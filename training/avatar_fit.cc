@@ -398,8 +398,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
       }
       const AvatarOutput out = RunAvatar(modules, p.inputs);
-      // Blind pixels take the output itself as their target: every term (MSE,
-      // SSIM, VGG) then sees no error there and sends no gradient through them.
+      // Blind pixels take the output itself as their target: the MSE sees no
+      // error there, SSIM and VGG only through windows reaching past them.
       const torch::Tensor target = p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
       const torch::Tensor mse = torch::mse_loss(out.image, target);
       const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - target).square()).mean() : mse;

@@ -47,9 +47,9 @@ struct LossOptions {
   FaceRegionOptions regions;
   // Synthetic renders (the head model painted with the subject's texture)
   // teach the outline, hair and poses the video lacks, but their eyes and
-  // mouth are painted: no real lids, irises or teeth. When set, their loss
-  // inside the same regions is zero (the target there is the avatar's own
-  // output), so those regions learn from real frames only.
+  // mouth are painted: no real lids, irises or teeth. When set, their target
+  // inside the same regions is the avatar's own output, so those regions
+  // learn (up to the windowed terms' edges) from real frames only.
   bool blind_synthetic_face = false;
   void Check() const;
 };
@@ -66,8 +66,8 @@ struct FitOptions {
   double final_lr_fraction = 1;
   // The rate rises linearly over the first warmup_steps steps, from
   // 1/warmup_steps of the schedule's to all of it: Adam's moment estimates
-  // start from one batch, and a fine-tune at twice the default rate
-  // diverged within its first steps without a warm-up. 0: none.
+  // start from one batch, and a fine-tune at 4e-3 diverged within its
+  // first 60 steps without a warm-up (bench/DEFAULTS.md). 0: none.
   int warmup_steps = 0;
   double LearningRateAt(int step) const;
   // The surface texture's rate over the networks' (its texels each see a
