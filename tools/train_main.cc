@@ -272,8 +272,8 @@ int main(int argc, char** argv) {
       ->add_option("--synthetic-start", s.synthetic_start, "probability of a synthetic sample at step 0 (falls to 0)")
       ->capture_default_str();
   subject->add_flag("--blind-synthetic-face", s.fit.loss.blind_synthetic_face,
-                    "synthetic renders teach no eyes, brows or mouth (their loss there is zero: the painted mesh has "
-                    "no real lids, irises or teeth)");
+                    "synthetic renders teach no eyes, brows or mouth (their target there is the avatar's own output: "
+                    "the painted mesh has no real lids, irises or teeth)");
   subject->add_flag("!--no-interpolated", s.use_interpolated, "leave out the dataset's interpolated frames");
   subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")
       ->capture_default_str();

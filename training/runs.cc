@@ -189,7 +189,7 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
 FitOptions SubjectFitDefaults() {
   FitOptions f;
   f.loss.regions.weight = 4;
-  f.learning_rate = 4e-3;  // twice pretraining's, which diverges without the warm-up
+  f.learning_rate = 4e-3;  // twice pretraining's; a fine-tune at this rate diverges without the warm-up
   f.warmup_steps = 200;
   return f;
 }
