@@ -134,6 +134,10 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_option("--surface-hidden", config->surface_hidden,
                   "hidden channels of the texture's per-pixel branch (0: twice --surface-features)")
       ->capture_default_str();
+  app->add_option("--surface-levels", config->surface_levels,
+                  "the renderer's x2 levels the texture joins, counted from the last (1: the last only; 2: averaged "
+                  "into the level before too, where a 3x3 layer sees it)")
+      ->capture_default_str();
   app->add_option("--surface-lr", fit->surface_lr_scale, "the texture's learning rate as a multiple of --lr")
       ->capture_default_str();
   app->add_flag("--canonical-samples,!--no-canonical-samples", config->canonical_samples,

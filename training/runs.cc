@@ -182,6 +182,7 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
   to->surface_shell = from.surface_shell;
   to->surface_conditioned = from.surface_conditioned;
   to->surface_hidden = from.surface_hidden;
+  to->surface_levels = from.surface_levels;
 }
 
 }  // namespace

@@ -54,7 +54,8 @@ void AvatarConfig::Check() const {
   c.InRange("surface_shell", surface_shell, 0.0, 0.2);
   c.That(surface_shell == 0 || has_surface(), "surface_shell needs surface_features > 0");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
-  c.InRange("surface_hidden", surface_hidden, 0, 256);
+  c.InRange("surface_hidden", surface_hidden, 0, 256).InRange("surface_levels", surface_levels, 1, 3);
+  c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
@@ -89,6 +90,7 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"surface_shell", surface_shell},
           {"surface_conditioned", surface_conditioned},
           {"surface_hidden", surface_hidden},
+          {"surface_levels", surface_levels},
           {"matte", MatteModeName(matte)},
           {"matte_rules", matte_rules.ToJson()},
           {"matte_core", matte_core}};
@@ -127,6 +129,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
     c.surface_conditioned = j.value("surface_conditioned", false);
     c.surface_hidden = j.value("surface_hidden", 0);
+    c.surface_levels = j.value("surface_levels", 1);
     c.matte = ParseMatteMode(j.value("matte", std::string("none")));
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);

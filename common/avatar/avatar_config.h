@@ -78,6 +78,12 @@ struct AvatarConfig : AvatarCommonConfig {
   // inside) instead of its average. false: the same branch for every frame.
   bool surface_conditioned = false;
   int surface_hidden = 0;  // the branch's hidden channels (0: twice surface_features, as in files from before)
+  // How many of the renderer's x2 levels, counted from the last, the texture
+  // joins (1: the last only, as in files from before). At the last level it
+  // meets only 1x1 layers, so each pixel's colour is drawn from its own texel;
+  // a level before, averaged to that level's size, it passes the next level's
+  // dilated 3x3 too, and a lid or brow the mesh moves can shape its neighbours.
+  int surface_levels = 1;
 
   // The outline (kNone in files from before it). A coverage logit, summed over
   // the renderer's levels like its RGB, can turn from 0 to 1 within a pixel

@@ -256,9 +256,19 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
     // texture gets gradients from the first step that moves these weights.
     if (config.surface_conditioned)
       surface_film_ = register_module("surface_film", torch::nn::Linear(config.motion_dim(), 2 * hidden));
+    // Earlier levels get the surface term averaged to their size through
+    // their own 1x1 layers, zero at first too.
+    first_surface_level_ = 3 - config.surface_levels;
+    if (first_surface_level_ < 2) {  // files with the last level only hold no such entry
+      surface_early_ = register_module("surface_early", torch::nn::ModuleList());
+      for (int k = first_surface_level_; k < 2; ++k)
+        surface_early_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[3], ch[k + 1], 1)));
+    }
     torch::NoGradGuard no_grad;
     surface_out_->weight.zero_();
     surface_out_->bias.zero_();
+    if (surface_early_)
+      for (auto& p : surface_early_->parameters()) p.zero_();
     // Zero too: a conditioned branch starts as the unconditioned one.
     if (surface_film_)
       for (auto& p : surface_film_->parameters()) p.zero_();
@@ -338,7 +348,13 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
     const ImageWindow w = k == 2 ? last : ImageWindow::Whole(2 * x.size(2), 2 * x.size(3));
     rgb = UpsampleWindow(rgb, w);
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x, w);
-    if (k == 2 && surface_term.defined()) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
+    if (surface_term.defined() && k == 2) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
+    if (surface_term.defined() && k < 2 && k >= first_surface_level_) {
+      const int64_t factor = int64_t{1} << (2 - k);
+      const torch::Tensor pooled = F::avg_pool2d(surface_term, F::AvgPool2dFuncOptions(factor));
+      x = x + Conv1x1(*surface_early_[k - first_surface_level_]->as<torch::nn::Conv2dImpl>(),
+                      pooled.contiguous(x.suggest_memory_format()));
+    }
     x = F::leaky_relu(Conv1x1(*post_[k]->as<torch::nn::Conv2dImpl>(), x),
                       F::LeakyReLUFuncOptions().negative_slope(0.2));
     rgb = rgb + Conv1x1(*to_rgb_[k]->as<torch::nn::Conv2dImpl>(), x);

@@ -114,8 +114,9 @@ inline constexpr double kInitialCoverageLogit = 6;
 // Three x2 levels; at each, RGB from the previous level bilinearly upsampled
 // plus RGB from the upsampled features; 1x1 convs and LeakyReLU elsewhere.
 // With surface features, a per-pixel two-layer branch of the full-resolution
-// surface image joins the last level's features. With a matte, a coverage
-// logit is built the same way as the RGB (its own 1x1 convs per level).
+// surface image joins the last level's features (averaged, earlier levels'
+// too when configured). With a matte, a coverage logit is built the same way
+// as the RGB (its own 1x1 convs per level).
 class NeuralRendererImpl : public torch::nn::Module {
  public:
   explicit NeuralRendererImpl(const AvatarConfig& config);
@@ -140,9 +141,10 @@ class NeuralRendererImpl : public torch::nn::Module {
 
  private:
   bool channels_last_ = false;
+  int first_surface_level_ = 2;  // the first x2 level (0..2) the surface term joins
   torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr}, input_alpha_{nullptr};
   torch::nn::Linear surface_film_{nullptr};  // motion -> (scale, shift) of the surface branch's hidden layer
-  torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_;
+  torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_, surface_early_;
 };
 TORCH_MODULE(NeuralRenderer);
 

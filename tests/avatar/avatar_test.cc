@@ -177,6 +177,7 @@ TEST(NeuralRenderer, AWindowOrChannelsLastDrawTheSamePixels) {
   AvatarConfig c = Tiny();
   c.matte = MatteMode::kLearned;
   c.surface_features = 4;
+  c.surface_levels = 3;  // the texture into every level: the averaged terms must land where the whole picture's do
   NeuralRenderer net(c);
   torch::manual_seed(3);
   {  // a matte and a surface branch that start at zero would hide a misplaced window: make them speak

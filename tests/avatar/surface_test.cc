@@ -388,6 +388,78 @@ TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
   }
 }
 
+// The texture joins the level before the last too when asked: it starts as the
+// avatar without that path, the path's weights learn once the texture draws,
+// then the picture differs from the last-level-only one; the file keeps it.
+TEST(SurfaceTexture, JoinsAnEarlierLevelWhenAskedAndStartsWithoutIt) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig two = TinyWithSurface();
+  two.surface_levels = 2;
+  nlohmann::json old = two.ToJson();
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_levels, 2);
+  old.erase("surface_levels");
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_levels, 1) << "files from before: the last level only";
+  for (int bad : {0, 4}) {
+    AvatarConfig c = two;
+    c.surface_levels = bad;
+    EXPECT_THROW(c.Check(), std::invalid_argument) << bad;
+  }
+  AvatarConfig untextured = testing::TinyAvatarConfig();
+  untextured.surface_levels = 2;
+  EXPECT_THROW(untextured.Check(), std::invalid_argument);
+
+  Avatar last = Avatar::CreateRandom(TinyWithSurface(), m, DefaultSubject(m, 128), 8);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : last.modules().surface->parameters()) t.uniform_(-1, 1);
+    for (auto& p : last.modules().renderer->named_parameters())
+      if (p.key().find("surface_out") != std::string::npos) p.value().uniform_(-0.5, 0.5);
+  }
+  Avatar both = Avatar::CreateRandom(two, m, last.subject(), 8);
+  {  // the last-level avatar's weights; the earlier level's path at its zero start
+    torch::NoGradGuard no_grad;
+    auto from = last.modules().renderer->named_parameters();
+    int early = 0;
+    for (auto& p : both.modules().renderer->named_parameters()) {
+      if (const torch::Tensor* t = from.find(p.key())) {
+        p.value().copy_(*t);
+      } else {
+        EXPECT_NE(p.key().find("surface_early"), std::string::npos) << p.key();
+        ++early;
+      }
+    }
+    EXPECT_EQ(early, 2) << "one 1x1 layer (weight, bias) for the level before the last";
+    auto cnerf = last.modules().cnerf->named_parameters();
+    for (auto& p : both.modules().cnerf->named_parameters()) p.value().copy_(cnerf[p.key()]);
+    both.modules().surface->parameters()[0].copy_(last.modules().surface->parameters()[0]);
+  }
+  const FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(last, frame), Shown(both, frame), cv::NORM_INF), 0);
+  EXPECT_THROW(last.WithRuntimeSwitches(two), std::invalid_argument) << "a texture's levels are not a switch";
+
+  both.modules().train();
+  RaySampler sampler(both.config());
+  AvatarFrameInputs inputs;
+  PrepareAvatarFrame(both.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), both.subject(), frame,
+                     &sampler, nullptr, &inputs);
+  torch::mse_loss(RunAvatar(both.modules(), inputs).image, torch::full({1, 3, 128, 128}, 0.8f)).backward();
+  for (auto& p : both.modules().renderer->named_parameters())
+    if (p.key().find("surface_early") != std::string::npos && p.key().find("weight") != std::string::npos)
+      EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : both.modules().renderer->named_parameters())
+      if (p.key().find("surface_early") != std::string::npos) p.value().uniform_(-0.5, 0.5);
+  }
+  const cv::Mat drawn = Shown(both, frame);
+  EXPECT_GT(cv::norm(Shown(last, frame), drawn, cv::NORM_INF), 0);
+  const std::string path = testing::TempDir("surface_levels") + "/l.hcavatar";
+  both.Save(path);
+  Avatar back = Avatar::Load(path, m);
+  EXPECT_EQ(back.config().surface_levels, 2);
+  EXPECT_EQ(cv::norm(drawn, Shown(back, frame), cv::NORM_INF), 0);
+}
+
 TEST(SurfaceTexture, TheBranchWidthIsChosenAndOldFilesKeepTwiceTheFeatures) {
   const HeadModel& m = *Builtin();
   AvatarConfig c = TinyWithSurface();

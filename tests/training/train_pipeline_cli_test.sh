@@ -114,6 +114,15 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
   [ "$(json "$tmp/b.json" "j['fit']['region_weight']")" = 4.0 ] &&
   [ "$(json "$tmp/b.json" "0 < j['fit']['final_loss'] < 10")" = True ] &&
   ok "subject --blind-synthetic-face: trained and recorded" || bad "blind synthetic face: $(tail -3 "$tmp/b.err")"
+# The texture into the level before the last too: trained and kept in the file (the default: the last only).
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --surface-levels 2 --out "$tmp/l.hcavatar" --json "$tmp/l.json" > /dev/null 2> "$tmp/l.err"
+[ "$(config "$tmp/l.hcavatar" "['surface_levels']")" = 2 ] && [ "$(config "$tmp/i.hcavatar" "['surface_levels']")" = 1 ] &&
+  [ "$(json "$tmp/l.json" "0 < j['fit']['final_loss'] < 10")" = True ] &&
+  ok "subject --surface-levels 2: trained and kept" || bad "surface levels: $(tail -3 "$tmp/l.err")"
+out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
+  --iterations 2 --surface-levels 4 --out "$tmp/l4.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "surface-levels" <<<"$out" && ok "--surface-levels 4 refused" || bad "surface levels 4: $out"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-features 0 --surface-conditioned --out "$tmp/u.hcavatar" 2>&1)
 [ $? -ne 0 ] && grep -q "surface-conditioned needs --surface-features" <<<"$out" &&
