@@ -42,6 +42,27 @@ cv::Mat Shown(Avatar& avatar, const FrameParams& frame) {
   return image;
 }
 
+// `to` takes every weight of `from` that it has by name (CNeRF, renderer,
+// texture); returns the names of those it has and `from` lacks.
+std::vector<std::string> CopySharedWeights(Avatar& from, Avatar& to) {
+  torch::NoGradGuard no_grad;
+  std::vector<std::string> missing;
+  auto copy = [&](const torch::nn::Module& a, torch::nn::Module& b) {
+    const auto source = a.named_parameters();
+    for (auto& p : b.named_parameters()) {
+      if (const torch::Tensor* t = source.find(p.key())) {
+        p.value().copy_(*t);
+      } else {
+        missing.push_back(p.key());
+      }
+    }
+  };
+  copy(*from.modules().cnerf, *to.modules().cnerf);
+  copy(*from.modules().renderer, *to.modules().renderer);
+  copy(*from.modules().surface, *to.modules().surface);
+  return missing;
+}
+
 Eigen::Vector3f Corner(const Eigen::VectorXf& flat, int v) { return {flat[3 * v], flat[3 * v + 1], flat[3 * v + 2]}; }
 
 }  // namespace
@@ -341,15 +362,7 @@ TEST(SurfaceTexture, AConditionedBranchStartsPlainAndFollowsTheExpression) {
   conditioned_config.surface_conditioned = true;
   EXPECT_TRUE(AvatarConfig::FromJson(conditioned_config.ToJson()).surface_conditioned);
   Avatar conditioned = Avatar::CreateRandom(conditioned_config, m, plain.subject(), 6);
-  {  // the plain avatar's weights, the FiLM at its zero start
-    torch::NoGradGuard no_grad;
-    auto from = plain.modules().renderer->named_parameters();
-    for (auto& p : conditioned.modules().renderer->named_parameters())
-      if (const torch::Tensor* t = from.find(p.key())) p.value().copy_(*t);
-    auto cnerf = plain.modules().cnerf->named_parameters();
-    for (auto& p : conditioned.modules().cnerf->named_parameters()) p.value().copy_(cnerf[p.key()]);
-    conditioned.modules().surface->parameters()[0].copy_(plain.modules().surface->parameters()[0]);
-  }
+  CopySharedWeights(plain, conditioned);  // the plain avatar's weights, the FiLM at its zero start
   FrameParams smile = Expressive(), other = Expressive();
   other.expression[0] = -1.0f;
   EXPECT_EQ(cv::norm(Shown(plain, smile), Shown(conditioned, smile), cv::NORM_INF), 0);
@@ -416,23 +429,10 @@ TEST(SurfaceTexture, JoinsAnEarlierLevelWhenAskedAndStartsWithoutIt) {
       if (p.key().find("surface_out") != std::string::npos) p.value().uniform_(-0.5, 0.5);
   }
   Avatar both = Avatar::CreateRandom(two, m, last.subject(), 8);
-  {  // the last-level avatar's weights; the earlier level's path at its zero start
-    torch::NoGradGuard no_grad;
-    auto from = last.modules().renderer->named_parameters();
-    int early = 0;
-    for (auto& p : both.modules().renderer->named_parameters()) {
-      if (const torch::Tensor* t = from.find(p.key())) {
-        p.value().copy_(*t);
-      } else {
-        EXPECT_NE(p.key().find("surface_early"), std::string::npos) << p.key();
-        ++early;
-      }
-    }
-    EXPECT_EQ(early, 2) << "one 1x1 layer (weight, bias) for the level before the last";
-    auto cnerf = last.modules().cnerf->named_parameters();
-    for (auto& p : both.modules().cnerf->named_parameters()) p.value().copy_(cnerf[p.key()]);
-    both.modules().surface->parameters()[0].copy_(last.modules().surface->parameters()[0]);
-  }
+  // The last-level avatar's weights; the earlier level's path at its zero start.
+  const std::vector<std::string> early = CopySharedWeights(last, both);
+  for (const std::string& key : early) EXPECT_NE(key.find("surface_early"), std::string::npos) << key;
+  EXPECT_EQ(early.size(), 2u) << "one 1x1 layer (weight, bias) for the level before the last";
   const FrameParams frame = Expressive();
   EXPECT_EQ(cv::norm(Shown(last, frame), Shown(both, frame), cv::NORM_INF), 0);
   EXPECT_THROW(last.WithRuntimeSwitches(two), std::invalid_argument) << "a texture's levels are not a switch";
@@ -443,9 +443,11 @@ TEST(SurfaceTexture, JoinsAnEarlierLevelWhenAskedAndStartsWithoutIt) {
   PrepareAvatarFrame(both.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), both.subject(), frame,
                      &sampler, nullptr, &inputs);
   torch::mse_loss(RunAvatar(both.modules(), inputs).image, torch::full({1, 3, 128, 128}, 0.8f)).backward();
-  for (auto& p : both.modules().renderer->named_parameters())
-    if (p.key().find("surface_early") != std::string::npos && p.key().find("weight") != std::string::npos)
+  for (auto& p : both.modules().renderer->named_parameters()) {
+    if (p.key().find("surface_early") != std::string::npos && p.key().find("weight") != std::string::npos) {
       EXPECT_GT(p.value().grad().abs().max().item<float>(), 0.f) << p.key();
+    }
+  }
   {
     torch::NoGradGuard no_grad;
     for (auto& p : both.modules().renderer->named_parameters())
