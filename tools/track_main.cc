@@ -100,6 +100,10 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "weight of each expression coefficient's squared distance outside the model's range (ICT: 0..1), "
                  "against squared landmark pixels")
       ->capture_default_str();
+  app.add_option("--eye-look-prior", t.tracker.fit.eye_look_prior,
+                 "extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark pixels: "
+                 "lids close with the blink shapes")
+      ->capture_default_str();
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
                  "pixels): what every key frame shows goes into the shape")

@@ -196,6 +196,10 @@ int main(int argc, char** argv) {
                    "tracking: weight of each expression coefficient's squared distance outside the model's range "
                    "(ICT: 0..1), against squared landmark pixels")
       ->capture_default_str();
+  prep->add_option("--eye-look-prior", p.eye_look_prior,
+                   "tracking: extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark "
+                   "pixels: lids close with the blink shapes")
+      ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "
                    "landmark pixels): what every key frame shows goes into the shape")

@@ -41,6 +41,7 @@ void PrepOptions::Check() const {
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .NonNegative("expression_range_weight", expression_range_weight)
+      .NonNegative("eye_look_prior", eye_look_prior)
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
@@ -123,6 +124,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.calibration_mean_expression = o.calibration_mean_expression;
   track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
   track.tracker.fit.expression_range_weight = o.expression_range_weight;
+  track.tracker.fit.eye_look_prior = o.eye_look_prior;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.filter_min_cutoff = o.landmark_filter_hz;

@@ -18,6 +18,7 @@ void HeadFitterOptions::Check() const {
   OptionsCheck c("HeadFitterOptions");
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
+  c.NonNegative("eye_look_prior", eye_look_prior);
   c.InRange("expression_limit", expression_limit, 0.1, 5.0)
       .NonNegative("expression_range_weight", expression_range_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
@@ -228,8 +229,12 @@ class MeanCost : public ceres::CostFunction {
 
 void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression) const {
   if (num_expression_ == 0) return;
-  problem->AddResidualBlock(new PriorCost(num_expression_, std::sqrt(options_.expression_prior)), nullptr, expression);
   const HeadModelData& d = model_.data();
+  std::vector<double> weights(num_expression_, std::sqrt(options_.expression_prior));
+  for (int i = 0; i < num_expression_ && i < static_cast<int>(d.expression_names.size()); ++i)
+    if (d.expression_names[i].rfind("eyeLook", 0) == 0)
+      weights[i] = std::sqrt(options_.expression_prior + options_.eye_look_prior);
+  problem->AddResidualBlock(new PriorCost(std::move(weights)), nullptr, expression);
   if (d.HasExpressionRange() && options_.expression_range_weight > 0)
     problem->AddResidualBlock(
         new RangeCost(num_expression_, d.expression_min, d.expression_max, std::sqrt(options_.expression_range_weight)),

@@ -39,6 +39,12 @@ struct HeadFitterOptions {
   // squared pixels. Without it ICT fits chase landmarks with eye-look and jaw
   // blendshapes at -4..+4, which no avatar can be conditioned on.
   double expression_range_weight = 100;
+  // Added to expression_prior for the coefficients that stand for lid motion
+  // with gaze (ICT's eyeLook*). Those shapes move only the lids (the eyes
+  // turn by joint), so a fit can close a lid by "looking down"; the avatar is
+  // then conditioned on one code for lowered eyes and for shut ones. Weighted,
+  // the fit closes lids with the blink shapes and gaze stays with the joints.
+  double eye_look_prior = 0;
   double jaw_prior = 10;        // weight of |jaw|^2 (radians^2)
   double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;      // Levenberg-Marquardt iterations per frame

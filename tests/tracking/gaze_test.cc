@@ -214,5 +214,39 @@ TEST(Gaze, ClosedOrBrokenEyesGiveNoIrisAndTheFitHoldsTheGaze) {
   EXPECT_EQ(f.right_eye, truth.right_eye);
 }
 
+// ICT's eyeLookDown lowers both lids as a downward look would; a fit is free to
+// close a lid with it instead of eyeBlink. Shut eyes drawn by the blink shapes
+// (irises not found), the lids' landmarks exact: with eye_look_prior the fit
+// recovers the blink and leaves the eyeLook shapes alone.
+TEST(Gaze, TheEyeLookPriorClosesLidsWithTheBlinkShapes) {
+  const HeadModel* m = Ict();
+  if (!m) GTEST_SKIP() << "needs ../shared/data (ICT-FaceKit)";
+  const int blink[2] = {m->ExpressionIndex("eyeBlink_L"), m->ExpressionIndex("eyeBlink_R")};
+  ASSERT_GE(std::min(blink[0], blink[1]), 0);
+  std::vector<int> look;
+  for (int i = 0; i < m->num_expression(); ++i)
+    if (m->data().expression_names[i].rfind("eyeLook", 0) == 0) look.push_back(i);
+  ASSERT_EQ(look.size(), 8u);
+  FrameParams truth = Looking(*m, 0, 0);
+  for (int i : blink) truth.expression[i] = 1;
+  double fitted_blink[2], fitted_look[2];
+  for (int with : {0, 1}) {
+    HeadFitterOptions o;
+    o.eye_look_prior = with ? 10 : 0;
+    HeadFitter fitter(*m, o);
+    FrameParams fit = truth;
+    fit.expression.setZero();
+    ASSERT_TRUE(fitter.Fit(fitter.Project(truth, kCamera), kCamera, &fit).ok);
+    fitted_blink[with] = std::min(fit.expression[blink[0]], fit.expression[blink[1]]);
+    fitted_look[with] = 0;
+    for (int i : look) fitted_look[with] = std::max(fitted_look[with], std::abs(double(fit.expression[i])));
+    std::cout << "eye_look_prior " << o.eye_look_prior << ": blink " << fitted_blink[with] << ", largest |eyeLook| "
+              << fitted_look[with] << "\n";
+  }
+  EXPECT_GT(fitted_blink[1], 0.8);
+  EXPECT_LT(fitted_look[1], 0.1);
+  EXPECT_LE(fitted_look[1], fitted_look[0]);
+}
+
 }  // namespace
 }  // namespace headcast
