@@ -7,7 +7,8 @@
 # avatar's creation time (prep + fine-tune), the frames whose brow or mouth
 # landmarks the tracker disputed and repaired; then the receiver's frame rate at
 # 256² and 512² (headcast-bench render, default subject configuration).
-#   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N] [--ict DIR] [--clips "d9 d10 ..."]
+#   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N (3000, as headcast-train create)] [--ict DIR]
+#       [--clips "d9 d10 ..."]
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
 #       [--prep-flags "FLAGS"]      extra `headcast-train prep` flags (default: none)
 #       [--no-render]               skip the receiver's frame rate (ablations of the avatar only)
@@ -20,7 +21,7 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
-name=four_clips iterations=10000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
+name=four_clips iterations=3000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
