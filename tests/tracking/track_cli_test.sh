@@ -20,6 +20,14 @@ awk "BEGIN{exit !($jit < $raw && $jit < 0.015)}" && ok "fitted landmarks shake l
 cerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/c.json" | awk '{print $2}')
 grep -q '"focal_px"' "$tmp/c.json" && awk "BEGIN{exit !($cerr < 0.03)}" &&
   ok "identity + focal calibrated over key frames (error $cerr IOD)" || bad "calibrate: $(cat "$tmp/c.json")"
+"$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
+  --eye-look-prior 100 --out "$tmp/e14.hcrec" --json "$tmp/e.json" > /dev/null 2>&1
+eerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/e.json" | awk '{print $2}')
+grep -q '"fitted_frames": 60' "$tmp/e.json" && awk "BEGIN{exit !($eerr < 0.03)}" &&
+  ok "--eye-look-prior 100: 60 frames fitted (error $eerr IOD)" || bad "eye-look prior: $(cat "$tmp/e.json")"
+out=$("$bin/headcast-track" --input "$data/video/talking_d14.mp4" --eye-look-prior -1 --out "$tmp/n.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "eye_look_prior" <<<"$out" && ok "negative --eye-look-prior refused by name" ||
+  bad "negative prior: rc=$rc $out"
 "$bin/headcast-avatar" render --help > /dev/null  # (the recording format is shared with the avatar tools)
 head -c 20000 "$data/video/talking_d14.mp4" > "$tmp/cut.mp4"
 out=$("$bin/headcast-track" --input "$tmp/cut.mp4" --out "$tmp/x.hcrec" 2>&1); rc=$?
