@@ -73,6 +73,12 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   options.Check();
   num_expression_ =
       options.num_expression > 0 ? std::min(options.num_expression, model.num_expression()) : model.num_expression();
+  // Once per fitter, not per frame: the names decide which coefficients the eyeLook prior weighs.
+  const std::vector<std::string>& names = model.data().expression_names;
+  expression_prior_weights_.assign(num_expression_, std::sqrt(options.expression_prior));
+  for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i)
+    if (names[i].rfind("eyeLook", 0) == 0)
+      expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
   rigid_vertices_ = RigidHeadVertices(model, MakeBasis(PoseVector::Zero(), true).base, 64);
   SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));
 }
@@ -230,11 +236,7 @@ class MeanCost : public ceres::CostFunction {
 void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression) const {
   if (num_expression_ == 0) return;
   const HeadModelData& d = model_.data();
-  std::vector<double> weights(num_expression_, std::sqrt(options_.expression_prior));
-  for (int i = 0; i < num_expression_ && i < static_cast<int>(d.expression_names.size()); ++i)
-    if (d.expression_names[i].rfind("eyeLook", 0) == 0)
-      weights[i] = std::sqrt(options_.expression_prior + options_.eye_look_prior);
-  problem->AddResidualBlock(new PriorCost(std::move(weights)), nullptr, expression);
+  problem->AddResidualBlock(new PriorCost(expression_prior_weights_), nullptr, expression);
   if (d.HasExpressionRange() && options_.expression_range_weight > 0)
     problem->AddResidualBlock(
         new RangeCost(num_expression_, d.expression_min, d.expression_max, std::sqrt(options_.expression_range_weight)),

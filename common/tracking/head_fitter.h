@@ -137,8 +137,9 @@ class HeadFitter {
   HeadFitterOptions options_;
   HeadIdentity identity_;
   int num_expression_;
-  std::vector<int> rigid_vertices_;  // above the brows, moved by no expression
-  RowMatrixX3f rigid_normals_;       // theirs, for the identity
+  std::vector<double> expression_prior_weights_;  // per fitted coefficient: sqrt of its prior (eyeLook* heavier)
+  std::vector<int> rigid_vertices_;               // above the brows, moved by no expression
+  RowMatrixX3f rigid_normals_;                    // theirs, for the identity
 };
 
 // The normalised landmark error: mean distance / outer-eye-corner distance (points 36, 45).
