@@ -108,6 +108,15 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
       timings(MeasureConfig(options, subject, frames), {{"surface_features", subject.surface_features},
                                                         {"surface_conditioned", subject.surface_conditioned},
                                                         {"matte", MatteModeName(subject.matte)}});
+  // A subject's avatar with a two-level renderer: the feature map at output/4
+  // (four times the rays, with the same reach beyond the silhouette) and half
+  // the samples per ray.
+  AvatarConfig two_levels = subject;
+  ApplyTwoLevelRenderer(&two_levels);
+  out["subject_two_levels"] =
+      timings(MeasureConfig(options, two_levels, frames), {{"renderer_channels", two_levels.renderer_channels},
+                                                           {"feature_size", two_levels.feature_size()},
+                                                           {"samples_per_ray", two_levels.samples_per_ray}});
   // The subject's default again with the convolutions on images in libtorch's
   // default layout (channels first), side by side: what channels-last buys.
   AvatarRendererOptions channels_first;

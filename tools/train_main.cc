@@ -109,8 +109,13 @@ void AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string
            config->renderer_channels = ch;
            if (!ch.empty()) config->feature_channels = ch[0];  // the feature map enters the renderer
          },
-         when + "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8)")
+         when +
+             "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8: a "
+             "feature map of output/8; 3 values, e.g. 48,24,8: two levels and a feature map of output/4)")
       ->delimiter(',');
+  app->add_option("--hair-margin", config->hair_margin_px,
+                  when + "feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
+      ->capture_default_str();
   app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")->capture_default_str();
 }
 

@@ -1,6 +1,7 @@
 // AvatarConfig checks and JSON.
 #include "common/avatar/avatar_config.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 #include "common/core/options.h"
@@ -45,7 +46,8 @@ void AvatarConfig::Check() const {
   c.That(shell_front + shell_back > 0, "shell_front + shell_back must be > 0");
   c.InRange("hair_margin_px", hair_margin_px, 0, 64);
   c.Positive("uniform_near", uniform_near).Positive("uniform_far", uniform_far);
-  c.That(renderer_channels.size() == 4, "renderer_channels needs 4 entries (into levels 1-3 and out of level 3)");
+  c.That(renderer_channels.size() == 3 || renderer_channels.size() == 4,
+         "renderer_channels needs 3 or 4 entries (into each x2 level and out of the last: 2 or 3 levels)");
   for (int ch : renderer_channels) c.InRange("renderer_channels[i]", ch, 1, 1024);
   c.That(renderer_channels.empty() || renderer_channels[0] == feature_channels,
          "renderer_channels[0] must equal feature_channels");
@@ -54,7 +56,8 @@ void AvatarConfig::Check() const {
   c.InRange("surface_shell", surface_shell, 0.0, 0.2);
   c.That(surface_shell == 0 || has_surface(), "surface_shell needs surface_features > 0");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
-  c.InRange("surface_hidden", surface_hidden, 0, 256).InRange("surface_levels", surface_levels, 1, 3);
+  c.InRange("surface_hidden", surface_hidden, 0, 256)
+      .InRange("surface_levels", surface_levels, 1, std::max<int>(1, static_cast<int>(renderer_channels.size()) - 1));
   c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
@@ -167,6 +170,12 @@ void ApplySubjectDefaults(AvatarConfig* config) {
   config->surface_conditioned = true;
   config->canonical_samples = true;
   config->matte = kSubjectMatte;
+}
+
+void ApplyTwoLevelRenderer(AvatarConfig* config) {
+  config->renderer_channels = {config->feature_channels, 24, 8};
+  config->samples_per_ray = 4;
+  config->hair_margin_px = 4;
 }
 
 }  // namespace headcast

@@ -55,7 +55,12 @@ struct AvatarConfig : AvatarCommonConfig {
   double uniform_far = 0.25;   // uniform mode: metres after the head centre
   // Speed switches (results identical up to float rounding when on).
   bool precompute_conditioning = true;  // first-layer conditioning term once per frame
-  // 2D neural renderer: channels entering each of the three x2 levels and leaving the last.
+  // 2D neural renderer: channels entering each x2 level and leaving the last.
+  // Their count sets the levels, hence the feature map's size: four entries,
+  // three levels and a map of output/8; three entries, two levels and a map
+  // of output/4 (four times the CNeRF's rays, each feature pixel a quarter of
+  // the picture's area: finer hair outlines and lids than the 3x3 layers can
+  // draw from output/8).
   std::vector<int> renderer_channels = {48, 24, 12, 8};
   // Surface features (0: off, the thesis's configuration): a learned feature
   // texture on the head model's canonical (neutral) surface, stored as three
@@ -102,7 +107,9 @@ struct AvatarConfig : AvatarCommonConfig {
   int surface_hidden_channels() const { return surface_hidden > 0 ? surface_hidden : 2 * surface_features; }
   bool has_matte() const { return matte != MatteMode::kNone; }
 
-  int feature_size() const { return output_size / 8; }
+  int renderer_levels() const { return static_cast<int>(renderer_channels.size()) - 1; }
+  int feature_stride() const { return 1 << renderer_levels(); }  // output pixels per feature-map pixel
+  int feature_size() const { return output_size / feature_stride(); }
   int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi
   int motion_dim() const { return 12 + num_expression; }   // the conditioning without beta: what changes per frame
   int appearance_dim() const { return 27 + num_texture; }  // lambda, tau
@@ -125,5 +132,11 @@ struct AvatarConfig : AvatarCommonConfig {
 // per frame, CNeRF samples in the canonical head, and the bounded matte. The
 // thesis's avatar has none of them.
 void ApplySubjectDefaults(AvatarConfig* config);
+
+// The renderer with two x2 levels (a feature map of output/4, four times the
+// rays), 4 samples per ray instead of 8 (the CNeRF's cost about twice, not
+// four times) and a hair margin of 4 feature-map pixels (the default's reach
+// in the picture).
+void ApplyTwoLevelRenderer(AvatarConfig* config);
 
 }  // namespace headcast

@@ -245,12 +245,14 @@ torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical) {
 NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   config.Check();
   const auto& ch = config.renderer_channels;
+  levels_ = config.renderer_levels();
+  const int last = levels_ - 1;
   input_rgb_ = register_module("input_rgb", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 3, 1)));
   if (config.has_surface()) {
     const int hidden = config.surface_hidden_channels();
     surface_hidden_ = register_module("surface_hidden",
                                       torch::nn::Conv2d(torch::nn::Conv2dOptions(config.surface_features, hidden, 1)));
-    surface_out_ = register_module("surface_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, ch[3], 1)));
+    surface_out_ = register_module("surface_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, ch[levels_], 1)));
     // Zero: a renderer given surface features starts as the one without (a
     // fine-tune from a general model starts where the general model is); the
     // texture gets gradients from the first step that moves these weights.
@@ -258,11 +260,11 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
       surface_film_ = register_module("surface_film", torch::nn::Linear(config.motion_dim(), 2 * hidden));
     // Earlier levels get the surface term averaged to their size through
     // their own 1x1 layers, zero at first too.
-    first_surface_level_ = 3 - config.surface_levels;
-    if (first_surface_level_ < 2) {  // files with the last level only hold no such entry
+    first_surface_level_ = levels_ - config.surface_levels;
+    if (first_surface_level_ < last) {  // files with the last level only hold no such entry
       surface_early_ = register_module("surface_early", torch::nn::ModuleList());
-      for (int k = first_surface_level_; k < 2; ++k)
-        surface_early_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[3], ch[k + 1], 1)));
+      for (int k = first_surface_level_; k < last; ++k)
+        surface_early_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[levels_], ch[k + 1], 1)));
     }
     torch::NoGradGuard no_grad;
     surface_out_->weight.zero_();
@@ -276,7 +278,7 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   blocks_ = register_module("blocks", torch::nn::ModuleList());
   post_ = register_module("post", torch::nn::ModuleList());
   to_rgb_ = register_module("to_rgb", torch::nn::ModuleList());
-  for (int k = 0; k < 3; ++k) {
+  for (int k = 0; k < levels_; ++k) {
     blocks_->push_back(UpsamplingBlock(ch[k], ch[k + 1]));
     post_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], ch[k + 1], 1)));
     to_rgb_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 3, 1)));
@@ -284,7 +286,8 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   if (config.has_matte()) {
     input_alpha_ = register_module("input_alpha", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 1, 1)));
     to_alpha_ = register_module("to_alpha", torch::nn::ModuleList());
-    for (int k = 0; k < 3; ++k) to_alpha_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 1, 1)));
+    for (int k = 0; k < levels_; ++k)
+      to_alpha_->push_back(torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[k + 1], 1, 1)));
     // Covered everywhere at first: a matte added to a renderer without one
     // starts from the picture it drew (the weights still get gradients).
     torch::NoGradGuard no_grad;
@@ -333,7 +336,7 @@ void NeuralRendererImpl::UseChannelsLast() {
 
 torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term,
                                           torch::Tensor* coverage_logit, const ImageWindow* window) {
-  const int64_t height = 8 * feature_map.size(2), width = 8 * feature_map.size(3);
+  const int64_t height = feature_map.size(2) << levels_, width = feature_map.size(3) << levels_;
   const ImageWindow last = window ? *window : ImageWindow::Whole(height, width);
   CheckWindow(last, height, width);
   const bool matte = input_alpha_ && coverage_logit;
@@ -342,15 +345,16 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
   torch::Tensor rgb = Conv1x1(*input_rgb_, features), alpha;
   if (matte) alpha = Conv1x1(*input_alpha_, features);
   torch::Tensor x = features;
-  for (int k = 0; k < 3; ++k) {
+  for (int k = 0; k < levels_; ++k) {
     // The last level draws the window only; the ones before it the whole
     // picture (its squeeze averages all of theirs).
-    const ImageWindow w = k == 2 ? last : ImageWindow::Whole(2 * x.size(2), 2 * x.size(3));
+    const bool at_last = k == levels_ - 1;
+    const ImageWindow w = at_last ? last : ImageWindow::Whole(2 * x.size(2), 2 * x.size(3));
     rgb = UpsampleWindow(rgb, w);
     x = blocks_[k]->as<UpsamplingBlockImpl>()->forward(x, w);
-    if (surface_term.defined() && k == 2) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
-    if (surface_term.defined() && k < 2 && k >= first_surface_level_) {
-      const int64_t factor = int64_t{1} << (2 - k);
+    if (surface_term.defined() && at_last) x = x + surface_term.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1);
+    if (surface_term.defined() && !at_last && k >= first_surface_level_) {
+      const int64_t factor = int64_t{1} << (levels_ - 1 - k);
       const torch::Tensor pooled = F::avg_pool2d(surface_term, F::AvgPool2dFuncOptions(factor));
       x = x + Conv1x1(*surface_early_[k - first_surface_level_]->as<torch::nn::Conv2dImpl>(),
                       pooled.contiguous(x.suggest_memory_format()));

@@ -111,7 +111,7 @@ TORCH_MODULE(SurfaceTexture);
 // The coverage logit a new matte starts with everywhere (sigmoid: 0.9975).
 inline constexpr double kInitialCoverageLogit = 6;
 
-// Three x2 levels; at each, RGB from the previous level bilinearly upsampled
+// Two or three x2 levels (AvatarConfig::renderer_levels); at each, RGB from the previous level bilinearly upsampled
 // plus RGB from the upsampled features; 1x1 convs and LeakyReLU elsewhere.
 // With surface features, a per-pixel two-layer branch of the full-resolution
 // surface image joins the last level's features (averaged, earlier levels'
@@ -120,9 +120,9 @@ inline constexpr double kInitialCoverageLogit = 6;
 class NeuralRendererImpl : public torch::nn::Module {
  public:
   explicit NeuralRendererImpl(const AvatarConfig& config);
-  // (B, C0, h, w) [, surface_term (B, C3, 8h, 8w) from SurfaceTerm] -> (B, 3, 8h, 8w), RGB in [0, 1].
-  // With a matte, `coverage_logit` gets (B, 1, 8h, 8w): where the head covers the picture.
-  // With `window` (even edges, inside 8h x 8w), the last x2 level runs on that
+  // (B, C0, h, w) [, surface_term (B, C_last, s h, s w) from SurfaceTerm] -> (B, 3, s h, s w), RGB in [0, 1],
+  // s = 2^levels. With a matte, `coverage_logit` gets (B, 1, s h, s w): where the head covers the picture.
+  // With `window` (even edges, inside s h x s w), the last x2 level runs on that
   // window only and both outputs are its size: the same pixels as without.
   torch::Tensor forward(const torch::Tensor& feature_map, const torch::Tensor& surface_term = torch::Tensor(),
                         torch::Tensor* coverage_logit = nullptr, const ImageWindow* window = nullptr);
@@ -141,7 +141,8 @@ class NeuralRendererImpl : public torch::nn::Module {
 
  private:
   bool channels_last_ = false;
-  int first_surface_level_ = 2;  // the first x2 level (0..2) the surface term joins
+  int levels_ = 3;               // x2 levels
+  int first_surface_level_ = 2;  // the first x2 level (0..levels_-1) the surface term joins
   torch::nn::Conv2d input_rgb_{nullptr}, surface_hidden_{nullptr}, surface_out_{nullptr}, input_alpha_{nullptr};
   torch::nn::Linear surface_film_{nullptr};  // motion -> (scale, shift) of the surface branch's hidden layer
   torch::nn::ModuleList blocks_, post_, to_rgb_, to_alpha_, surface_early_;

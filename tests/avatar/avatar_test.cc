@@ -219,6 +219,67 @@ TEST(NeuralRenderer, AWindowOrChannelsLastDrawTheSamePixels) {
   EXPECT_LT((alpha_after - alpha_before).abs().max().item<float>(), 1e-4);
 }
 
+TEST(NeuralRenderer, TwoLevelsUpsampleFourTimesAndAWindowDrawsTheSamePixels) {
+  AvatarConfig c = Tiny();
+  c.renderer_channels = {8, 8, 4};  // two x2 levels: a feature map of output/4
+  c.matte = MatteMode::kLearned;
+  c.surface_features = 4;
+  c.surface_levels = 2;
+  ASSERT_NO_THROW(c.Check());
+  EXPECT_EQ(c.renderer_levels(), 2);
+  EXPECT_EQ(c.feature_size(), 32);
+  NeuralRenderer net(c);
+  torch::manual_seed(5);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->parameters()) p.copy_(0.3 * torch::randn_like(p));
+  }
+  const torch::Tensor x = torch::randn({1, 8, 32, 32}), surface = torch::randn({1, 4, 128, 128});
+  torch::Tensor whole_alpha;
+  const torch::Tensor whole = net->forward(x, surface, &whole_alpha);
+  ASSERT_EQ(whole.sizes(), (std::vector<int64_t>{1, 3, 128, 128}));
+  ASSERT_EQ(whole_alpha.sizes(), (std::vector<int64_t>{1, 1, 128, 128}));
+  for (const ImageWindow w : {ImageWindow{0, 128, 0, 128}, ImageWindow{10, 64, 0, 50}, ImageWindow{36, 128, 82, 128}}) {
+    torch::Tensor alpha;
+    const torch::Tensor part = net->forward(x, surface, &alpha, &w);
+    ASSERT_EQ(part.sizes(), (std::vector<int64_t>{1, 3, w.height(), w.width()}));
+    EXPECT_LT((part - whole.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1)).abs().max().item<float>(), 1e-5);
+    EXPECT_LT((alpha - whole_alpha.slice(2, w.y0, w.y1).slice(3, w.x0, w.x1)).abs().max().item<float>(), 1e-4);
+  }
+  // As made: every level's layers learn (the texture's branch and the matte's
+  // layers start at zero, so only their output layers do at first; a tiny
+  // squeeze-excitation's single hidden unit may start dead).
+  NeuralRenderer fresh(c);
+  const torch::Tensor features = torch::randn({50, 4}), pixels = torch::randperm(128 * 128).narrow(0, 0, 50);
+  torch::Tensor alpha;
+  const torch::Tensor rgb = fresh->forward(x, fresh->SurfaceTerm(features, pixels, 128, 128), &alpha);
+  (rgb.mean() + alpha.mean()).backward();
+  int learning = 0;
+  for (auto& p : fresh->named_parameters()) {
+    ASSERT_TRUE(p.value().grad().defined()) << p.key();
+    EXPECT_TRUE(torch::isfinite(p.value().grad()).all().item<bool>()) << p.key();
+    const bool must_learn = p.key().find("_branch") != std::string::npos || p.key().rfind("post.", 0) == 0 ||
+                            p.key().rfind("to_", 0) == 0 || p.key().rfind("input_", 0) == 0 ||
+                            p.key().rfind("surface_out", 0) == 0;
+    if (must_learn) EXPECT_GT(p.value().grad().abs().sum().item<float>(), 0.f) << p.key();
+    learning += must_learn;
+  }
+  EXPECT_EQ(learning, 2 * 10 + 4 + 2) << "per level two branches, post, to_rgb, to_alpha; the inputs; surface_out";
+  // The level count is the channel list's: two entries or a texture in more
+  // levels than there are are refused by name.
+  AvatarConfig bad = c;
+  bad.renderer_channels = {8, 4};
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad = c;
+  bad.surface_levels = 3;
+  try {
+    bad.Check();
+    ADD_FAILURE() << "three texture levels in a two-level renderer passed";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("surface_levels"), std::string::npos) << e.what();
+  }
+}
+
 TEST(RaySampler, MeshGuidedRaysCoverTheHeadAndSkipTheRest) {
   AvatarConfig c = Tiny();
   const HeadModel& m = *Builtin();
@@ -445,6 +506,35 @@ TEST(AvatarRenderer, TheParallelStagesDrawTheSamePicture) {
     EXPECT_GT(t.surface_ms, 0);
     EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0) << "jaw " << jaw;
   }
+}
+
+TEST(AvatarRenderer, ATwoLevelAvatarCastsRaysAtAQuarterOfTheOutputAndRoundTrips) {
+  AvatarConfig three = Tiny();
+  ApplySubjectDefaults(&three);
+  AvatarConfig two = three;
+  ApplyTwoLevelRenderer(&two);
+  EXPECT_EQ(two.renderer_channels, (std::vector<int>{three.feature_channels, 24, 8}));
+  EXPECT_EQ(two.hair_margin_px, 2 * three.hair_margin_px);  // the same reach in output pixels
+  EXPECT_EQ(two.samples_per_ray, 4);
+  const SubjectParams subject = DefaultSubject(*Builtin(), 128);
+  AvatarRenderer coarse(Builtin(), Avatar::CreateRandom(three, *Builtin(), subject, 4));
+  const std::string path = (std::filesystem::temp_directory_path() / "two_levels_test.hcavatar").string();
+  Avatar::CreateRandom(two, *Builtin(), subject, 4).Save(path);
+  Avatar loaded = Avatar::Load(path, *Builtin());
+  std::filesystem::remove(path);
+  EXPECT_EQ(loaded.config().ToJson(), two.ToJson());
+  AvatarRenderer fine(Builtin(), std::move(loaded));
+  AvatarRenderer again(Builtin(), Avatar::CreateRandom(two, *Builtin(), subject, 4));
+  cv::Mat a, b, c;
+  AvatarTimings ta, tb;
+  ASSERT_TRUE(coarse.Render(Frontal(0.1f), &a, &ta));
+  ASSERT_TRUE(fine.Render(Frontal(0.1f), &b, &tb));
+  ASSERT_TRUE(again.Render(Frontal(0.1f), &c));
+  EXPECT_EQ(b.size(), cv::Size(128, 128));
+  EXPECT_EQ(cv::norm(b, c, cv::NORM_INF), 0) << "the file changed the two-level avatar's picture";
+  // A feature pixel a quarter of the area: about four times the rays.
+  EXPECT_GT(tb.rays, 3 * ta.rays);
+  EXPECT_LT(tb.rays, 5 * ta.rays);
 }
 
 TEST(AvatarRenderer, RendersAndRefusesBadParameters) {
