@@ -57,7 +57,7 @@ void AvatarConfig::Check() const {
   c.That(surface_shell == 0 || has_surface(), "surface_shell needs surface_features > 0");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
   c.InRange("surface_hidden", surface_hidden, 0, 256)
-      .InRange("surface_levels", surface_levels, 1, std::max<int>(1, static_cast<int>(renderer_channels.size()) - 1));
+      .InRange("surface_levels", surface_levels, 1, std::max(1, renderer_levels()));
   c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");

@@ -157,8 +157,8 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
   } else {
     // Beyond a bound the picture is the background whatever the networks say:
     // the last level draws only the window around it.
-    const int levels = modules.cnerf->config().renderer_levels();
-    const int64_t height = out->feature_map.size(2) << levels, width = out->feature_map.size(3) << levels;
+    const int64_t stride = modules.cnerf->config().feature_stride();
+    const int64_t height = stride * out->feature_map.size(2), width = stride * out->feature_map.size(3);
     const ImageWindow window =
         inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
     torch::Tensor logit;
