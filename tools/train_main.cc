@@ -9,6 +9,8 @@
 #include <cstdlib>
 #include <iostream>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "common/capture/capture_flags.h"
 #include "common/core/camera.h"
@@ -96,6 +98,8 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
 
 // The network's size, for a new avatar (a fine-tune keeps its general model's).
 // Checked with the rest of the configuration (AvatarConfig::Check).
+const std::vector<std::string> kArchitectureFlags = {"--expressions",       "--mlp-width",   "--mlp-layers",
+                                                     "--renderer-channels", "--hair-margin", "--samples-per-ray"};
 void AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string& when) {
   app->add_option("--expressions", config->num_expression,
                   when + "at most this many expression components condition the avatar (fewer if the model has fewer)")
@@ -402,6 +406,13 @@ int main(int argc, char** argv) {
       // texture (the thesis's avatar) there is nothing to condition, unless asked.
       if (subject->parsed() && !s.config.has_surface() && subject->get_option("--surface-conditioned")->count() == 0)
         s.config.surface_conditioned = false;
+      // A fine-tune takes its general model's network: a size given with it
+      // would be dropped without a word.
+      if (subject->parsed() && !s.from_scratch)
+        for (const std::string& name : kArchitectureFlags)
+          if (subject->get_option(name)->count() > 0)
+            throw std::invalid_argument(name + " sizes a new network: a fine-tune keeps its general model's (" +
+                                        s.general + "); give it to pretrain, or with --from-scratch");
       std::unique_ptr<LocalRanks> ranks;
       if (processes > 1) {
         if (fit.distributed.world_size > 1)

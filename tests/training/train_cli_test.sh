@@ -29,6 +29,12 @@ out=$("$bin/headcast-train" "${common[@]}" --iterations 8 2>&1); rc=$?
 out=$("$bin/headcast-train" pretrain --resolution 128 --iterations 4 --checkpoint-dir "$tmp/no-such-ckpt" --resume \
   --out "$tmp/b.hcavatar" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "no checkpoint folder" <<<"$out" && ok "--resume on a missing folder is refused" || bad "resume typo: $out"
+# A network size given to a fine-tune is refused, not dropped (the general model's network is kept).
+out=$("$bin/headcast-train" subject --general "$tmp/a.hcavatar" --data "$tmp/no-dataset" --out "$tmp/x.hcavatar" \
+  --renderer-channels 48,24,8 \
+  2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "renderer-channels sizes a new network" <<<"$out" && ok "--renderer-channels on a fine-tune is refused" ||
+  bad "architecture flag on a fine-tune: $out"
 # Rank 0 killed with -9: its copy must not wait out Gloo's 300 s timeout.
 "$bin/headcast-train" pretrain --resolution 128 --batch 1 --iterations 100000 --processes 2 --out "$tmp/c.hcavatar" \
   > /dev/null 2>&1 &
