@@ -97,30 +97,37 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
 }
 
 // The network's size, for a new avatar (a fine-tune keeps its general model's).
-// Checked with the rest of the configuration (AvatarConfig::Check).
-const std::vector<std::string> kArchitectureFlags = {"--expressions",       "--mlp-width",   "--mlp-layers",
-                                                     "--renderer-channels", "--hair-margin", "--samples-per-ray"};
-void AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string& when) {
-  app->add_option("--expressions", config->num_expression,
-                  when + "at most this many expression components condition the avatar (fewer if the model has fewer)")
-      ->capture_default_str();
-  app->add_option("--mlp-width", config->mlp_width, when + "CNeRF hidden width")->capture_default_str();
-  app->add_option("--mlp-layers", config->mlp_layers, when + "CNeRF layers before the density head")
-      ->capture_default_str();
-  app->add_option_function<std::vector<int>>(
-         "--renderer-channels",
-         [config](const std::vector<int>& ch) {
-           config->renderer_channels = ch;
-           if (!ch.empty()) config->feature_channels = ch[0];  // the feature map enters the renderer
-         },
-         when +
-             "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8: a "
-             "feature map of output/8; 3 values, e.g. 48,24,8: two levels and a feature map of output/4)")
-      ->delimiter(',');
-  app->add_option("--hair-margin", config->hair_margin_px,
-                  when + "feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
-      ->capture_default_str();
-  app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")->capture_default_str();
+// Checked with the rest of the configuration (AvatarConfig::Check). Returns
+// the options, so that a fine-tune can refuse them.
+std::vector<CLI::Option*> AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string& when) {
+  std::vector<CLI::Option*> options;
+  options.push_back(
+      app->add_option(
+             "--expressions", config->num_expression,
+             when + "at most this many expression components condition the avatar (fewer if the model has fewer)")
+          ->capture_default_str());
+  options.push_back(
+      app->add_option("--mlp-width", config->mlp_width, when + "CNeRF hidden width")->capture_default_str());
+  options.push_back(app->add_option("--mlp-layers", config->mlp_layers, when + "CNeRF layers before the density head")
+                        ->capture_default_str());
+  options.push_back(
+      app->add_option_function<std::vector<int>>(
+             "--renderer-channels",
+             [config](const std::vector<int>& ch) {
+               config->renderer_channels = ch;
+               if (!ch.empty()) config->feature_channels = ch[0];  // the feature map enters the renderer
+             },
+             when +
+                 "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8: a "
+                 "feature map of output/8; 3 values, e.g. 48,24,8: two levels and a feature map of output/4)")
+          ->delimiter(','));
+  options.push_back(
+      app->add_option("--hair-margin", config->hair_margin_px,
+                      when + "feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
+          ->capture_default_str());
+  options.push_back(app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")
+                        ->capture_default_str());
+  return options;
 }
 
 // The surface texture (METHOD's baseline has none): for a new avatar, or
@@ -279,7 +286,7 @@ int main(int argc, char** argv) {
   subject->add_option("--resolution", s.resolution, "output size (crops of this size must be prepared)")
       ->check(CLI::IsMember({128, 256, 512}))
       ->capture_default_str();
-  AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
+  const std::vector<CLI::Option*> subject_network = AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
   AddSurfaceFlags(subject, &s.config, &s.fit);
   AddMatteFlags(subject, &s.config, &s.fit);
   subject->add_option(
@@ -409,10 +416,11 @@ int main(int argc, char** argv) {
       // A fine-tune takes its general model's network: a size given with it
       // would be dropped without a word.
       if (subject->parsed() && !s.from_scratch)
-        for (const std::string& name : kArchitectureFlags)
-          if (subject->get_option(name)->count() > 0)
-            throw std::invalid_argument(name + " sizes a new network: a fine-tune keeps its general model's (" +
-                                        s.general + "); give it to pretrain, or with --from-scratch");
+        for (const CLI::Option* option : subject_network)
+          if (option->count() > 0)
+            throw std::invalid_argument(option->get_name() +
+                                        " sizes a new network: a fine-tune keeps its general model's (" + s.general +
+                                        "); give it to pretrain, or with --from-scratch");
       std::unique_ptr<LocalRanks> ranks;
       if (processes > 1) {
         if (fit.distributed.world_size > 1)
