@@ -100,17 +100,14 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
 // Checked with the rest of the configuration (AvatarConfig::Check). Returns
 // the options, so that a fine-tune can refuse them.
 std::vector<CLI::Option*> AddArchitectureFlags(CLI::App* app, AvatarConfig* config, const std::string& when) {
-  std::vector<CLI::Option*> options;
-  options.push_back(
-      app->add_option(
-             "--expressions", config->num_expression,
-             when + "at most this many expression components condition the avatar (fewer if the model has fewer)")
-          ->capture_default_str());
-  options.push_back(
-      app->add_option("--mlp-width", config->mlp_width, when + "CNeRF hidden width")->capture_default_str());
-  options.push_back(app->add_option("--mlp-layers", config->mlp_layers, when + "CNeRF layers before the density head")
-                        ->capture_default_str());
-  options.push_back(
+  return {
+      app->add_option("--expressions", config->num_expression,
+                      when + "at most this many expression components condition the avatar (fewer if the model has "
+                             "fewer)")
+          ->capture_default_str(),
+      app->add_option("--mlp-width", config->mlp_width, when + "CNeRF hidden width")->capture_default_str(),
+      app->add_option("--mlp-layers", config->mlp_layers, when + "CNeRF layers before the density head")
+          ->capture_default_str(),
       app->add_option_function<std::vector<int>>(
              "--renderer-channels",
              [config](const std::vector<int>& ch) {
@@ -120,14 +117,13 @@ std::vector<CLI::Option*> AddArchitectureFlags(CLI::App* app, AvatarConfig* conf
              when +
                  "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8: a "
                  "feature map of output/8; 3 values, e.g. 48,24,8: two levels and a feature map of output/4)")
-          ->delimiter(','));
-  options.push_back(
+          ->delimiter(','),
       app->add_option("--hair-margin", config->hair_margin_px,
                       when + "feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
-          ->capture_default_str());
-  options.push_back(app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")
-                        ->capture_default_str());
-  return options;
+          ->capture_default_str(),
+      app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")
+          ->capture_default_str(),
+  };
 }
 
 // The surface texture (METHOD's baseline has none): for a new avatar, or
