@@ -1,12 +1,36 @@
 // Benchmark suite "track": the sender's per-frame tracking cost (face tracker,
 // landmarks, head-model fit) on a video, through the FrameTracker the sender and
 // headcast-track use.
+#include <deque>
+
 #include "bench/bench.h"
 #include "common/core/image_io.h"
+#include "common/core/timer.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/tracking/frame_tracker.h"
 
 namespace headcast::bench {
+namespace {
+
+// Raw landmarks found on consecutive frames: their jitter, the second
+// difference of each point (mean over the 68, over the eye distance).
+class Jitter {
+ public:
+  void Add(const FaceObservation& o) {
+    if (o.status == FaceStatus::kNoFace) return last_.clear();
+    last_.push_back(o.raw);
+    if (last_.size() > 3) last_.pop_front();
+    if (last_.size() < 3) return;
+    stats_.Add(LandmarkJitterIod(last_[0], last_[1], last_[2]));
+  }
+  const SampleStats& stats() const { return stats_; }
+
+ private:
+  std::deque<Landmarks2d> last_;
+  SampleStats stats_;
+};
+
+}  // namespace
 
 nlohmann::json RunTrackSuite(const BenchOptions& options) {
   if (options.video.empty())
@@ -21,6 +45,14 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   every_frame.redetect_interval = 1;
   FaceTracker fixed_tracker(fixed_margins), reference(every_frame);
   SampleStats drift, fixed_drift;
+  // The shape predictor on every view of the face (FaceTrackerOptions::
+  // predictor_views) against the one box: its cost and the landmarks' jitter.
+  FaceTrackerOptions one_view, all_views;
+  one_view.filter = all_views.filter = false;
+  all_views.predictor_views = kMaxPredictorViews;
+  FaceTracker one_view_tracker(one_view), all_views_tracker(all_views);
+  SampleStats one_view_ms, all_views_ms;
+  Jitter one_view_jitter, all_views_jitter;
   VideoReader video(options.video);
   const double fps = video.fps() > 0 ? video.fps() : 30;
   SampleStats total, track_ms, fit_ms, error;
@@ -37,6 +69,12 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
     ++frames;
     const FaceObservation fixed_obs = fixed_tracker.Track(frame, frames / fps);
     const FaceObservation ref = reference.Track(frame, frames / fps);
+    Stopwatch clock;
+    one_view_jitter.Add(one_view_tracker.Track(frame, frames / fps));
+    one_view_ms.Add(clock.ElapsedMs());
+    clock.Restart();
+    all_views_jitter.Add(all_views_tracker.Track(frame, frames / fps));
+    all_views_ms.Add(clock.ElapsedMs());
     if (ref.status != FaceStatus::kNoFace && obs.status == FaceStatus::kTracked &&
         fixed_obs.status == FaceStatus::kTracked) {
       drift.Add(LandmarkErrorIod(obs.raw, ref.raw));
@@ -72,6 +110,15 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
   out["fixed_margins_drift_iod_p95"] = fixed_drift.Percentile(95);
   out["fixed_margins_drift_iod_max"] = fixed_drift.Max();
   out["fit_ms_median"] = fit_ms.Median();
+  out["views_what"] =
+      "FaceTracker::Track unfiltered (as prep runs it) with the shape predictor on one box and on all " +
+      std::to_string(kMaxPredictorViews) +
+      " views (--predictor-views): ms per frame, and the raw landmarks' jitter (second difference over consecutive "
+      "frames, mean over the 68, over the outer-eye-corner distance)";
+  out["one_view_ms_median"] = one_view_ms.Median();
+  out["all_views_ms_median"] = all_views_ms.Median();
+  out["one_view_jitter_iod_median"] = one_view_jitter.stats().Median();
+  out["all_views_jitter_iod_median"] = all_views_jitter.stats().Median();
   return out;
 }
 

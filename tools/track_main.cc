@@ -82,6 +82,11 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "weight of each rigid head point (forehead, hairline) followed by optical flow from the previous "
                  "frame, against a landmark (0: off)")
       ->capture_default_str();
+  app.add_option("--predictor-views", t.tracker.face.predictor_views,
+                 "the shape predictor runs on this many views of each face (the box, its mirror, the box smaller "
+                 "and larger), each landmark their median")
+      ->check(CLI::Range(1, kMaxPredictorViews))
+      ->capture_default_str();
   app.add_option_function<std::string>(
          "--landmark-filter", [&t](const std::string& mode) { SetLandmarkFilter(mode, &t); },
          "the landmarks over time: causal (filtered forwards, as live; the default), off (as found) or two-sided "

@@ -234,6 +234,11 @@ int main(int argc, char** argv) {
   prep->add_flag("!--no-landmark-repair", p.landmark_repair,
                  "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
                  "frame (no repair; drive the avatar the same way)");
+  prep->add_option("--predictor-views", p.predictor_views,
+                   "tracking: the shape predictor runs on this many views of each face (the box, its mirror, "
+                   "the box smaller and larger), each landmark their median")
+      ->check(CLI::Range(1, kMaxPredictorViews))
+      ->capture_default_str();
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")

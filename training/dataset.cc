@@ -42,6 +42,7 @@ void PrepOptions::Check() const {
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .NonNegative("expression_range_weight", expression_range_weight)
       .NonNegative("eye_look_prior", eye_look_prior)
+      .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
@@ -127,6 +128,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.eye_look_prior = o.eye_look_prior;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
+  track.tracker.face.predictor_views = o.predictor_views;
   track.tracker.face.filter_min_cutoff = o.landmark_filter_hz;
   track.tracker.face.filter_beta = o.landmark_filter_beta;
   SetLandmarkFilter(o.landmark_filter, &track);
@@ -317,6 +319,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"frames", track_report.value("frames", 0)},
         {"landmark_error_iod_mean", track_report.value("landmark_error_iod_mean", -1.0)},
         {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)},
+        {"jitter_iod_median_raw_landmarks", track_report.value("jitter_iod_median_raw_landmarks", -1.0)},
+        {"predictor_views", o.predictor_views},
         {"gaze", o.gaze},
         {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter}}}};

@@ -74,6 +74,7 @@ struct PrepOptions {
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
+  int predictor_views = FaceTrackerOptions{}.predictor_views;  // the shape predictor's views of each face, median
   // The landmarks over time. "off": as the shape predictor found them;
   // "causal": the live tracker's One-Euro filter, which steadies a live
   // picture but draws a moving face (lips, lids) where it was a frame or two

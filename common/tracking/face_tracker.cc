@@ -6,6 +6,7 @@
 #include <dlib/opencv/cv_image.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
@@ -20,6 +21,7 @@ void FaceTrackerOptions::Check() const {
   OptionsCheck c("FaceTrackerOptions");
   c.NotEmpty("predictor_path", predictor_path).InRange("detect_width", detect_width, 64, 8192);
   c.InRange("redetect_interval", redetect_interval, 1, 100000).Positive("min_face_px", min_face_px);
+  c.InRange("predictor_views", predictor_views, 1, kMaxPredictorViews);
   c.InRange("max_tracked_scale_change", max_tracked_scale_change, 1.01, 10.0)
       .InRange("max_tracked_shift", max_tracked_shift, 0.01, 10.0)
       .InRange("max_scale_change_since_detection", max_scale_change_since_detection, 1.01, 10.0);
@@ -27,6 +29,21 @@ void FaceTrackerOptions::Check() const {
   c.ThrowIfErrors();
   iris.Check();
   repair.Check();
+}
+
+int MirroredLandmark(int l) {
+  if (l < 0 || l >= kNumLandmarks) throw std::out_of_range("MirroredLandmark: no landmark " + std::to_string(l));
+  // Each run of points mirrors onto itself read backwards: index first + last - l.
+  struct Run {
+    int first, last;
+  };
+  static constexpr Run kRuns[] = {{0, 16}, {17, 26}, {31, 35}, {36, 45}, {48, 54}, {55, 59}, {60, 64}, {65, 67}};
+  if (l >= 27 && l <= 30) return l;  // the nose's bridge lies on the mirror line
+  // The eyes: the upper lids and corners 36-39 with 42-45, the lower lids 40-41 with 46-47.
+  if ((l >= 40 && l <= 41) || (l >= 46 && l <= 47)) return 87 - l;
+  for (const Run& r : kRuns)
+    if (l >= r.first && l <= r.last) return r.first + r.last - l;
+  return l;
 }
 
 const char* FaceStatusName(FaceStatus s) {
@@ -100,6 +117,41 @@ struct FaceTracker::Impl {
                               static_cast<int>(std::lround(b.y - margins.top * b.height))),
                     cv::Point(static_cast<int>(std::lround(b.x + b.width + margins.right * b.width)),
                               static_cast<int>(std::lround(b.y + b.height + margins.bottom * b.height))));
+  }
+
+  // The shape predictor on the views of `box` (FaceTrackerOptions::predictor_views).
+  Landmarks2d Predict(const cv::Mat& gray, const cv::Rect& box) const {
+    // View v: mirrored when odd, the box scaled about its centre by kScale[v].
+    static constexpr double kScale[kMaxPredictorViews] = {1, 1, 0.94, 1.06, 1.06, 0.94};
+    const int views = options.predictor_views;
+    cv::Mat mirrored;
+    if (views > 1) cv::flip(gray, mirrored, 1);
+    const double last_column = gray.cols - 1;
+    std::array<Landmarks2d, kMaxPredictorViews> found;
+    for (int v = 0; v < views; ++v) {
+      const bool mirror = v % 2 == 1;
+      const double cx = box.x + 0.5 * box.width, cy = box.y + 0.5 * box.height;
+      const double hw = 0.5 * box.width * kScale[v], hh = 0.5 * box.height * kScale[v];
+      const double left = mirror ? last_column - (cx + hw) : cx - hw;
+      const dlib::full_object_detection shape = predictor(
+          dlib::cv_image<unsigned char>(mirror ? mirrored : gray),
+          dlib::rectangle(std::lround(left), std::lround(cy - hh), std::lround(left + 2 * hw), std::lround(cy + hh)));
+      for (int l = 0; l < kNumLandmarks; ++l) {
+        const double x = shape.part(l).x(), y = shape.part(l).y();
+        found[v][mirror ? MirroredLandmark(l) : l] = Eigen::Vector2d(mirror ? last_column - x : x, y);
+      }
+    }
+    if (views == 1) return found[0];
+    // The median of each coordinate: one view whose cascade went astray does not pull it.
+    Landmarks2d median;
+    std::array<double, kMaxPredictorViews> values;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      for (int c = 0; c < 2; ++c) {
+        for (int v = 0; v < views; ++v) values[v] = found[v][l][c];
+        std::sort(values.begin(), values.begin() + views);
+        median[l][c] = 0.5 * (values[(views - 1) / 2] + values[views / 2]);
+      }
+    return median;
   }
 
   // Remembers how the detector's `box` sits around the landmarks found in it.
@@ -187,9 +239,7 @@ FaceObservation FaceTracker::Track(const cv::Mat& image, double time_s) {
     ++m.since_detection;
     obs.status = FaceStatus::kTracked;
   }
-  const dlib::full_object_detection shape = m.predictor(
-      dlib::cv_image<unsigned char>(gray), dlib::rectangle(box.x, box.y, box.x + box.width, box.y + box.height));
-  for (int l = 0; l < kNumLandmarks; ++l) obs.raw[l] = Eigen::Vector2d(shape.part(l).x(), shape.part(l).y());
+  obs.raw = m.Predict(gray, box);
   // A face that left the frame or a box on nothing: the landmarks collapse or fly off.
   const cv::Rect found = m.BoxFromLandmarks(obs.raw);
   const bool plausible = found.width >= m.options.min_face_px * 0.5 && found.height >= m.options.min_face_px * 0.5 &&

@@ -25,6 +25,13 @@ struct FaceTrackerOptions {
   // landmarks drift until the next detection. Off: fixed margins (comparisons).
   bool box_from_detection = true;
   double min_face_px = 40;  // smaller faces are ignored, pixels (full frame)
+  // The shape predictor runs on this many views of the face and each landmark
+  // is the median of its views: the box as found, the frame mirrored (each
+  // point taken back to its own side), then the box 6 % smaller and larger,
+  // mirrored and not (kMaxPredictorViews in all). The predictor's cascade
+  // starts from its mean shape placed in the box, and its errors differ from
+  // view to view; 1: the box as found only.
+  int predictor_views = 1;
   // While tracking, landmarks whose width changes by more than this factor
   // since the previous frame, or whose centre moves by more than this share
   // of the face's width in a frame, mean the box slipped off the face: the
@@ -45,6 +52,12 @@ struct FaceTrackerOptions {
   LandmarkRepairOptions repair;  // predictor jumps caught by flow from the previous frame
   void Check() const;
 };
+
+constexpr int kMaxPredictorViews = 6;
+
+// The landmark that point l of dlib's 68 becomes in the mirrored image (the
+// left eye's outer corner the right eye's, the jaw read the other way round).
+int MirroredLandmark(int l);
 
 enum class FaceStatus { kDetected, kTracked, kNoFace };
 const char* FaceStatusName(FaceStatus s);

@@ -492,4 +492,10 @@ double LandmarkErrorIod(const Landmarks2d& a, const Landmarks2d& b) {
   return sum / kNumLandmarks / std::max(iod, 1e-9);
 }
 
+double LandmarkJitterIod(const Landmarks2d& before, const Landmarks2d& at, const Landmarks2d& after) {
+  double sum = 0;
+  for (int l = 0; l < kNumLandmarks; ++l) sum += (before[l] - 2 * at[l] + after[l]).norm();
+  return sum / kNumLandmarks / std::max((at[36] - at[45]).norm(), 1e-9);
+}
+
 }  // namespace headcast

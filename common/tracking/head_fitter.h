@@ -144,5 +144,8 @@ class HeadFitter {
 
 // The normalised landmark error: mean distance / outer-eye-corner distance (points 36, 45).
 double LandmarkErrorIod(const Landmarks2d& a, const Landmarks2d& b);
+// Jitter at the middle of three consecutive frames' landmarks: the mean second
+// difference of each point over the middle frame's outer-eye-corner distance.
+double LandmarkJitterIod(const Landmarks2d& before, const Landmarks2d& at, const Landmarks2d& after);
 
 }  // namespace headcast

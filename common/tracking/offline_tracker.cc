@@ -151,11 +151,7 @@ class FitQuality {
   }
 
  private:
-  static double SecondDifference(const std::vector<Landmarks2d>& h) {
-    double sum = 0;
-    for (int l = 0; l < kNumLandmarks; ++l) sum += (h[2][l] - 2 * h[1][l] + h[0][l]).norm();
-    return sum / kNumLandmarks / std::max(1e-9, (h[1][36] - h[1][45]).norm());
-  }
+  static double SecondDifference(const std::vector<Landmarks2d>& h) { return LandmarkJitterIod(h[0], h[1], h[2]); }
   SampleStats error_iod_, jitter_fitted_, jitter_detected_;
   std::vector<Landmarks2d> fitted_, detected_;
   int last_frame_ = -2;

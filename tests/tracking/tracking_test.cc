@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <opencv2/imgproc.hpp>
 #include <random>
 #include <vector>
@@ -608,6 +610,76 @@ TEST(FaceTracker, LandmarksMatchHumanAnnotations) {
     RecordProperty(name + "_error_iod", std::to_string(err));
     EXPECT_LT(err, 0.08) << name;
   }
+}
+
+TEST(FaceTracker, MirroredLandmarksPairTheSides) {
+  for (int l = 0; l < kNumLandmarks; ++l) EXPECT_EQ(MirroredLandmark(MirroredLandmark(l)), l) << l;
+  EXPECT_EQ(MirroredLandmark(0), 16);   // the jaw's ends
+  EXPECT_EQ(MirroredLandmark(8), 8);    // the chin
+  EXPECT_EQ(MirroredLandmark(17), 26);  // the brows' outer ends
+  EXPECT_EQ(MirroredLandmark(30), 30);  // the nose tip
+  EXPECT_EQ(MirroredLandmark(36), 45);  // the eyes' outer corners
+  EXPECT_EQ(MirroredLandmark(39), 42);  // and inner ones
+  EXPECT_EQ(MirroredLandmark(37), 44);  // upper lids
+  EXPECT_EQ(MirroredLandmark(41), 46);  // lower lids
+  EXPECT_EQ(MirroredLandmark(48), 54);  // the mouth's corners
+  EXPECT_EQ(MirroredLandmark(57), 57);  // the lower lip's middle
+  EXPECT_EQ(MirroredLandmark(60), 64);  // the inner corners
+  EXPECT_EQ(MirroredLandmark(65), 67);
+  EXPECT_THROW(MirroredLandmark(68), std::out_of_range);
+  EXPECT_THROW(MirroredLandmark(-1), std::out_of_range);
+}
+
+// Several views of the face: on the annotated pictures the median of the
+// views stays as close to the human points as the box alone (the figures are
+// in the test's properties), and the points found in a mirrored picture,
+// mirrored back, come closer to those of the picture itself: with the box and
+// its mirror among the views only the detector's box differs between the two.
+TEST(FaceTracker, PredictorViewsKeepTheLandmarksAndMirrorWithThePicture) {
+  HEADCAST_REQUIRE_DATA("landmarks/einstein.jpg");
+  const std::array<int, 3> counts = {1, 2, kMaxPredictorViews};
+  std::vector<std::unique_ptr<FaceTracker>> trackers;
+  for (const int views : counts) {
+    FaceTrackerOptions o;
+    o.predictor_views = views;
+    trackers.push_back(std::make_unique<FaceTracker>(o));
+  }
+  int mirrors_found = 0;
+  for (const std::string name : {"einstein.jpg", "takeo.ppm"}) {
+    const std::string base = testing::DataDir() + "/landmarks/" + name;
+    const cv::Mat image = ReadImage(base);
+    cv::Mat mirrored;
+    cv::flip(image, mirrored, 1);
+    const Landmarks2d truth = ReadPts(base.substr(0, base.rfind('.')) + ".pts");
+    double one_view_asymmetry = -1;
+    for (size_t k = 0; k < counts.size(); ++k) {
+      FaceTracker& tracker = *trackers[k];
+      tracker.Reset();
+      const FaceObservation obs = tracker.Track(image, 0);
+      ASSERT_EQ(obs.status, FaceStatus::kDetected) << name;
+      const double err = LandmarkErrorIod(obs.raw, truth);
+      RecordProperty(name + "_views" + std::to_string(counts[k]) + "_error_iod", std::to_string(err));
+      EXPECT_LT(err, 0.08) << name << " " << counts[k];
+      tracker.Reset();
+      const FaceObservation back = tracker.Track(mirrored, 0);
+      if (back.status != FaceStatus::kDetected) {  // HOG is not mirror-symmetric: it misses Einstein's mirror
+        std::printf("%s, %d views: %.4f IOD from the annotation; no face found in the mirror\n", name.c_str(),
+                    counts[k], err);
+        continue;
+      }
+      Landmarks2d unmirrored;
+      for (int l = 0; l < kNumLandmarks; ++l)
+        unmirrored[MirroredLandmark(l)] = Eigen::Vector2d(image.cols - 1 - back.raw[l].x(), back.raw[l].y());
+      const double asymmetry = LandmarkErrorIod(unmirrored, obs.raw);
+      std::printf("%s, %d views: %.4f IOD from the annotation, %.4f between picture and mirror\n", name.c_str(),
+                  counts[k], err, asymmetry);
+      if (k == 0)
+        one_view_asymmetry = asymmetry, ++mirrors_found;
+      else
+        EXPECT_LT(asymmetry, 0.75 * one_view_asymmetry) << name << " " << counts[k];
+    }
+  }
+  EXPECT_GT(mirrors_found, 0);
 }
 
 // A face that moved: the filtered landmarks lag behind the found ones, the
