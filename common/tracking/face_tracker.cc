@@ -38,12 +38,11 @@ int MirroredLandmark(int l) {
     int first, last;
   };
   static constexpr Run kRuns[] = {{0, 16}, {17, 26}, {31, 35}, {36, 45}, {48, 54}, {55, 59}, {60, 64}, {65, 67}};
-  if (l >= 27 && l <= 30) return l;  // the nose's bridge lies on the mirror line
   // The eyes: the upper lids and corners 36-39 with 42-45, the lower lids 40-41 with 46-47.
   if ((l >= 40 && l <= 41) || (l >= 46 && l <= 47)) return 87 - l;
   for (const Run& r : kRuns)
     if (l >= r.first && l <= r.last) return r.first + r.last - l;
-  return l;
+  return l;  // the nose's bridge, 27-30, lies on the mirror line
 }
 
 const char* FaceStatusName(FaceStatus s) {
@@ -127,10 +126,10 @@ struct FaceTracker::Impl {
     cv::Mat mirrored;
     if (views > 1) cv::flip(gray, mirrored, 1);
     const double last_column = gray.cols - 1;
+    const double cx = box.x + 0.5 * box.width, cy = box.y + 0.5 * box.height;
     std::array<Landmarks2d, kMaxPredictorViews> found;
     for (int v = 0; v < views; ++v) {
       const bool mirror = v % 2 == 1;
-      const double cx = box.x + 0.5 * box.width, cy = box.y + 0.5 * box.height;
       const double hw = 0.5 * box.width * kScale[v], hh = 0.5 * box.height * kScale[v];
       const double left = mirror ? last_column - (cx + hw) : cx - hw;
       const dlib::full_object_detection shape = predictor(

@@ -140,8 +140,8 @@ class FitQuality {
       detected_.erase(detected_.begin());
     }
     if (fitted_.size() == 3) {
-      jitter_fitted_.Add(SecondDifference(fitted_));
-      jitter_detected_.Add(SecondDifference(detected_));
+      jitter_fitted_.Add(LandmarkJitterIod(fitted_[0], fitted_[1], fitted_[2]));
+      jitter_detected_.Add(LandmarkJitterIod(detected_[0], detected_[1], detected_[2]));
     }
   }
   void Report(nlohmann::json* r) const {
@@ -151,7 +151,6 @@ class FitQuality {
   }
 
  private:
-  static double SecondDifference(const std::vector<Landmarks2d>& h) { return LandmarkJitterIod(h[0], h[1], h[2]); }
   SampleStats error_iod_, jitter_fitted_, jitter_detected_;
   std::vector<Landmarks2d> fitted_, detected_;
   int last_frame_ = -2;
