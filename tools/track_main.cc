@@ -87,6 +87,11 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "and larger), each landmark their median")
       ->check(CLI::Range(1, kMaxPredictorViews))
       ->capture_default_str();
+  app.add_option("--predictor-views-points", t.tracker.face.predictor_views_points,
+                 "with several predictor views, which points take their median (the others the box's): all, no-eyes, "
+                 "outline (jaw line and nose)")
+      ->check(CLI::IsMember(kPredictorViewsPoints))
+      ->capture_default_str();
   app.add_option_function<std::string>(
          "--landmark-filter", [&t](const std::string& mode) { SetLandmarkFilter(mode, &t); },
          "the landmarks over time: causal (filtered forwards, as live; the default), off (as found) or two-sided "

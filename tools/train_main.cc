@@ -239,6 +239,11 @@ int main(int argc, char** argv) {
                    "the box smaller and larger), each landmark their median")
       ->check(CLI::Range(1, kMaxPredictorViews))
       ->capture_default_str();
+  prep->add_option("--predictor-views-points", p.predictor_views_points,
+                   "tracking: with several predictor views, which points take their median (the others the box's): "
+                   "all, no-eyes, outline (jaw line and nose)")
+      ->check(CLI::IsMember(kPredictorViewsPoints))
+      ->capture_default_str();
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")

@@ -43,6 +43,9 @@ void PrepOptions::Check() const {
       .NonNegative("expression_range_weight", expression_range_weight)
       .NonNegative("eye_look_prior", eye_look_prior)
       .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
+      .That(std::find(kPredictorViewsPoints.begin(), kPredictorViewsPoints.end(), predictor_views_points) !=
+                kPredictorViewsPoints.end(),
+            "predictor_views_points is all, no-eyes or outline")
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
@@ -129,6 +132,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.predictor_views = o.predictor_views;
+  track.tracker.face.predictor_views_points = o.predictor_views_points;
   track.tracker.face.filter_min_cutoff = o.landmark_filter_hz;
   track.tracker.face.filter_beta = o.landmark_filter_beta;
   SetLandmarkFilter(o.landmark_filter, &track);
@@ -321,6 +325,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"jitter_iod_median", track_report.value("jitter_iod_median", -1.0)},
         {"jitter_iod_median_raw_landmarks", track_report.value("jitter_iod_median_raw_landmarks", -1.0)},
         {"predictor_views", o.predictor_views},
+        {"predictor_views_points", o.predictor_views_points},
         {"gaze", o.gaze},
         {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter}}}};

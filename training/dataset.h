@@ -75,6 +75,7 @@ struct PrepOptions {
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   int predictor_views = FaceTrackerOptions{}.predictor_views;  // the shape predictor's views of each face, median
+  std::string predictor_views_points = FaceTrackerOptions{}.predictor_views_points;  // which take the views' median
   // The landmarks over time. "off": as the shape predictor found them;
   // "causal": the live tracker's One-Euro filter, which steadies a live
   // picture but draws a moving face (lips, lids) where it was a frame or two

@@ -21,7 +21,10 @@ void FaceTrackerOptions::Check() const {
   OptionsCheck c("FaceTrackerOptions");
   c.NotEmpty("predictor_path", predictor_path).InRange("detect_width", detect_width, 64, 8192);
   c.InRange("redetect_interval", redetect_interval, 1, 100000).Positive("min_face_px", min_face_px);
-  c.InRange("predictor_views", predictor_views, 1, kMaxPredictorViews);
+  c.InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
+      .That(std::find(kPredictorViewsPoints.begin(), kPredictorViewsPoints.end(), predictor_views_points) !=
+                kPredictorViewsPoints.end(),
+            "predictor_views_points is all, no-eyes or outline");
   c.InRange("max_tracked_scale_change", max_tracked_scale_change, 1.01, 10.0)
       .InRange("max_tracked_shift", max_tracked_shift, 0.01, 10.0)
       .InRange("max_scale_change_since_detection", max_scale_change_since_detection, 1.01, 10.0);
@@ -29,6 +32,12 @@ void FaceTrackerOptions::Check() const {
   c.ThrowIfErrors();
   iris.Check();
   repair.Check();
+}
+
+bool FaceTrackerOptions::TakesTheViewsMedian(int l) const {
+  if (predictor_views_points == "no-eyes") return l < 36 || l > 47;
+  if (predictor_views_points == "outline") return l <= 16 || (l >= 27 && l <= 35);  // jaw line, nose
+  return true;
 }
 
 int MirroredLandmark(int l) {
@@ -150,6 +159,8 @@ struct FaceTracker::Impl {
         std::sort(values.begin(), values.begin() + views);
         median[l][c] = 0.5 * (values[(views - 1) / 2] + values[views / 2]);
       }
+    for (int l = 0; l < kNumLandmarks; ++l)
+      if (!options.TakesTheViewsMedian(l)) median[l] = found[0][l];
     return median;
   }
 

@@ -7,6 +7,7 @@
 #include <memory>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/iris_locator.h"
@@ -32,6 +33,12 @@ struct FaceTrackerOptions {
   // starts from its mean shape placed in the box, and its errors differ from
   // view to view; 1: the box as found only.
   int predictor_views = 1;
+  // Which points take the views' median, the others the box's own: "all";
+  // "no-eyes" (the eyes' from the box); "outline" (only the jaw line and the
+  // nose, the points that hold the pose and cut the masks). The median pulls a
+  // wide stare, shut lids or a frown toward the predictor's mean shape.
+  std::string predictor_views_points = "all";
+  bool TakesTheViewsMedian(int landmark) const;
   // While tracking, landmarks whose width changes by more than this factor
   // since the previous frame, or whose centre moves by more than this share
   // of the face's width in a frame, mean the box slipped off the face: the
@@ -54,6 +61,7 @@ struct FaceTrackerOptions {
 };
 
 constexpr int kMaxPredictorViews = 6;
+inline const std::vector<std::string> kPredictorViewsPoints = {"all", "no-eyes", "outline"};
 
 // The landmark that point l of dlib's 68 becomes in the mirrored image (the
 // left eye's outer corner the right eye's, the jaw read the other way round).

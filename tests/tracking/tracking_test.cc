@@ -682,6 +682,41 @@ TEST(FaceTracker, PredictorViewsKeepTheLandmarksAndMirrorWithThePicture) {
   EXPECT_GT(mirrors_found, 0);
 }
 
+// predictor_views_points: the points it names are the views' median (those
+// of the six-view tracker that takes it for all), the others the box's own
+// (the one-view tracker's).
+TEST(FaceTracker, PredictorViewsPointsChooseWhichTakeTheMedian) {
+  HEADCAST_REQUIRE_DATA("landmarks/takeo.ppm");
+  const cv::Mat image = ReadImage(testing::DataDir() + "/landmarks/takeo.ppm");
+  auto found = [&image](int views, const std::string& points) {
+    FaceTrackerOptions o;
+    o.predictor_views = views;
+    o.predictor_views_points = points;
+    FaceTracker tracker(o);
+    const FaceObservation obs = tracker.Track(image, 0);
+    EXPECT_EQ(obs.status, FaceStatus::kDetected) << points;
+    return obs.raw;
+  };
+  const Landmarks2d box = found(1, "all"), all = found(kMaxPredictorViews, "all");
+  for (const std::string points : {"no-eyes", "outline"}) {
+    const Landmarks2d mixed = found(kMaxPredictorViews, points);
+    double box_points_moved_by_the_views = 0;
+    int median_points = 0;
+    for (int l = 0; l < kNumLandmarks; ++l) {
+      const bool eye = l >= 36 && l <= 47, outline = l <= 16 || (l >= 27 && l <= 35);
+      const bool median = points == "no-eyes" ? !eye : outline;
+      median_points += median;
+      EXPECT_EQ(mixed[l], median ? all[l] : box[l]) << points << " " << l;
+      if (!median) box_points_moved_by_the_views += (all[l] - box[l]).norm();
+    }
+    EXPECT_EQ(median_points, points == "no-eyes" ? 56 : 26);
+    EXPECT_GT(box_points_moved_by_the_views, 0) << points << ": the views' median should differ from the box here";
+  }
+  FaceTrackerOptions o;
+  o.predictor_views_points = "eyes";
+  EXPECT_THROW(o.Check(), std::invalid_argument);
+}
+
 // A face that moved: the filtered landmarks lag behind the found ones, the
 // unfiltered (FaceTrackerOptions::filter off, what prep uses) are the found ones.
 TEST(FaceTracker, UnfilteredLandmarksDoNotLagAMovedFace) {
