@@ -38,6 +38,7 @@ void ToProto(const FrameParams& in, v1::FrameParams* out) {
   out->set_capture_time_s(in.capture_time_s);
   out->set_sequence(in.sequence);
   out->set_confidence(in.confidence);
+  if (in.skin_colour) PutVector3(*in.skin_colour, out->mutable_skin_colour());
 }
 
 bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why) {
@@ -51,6 +52,12 @@ bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why) {
   out->capture_time_s = in.capture_time_s();
   out->sequence = in.sequence();
   out->confidence = in.confidence();
+  out->skin_colour.reset();
+  if (in.skin_colour_size() > 0) {  // absent: not measured
+    Eigen::Vector3f rgb;
+    if (!GetVector3(in.skin_colour(), "skin_colour", &rgb, why)) return false;
+    out->skin_colour = rgb;
+  }
   return true;
 }
 
@@ -96,6 +103,7 @@ void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out) {
   out->set_fps(fps);
   out->set_codec_version(kCodecVersion);
   out->set_head_model_fingerprint(in.head_model_fingerprint);
+  out->set_skin_colour(in.skin_colour);
 }
 
 bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why) {
@@ -123,6 +131,7 @@ bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why
   l.steps.assign(in.steps().begin(), in.steps().end());
   l.key_frame_interval = static_cast<int>(in.key_frame_interval());
   l.head_model_fingerprint = in.head_model_fingerprint();  // Check bounds its length
+  l.skin_colour = in.skin_colour();
   try {
     l.Check();
   } catch (const std::invalid_argument& e) {

@@ -323,6 +323,9 @@ int main(int argc, char** argv) {
   eval->add_flag("--write-frames", e.write_frames,
                  "also write the ground-truth and avatar frames (PNG) under OUT/frames");
   eval->add_option("--orbit-frames", e.orbit_frames, "frames of the novel-view orbit (0: none)")->capture_default_str();
+  eval->add_flag("!--no-skin-colour", e.skin_colour,
+                 "draw the avatar in its own colours, not matched to the frames' skin colours (when the dataset has "
+                 "them)");
   eval->add_flag("!--no-landmarks", e.landmarks,
                  "skip the expression-fidelity figures (dlib landmarks on avatar and true frames)");
   eval->add_option("--predictor", e.landmark_predictor, "dlib's 68-point shape predictor")->capture_default_str();

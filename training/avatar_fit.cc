@@ -531,9 +531,12 @@ EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const Subjec
 
 EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
                              const std::vector<int>& positions,
-                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render) {
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render, bool skin_colour) {
   std::vector<FrameParams> frames;
-  for (int i : positions) frames.push_back(data.At(i).params);
+  for (int i : positions) {
+    frames.push_back(data.At(i).params);
+    if (!skin_colour) frames.back().skin_colour.reset();
+  }
   return EvaluateOnFrames(
       avatar, model, data.subject(), frames,
       [&](int k) {

@@ -168,9 +168,11 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
 
 // PSNR/SSIM on dataset frames (positions; default its test split), the
 // ground truth with its background replaced as in training. `render(i, avatar_bgr)` per frame if given.
+// `skin_colour` false: the frames' skin colours are left out (the avatar's own colours, as a sender without them).
 EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
                              const std::vector<int>& positions,
-                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render = nullptr);
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render = nullptr,
+                             bool skin_colour = true);
 
 // PSNR/SSIM of the avatar rendered for `frames` (as the receiver shows them)
 // against `target(k)` (BGR, the avatar's size; an empty Mat skips frame k).

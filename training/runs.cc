@@ -297,6 +297,18 @@ nlohmann::json RunSubject(SubjectOptions o) {
   return summary;
 }
 
+namespace {
+// What eval.json says of the frames' skin colours (FrameParams::skin_colour).
+std::string SkinColourUse(const PreparedDataset& data, const std::vector<int>& positions, bool matched) {
+  int carried = 0;
+  for (int i : positions) carried += data.At(i).params.skin_colour.has_value();
+  if (carried == 0) return "the avatar's own colours (the dataset's frames carry no skin colour)";
+  const std::string of = std::to_string(carried) + " of " + std::to_string(positions.size()) + " frames";
+  return matched ? "matched to the frames' skin colours (" + of + " carry one)"
+                 : "the avatar's own colours (--no-skin-colour; " + of + " carry one)";
+}
+}  // namespace
+
 void EvalOptions::Check() const {
   OptionsCheck c("EvalOptions");
   c.That(!avatar.empty(), "avatar is required").That(!dataset.empty(), "dataset is required");
@@ -351,8 +363,9 @@ nlohmann::json RunEval(const EvalOptions& o) {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
     ProgressLine progress(0, static_cast<int>(positions.size()), 10, "frame");
     int done = 0;
-    const EvalResult e =
-        EvaluateOnDataset(avatar, model, data, positions, [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
+    const EvalResult e = EvaluateOnDataset(
+        avatar, model, data, positions,
+        [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
           progress.Show(done++, "evaluating");
           cv::Mat row;
           cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
@@ -364,7 +377,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
             WriteImage((dir / "frames" / ("truth" + std::string(name))).string(), truth);
             WriteImage((dir / "frames" / ("avatar" + std::string(name))).string(), rendered);
           }
-        });
+        },
+        o.skin_colour);
     progress.Finish();
     for (int k = 0; k < e.count; ++k)
       csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";
@@ -374,6 +388,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
         {"resolution", avatar.config().output_size},
         {"eval", EvalJson(e, on_test ? "test split" : "training frames")},
         {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
+        {"skin_colour", SkinColourUse(data, positions, o.skin_colour)},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",

@@ -81,6 +81,9 @@ struct EvalOptions {
   int orbit_frames = 60;      // novel-view orbit video (0: none)
   double orbit_deg = 30;      // yaw swing of the orbit
   bool write_frames = false;  // also OUT/frames/truth_NNNNN.png and avatar_NNNNN.png (codec comparisons)
+  // The frames' skin colours, when the dataset has them, matched as the
+  // receiver matches them; false: the avatar's own colours.
+  bool skin_colour = true;
   // Expression fidelity: dlib's landmarks on the avatar's frames against the
   // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
   bool landmarks = true;

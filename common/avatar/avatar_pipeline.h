@@ -84,9 +84,21 @@ void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, co
 // What the receiver shows for `frame`: PrepareAvatarFrame, RunAvatar, then
 // 8-bit BGR in *image_bgr (reused). With `parallel`, the head model's pass
 // runs as two tasks, then the surface preparation as one task beside the network.
+// A frame that carries the camera's skin colour (FrameParams::skin_colour)
+// has its picture matched to it (MatchSkinColour).
 void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,
                        const HeadIdentity& identity, const SubjectParams& subject, const FrameParams& frame,
                        RaySampler* sampler, AvatarFrameInputs* buffers, cv::Mat* image_bgr,
                        AvatarTimings* timings = nullptr, const ParallelTasks* parallel = nullptr);
+
+// The head in `out`'s picture scaled per channel so that its skin colour
+// (SkinColour in the region `landmarks` give) becomes `target`: the camera's
+// exposure, white balance and light, which the networks cannot know. The gain
+// is bounded by kMinSkinGain..kMaxSkinGain; the background stays. Writes
+// *image_bgr, which must hold `out`'s picture; false (nothing changed) when
+// the region is not in the picture.
+constexpr float kMinSkinGain = 0.5f, kMaxSkinGain = 2.f;
+bool MatchSkinColour(const AvatarOutput& out, const Eigen::Vector3f& target, const Landmarks2d& landmarks,
+                     cv::Mat* image_bgr);
 
 }  // namespace headcast

@@ -10,6 +10,7 @@
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_render.h"
+#include "common/headmodel/skin_colour.h"
 
 namespace headcast {
 
@@ -255,7 +256,29 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
   RunAvatarUpsampling(modules, *buffers, &out, timings);
   Stopwatch watch;
   ImageTensorToBgr(out.image, image_bgr);
+  if (frame.skin_colour)
+    MatchSkinColour(out, *frame.skin_colour,
+                    ProjectLandmarks(buffers->posed, buffers->cam_from_head, subject.intrinsics), image_bgr);
   if (timings) timings->convert_ms = watch.ElapsedMs();
+}
+
+bool MatchSkinColour(const AvatarOutput& out, const Eigen::Vector3f& target, const Landmarks2d& landmarks,
+                     cv::Mat* image_bgr) {
+  const std::optional<Eigen::Vector3f> drawn = SkinColour(*image_bgr, landmarks);
+  if (!drawn || !target.allFinite()) return false;
+  // Per channel; bounded, so that a region the avatar draws dark (a hand, a
+  // shadow the landmarks misplaced) cannot blow the picture up.
+  std::array<float, 3> gain;
+  for (int c = 0; c < 3; ++c)
+    gain[c] = std::clamp(target[c] / std::max((*drawn)[c], 1.f / 255), kMinSkinGain, kMaxSkinGain);
+  const torch::Tensor g = torch::tensor({gain[0], gain[1], gain[2]}).view({1, 3, 1, 1});
+  const torch::Tensor background = BackgroundColour();
+  // The head's own colour is scaled, not the background it is composited over:
+  // with a matte the picture is coverage x rgb + (1 - coverage) x background.
+  const torch::Tensor head =
+      out.coverage.defined() ? out.image - (1 - out.coverage) * background : out.image - background;
+  ImageTensorToBgr((out.image + (g - 1) * head).clamp(0, 1), image_bgr);
+  return true;
 }
 
 void AvatarBackendOptions::Check() const {

@@ -29,6 +29,8 @@ std::vector<double> Values(const CodecLayout& layout, const FrameParams& f) {
   for (int c : layout.expression_components) v.push_back(c < f.expression.size() ? f.expression[c] : 0.0);
   for (const Eigen::Vector3f* r : {&f.jaw, &f.neck, &f.left_eye, &f.right_eye, &f.cam_rotation, &f.cam_translation})
     for (int i = 0; i < 3; ++i) v.push_back((*r)[i]);
+  if (layout.skin_colour)
+    for (int i = 0; i < 3; ++i) v.push_back(f.skin_colour ? (*f.skin_colour)[i] : 0.0);
   return v;
 }
 
@@ -38,6 +40,11 @@ void SetValues(const CodecLayout& layout, const std::vector<double>& v, FramePar
   for (int c : layout.expression_components) f->expression[c] = static_cast<float>(v[k++]);
   for (Eigen::Vector3f* r : {&f->jaw, &f->neck, &f->left_eye, &f->right_eye, &f->cam_rotation, &f->cam_translation})
     for (int i = 0; i < 3; ++i) (*r)[i] = static_cast<float>(v[k++]);
+  f->skin_colour.reset();
+  if (layout.skin_colour) {
+    const Eigen::Vector3f rgb(static_cast<float>(v[k]), static_cast<float>(v[k + 1]), static_cast<float>(v[k + 2]));
+    if (rgb != Eigen::Vector3f::Zero()) f->skin_colour = rgb;  // 0, 0, 0: not measured
+  }
 }
 
 // Largest magnitude a value may decode to (garbage and hostile packets are refused).
@@ -45,7 +52,8 @@ double Limit(const CodecLayout& layout, int index) {
   const int e = static_cast<int>(layout.expression_components.size());
   if (index < e) return 10.0;       // expression coefficients
   if (index < e + 15) return M_PI;  // rotations, radians
-  return 20.0;                      // translation, metres
+  if (index < e + 18) return 20.0;  // translation, metres
+  return 1.0;                       // skin colour
 }
 
 }  // namespace
@@ -65,8 +73,10 @@ void CodecLayout::Check() const {
   c.ThrowIfErrors();
 }
 
-CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vector<int> components, int key_interval) {
+CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vector<int> components, int key_interval,
+                                   bool skin_colour) {
   CodecLayout l;
+  l.skin_colour = skin_colour;
   l.num_expression = model.num_expression();
   l.key_frame_interval = key_interval;
   l.head_model_fingerprint = model.fingerprint();
@@ -108,6 +118,8 @@ CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vect
   for (double r : {jaw_radius, head_radius, eye_radius, eye_radius, head_radius})
     for (int i = 0; i < 3; ++i) l.steps.push_back(static_cast<float>(err / r));
   for (int i = 0; i < 3; ++i) l.steps.push_back(static_cast<float>(err));
+  if (skin_colour)
+    for (int i = 0; i < 3; ++i) l.steps.push_back(1.f / 255);
   l.Check();
   return l;
 }

@@ -60,6 +60,8 @@ bool FrameParams::IsValid(std::string* why, float max_abs_expression) const {
     return fail("head not 0.05..20 m in front of the camera");
   if (!std::isfinite(capture_time_s)) return fail("capture time is not finite");
   if (!(confidence >= 0 && confidence <= 1)) return fail("confidence outside 0..1");
+  if (skin_colour && !(skin_colour->allFinite() && skin_colour->minCoeff() >= 0 && skin_colour->maxCoeff() <= 1))
+    return fail("skin colour outside 0..1");
   return true;
 }
 
@@ -88,6 +90,8 @@ FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double
       ((1 - t) * a.cam_translation.cast<double>() + t * b.cam_translation.cast<double>()).cast<float>();
   out.capture_time_s = (1 - t) * a.capture_time_s + t * b.capture_time_s;
   out.confidence = static_cast<float>((1 - t) * a.confidence + t * b.confidence);
+  if (a.skin_colour && b.skin_colour)
+    out.skin_colour = ((1 - t) * a.skin_colour->cast<double>() + t * b.skin_colour->cast<double>()).cast<float>();
   return out;
 }
 

@@ -28,6 +28,10 @@ struct FrameParams {
   double capture_time_s = 0;                                  // capture timestamp, seconds (sender's steady clock)
   uint64_t sequence = 0;                                      // frame number at the sender
   float confidence = 1;                                       // tracking confidence, 0..1
+  // The skin's median R, G, B (0..1) in the frame (SkinColour): the avatar's
+  // picture is matched to it (the camera's exposure and white balance, the
+  // light on the face). None: not measured; the avatar draws its own.
+  std::optional<Eigen::Vector3f> skin_colour;
 
   // The model pose vector: root zero (the head's placement is cam_from_head), then neck, jaw, eyes.
   PoseVector HeadPose() const;

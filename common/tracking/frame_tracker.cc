@@ -10,6 +10,7 @@
 #include "common/core/options.h"
 #include "common/core/timer.h"
 #include "common/core/zip_archive.h"
+#include "common/headmodel/skin_colour.h"
 #include "common/tracking/mesh_fitter.h"
 #include "common/tracking/tracked_fit.h"
 
@@ -272,7 +273,10 @@ TrackedFrame FrameTracker::TrackObserved(const cv::Mat& bgr, const cv::Mat& dept
     if (!r.fitted && r.face.status != FaceStatus::kNoFace) r.problem = "landmark fit did not converge";
   }
   r.fit_ms = watch.ElapsedMs();
-  if (r.fitted) *params = last_;
+  if (r.fitted) {
+    *params = last_;
+    if (options_.skin_colour) params->skin_colour = SkinColour(bgr, fitter_.Project(last_, camera));
+  }
   return r;
 }
 

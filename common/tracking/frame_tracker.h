@@ -32,6 +32,10 @@ struct FrameTrackerOptions {
   // frame is tracked at once with the identity known so far (neutral at
   // first), instead of each holding its frame for a free-shape fit.
   bool rgbd_identity_in_background = false;
+  // Each fitted frame carries its skin colour (FrameParams::skin_colour,
+  // measured where the fit puts the cheeks, nose and chin), which the
+  // receiver matches its avatar's picture to.
+  bool skin_colour = true;
   void Check() const;
 };
 

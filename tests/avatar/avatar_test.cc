@@ -15,6 +15,7 @@
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "common/headmodel/skin_colour.h"
 #include "tests/testing/test_data.h"
 #include "tests/testing/tiny_avatar.h"
 
@@ -535,6 +536,42 @@ TEST(AvatarRenderer, ATwoLevelAvatarCastsRaysAtAQuarterOfTheOutputAndRoundTrips)
   // A feature pixel a quarter of the area: about four times the rays.
   EXPECT_GT(tb.rays, 3 * ta.rays);
   EXPECT_LT(tb.rays, 5 * ta.rays);
+}
+
+// A frame that carries the camera's skin colour: the picture's skin is
+// brought to it (within the 8-bit rounding), the background stays, and a frame
+// without one draws what the avatar draws.
+TEST(AvatarRenderer, TheSkinColourOfTheFrameIsMatched) {
+  AvatarConfig c = Tiny();
+  ApplySubjectDefaults(&c);  // a bounded matte: the background is the renders' colour
+  const SubjectParams subject = DefaultSubject(*Builtin(), 128);
+  AvatarRenderer r(Builtin(), Avatar::CreateRandom(c, *Builtin(), subject, 4));
+  FrameParams p = Frontal();
+  cv::Mat own, matched;
+  ASSERT_TRUE(r.Render(p, &own));
+  HeadModelOutput posed;
+  Builtin()->Forward(Builtin()->MakeIdentity(subject.shape.cast<double>()), p.expression.cast<double>(), p.HeadPose(),
+                     &posed);
+  const Landmarks2d landmarks = ProjectLandmarks(posed, p.CamFromHead(), subject.intrinsics);
+  const std::optional<Eigen::Vector3f> drawn = SkinColour(own, landmarks);
+  ASSERT_TRUE(drawn.has_value());
+  const Eigen::Vector3f target = (drawn->array() * Eigen::Array3f(1.25f, 0.8f, 1.1f)).min(1.f).matrix();
+  p.skin_colour = target;
+  ASSERT_TRUE(r.Render(p, &matched));
+  const std::optional<Eigen::Vector3f> now = SkinColour(matched, landmarks);
+  ASSERT_TRUE(now.has_value());
+  for (int k = 0; k < 3; ++k)
+    if ((*drawn)[k] > 0.1f) EXPECT_NEAR((*now)[k], target[k], 2.5f / 255) << "channel " << k;
+  EXPECT_EQ(matched.at<cv::Vec3b>(0, 0), own.at<cv::Vec3b>(0, 0));  // the background
+  EXPECT_GT(cv::norm(own, matched, cv::NORM_L1), 0);
+  p.skin_colour.reset();
+  cv::Mat again;
+  ASSERT_TRUE(r.Render(p, &again));
+  EXPECT_EQ(cv::norm(own, again, cv::NORM_INF), 0);
+  p.skin_colour = Eigen::Vector3f(2, 0.5f, 0.5f);  // outside 0..1: refused like any bad value
+  std::string why;
+  EXPECT_FALSE(r.Render(p, &again, nullptr, &why));
+  EXPECT_NE(why.find("skin colour"), std::string::npos) << why;
 }
 
 TEST(AvatarRenderer, RendersAndRefusesBadParameters) {

@@ -88,7 +88,8 @@ TEST(Varint, RoundTripsAndRefusesOverlongEncodings) {
 
 TEST(ParamCodec, StepsComeFromSensitivity) {
   const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4);
-  EXPECT_EQ(l.num_values(), Model().num_expression() + 18);
+  EXPECT_EQ(l.num_values(), Model().num_expression() + 21);  // and the skin colour
+  EXPECT_EQ(CodecLayout::FromModel(Model(), 2e-4, {}, 30, false).num_values(), Model().num_expression() + 18);
   // A step of any expression component moves the mesh by at most ~0.2 mm.
   for (size_t k = 0; k < l.expression_components.size(); ++k) {
     HeadModelParams p;
@@ -98,7 +99,8 @@ TEST(ParamCodec, StepsComeFromSensitivity) {
     EXPECT_LE(moved, 2.01e-4f);
     EXPECT_GT(moved, 1e-4f);
   }
-  EXPECT_NEAR(l.steps.back(), 2e-4f, 1e-9f);  // translation: the error itself
+  EXPECT_NEAR(l.steps[Model().num_expression() + 17], 2e-4f, 1e-9f);  // translation: the error itself
+  EXPECT_NEAR(l.steps.back(), 1.f / 255, 1e-9f);                      // skin colour: an 8-bit level
 }
 
 TEST(ParamCodec, RoundTripWithinTheStepAndFewBits) {
@@ -120,6 +122,36 @@ TEST(ParamCodec, RoundTripWithinTheStepAndFewBits) {
   }
   const double bits_per_frame = 8.0 * bytes / n;
   EXPECT_LT(bits_per_frame, 200);  // 31 values: a few bits each
+}
+
+// The skin colour travels within its step, a frame without one decodes
+// without one, a layout without it (a peer that predates it) carries none, and
+// a colour outside 0..1 is refused.
+TEST(ParamCodec, TheSkinColourTravelsWhenTheLayoutSaysSo) {
+  const CodecLayout with = CodecLayout::FromModel(Model());
+  const CodecLayout without = CodecLayout::FromModel(Model(), 2e-4, {}, 30, false);
+  ParamEncoder enc(with), enc_without(without);
+  ParamDecoder dec(with), dec_without(without);
+  for (int i = 0; i < 60; ++i) {
+    FrameParams f = SyntheticTalkingHead(Model(), i);
+    if (i % 10 != 9) f.skin_colour = Eigen::Vector3f(0.6f + 0.001f * i, 0.42f, 0.3f - 0.002f * i);
+    FrameParams out;
+    std::string why;
+    ASSERT_TRUE(dec.Decode(enc.Encode(f), &out, &why)) << why;
+    ExpectWithinStep(with, f, out);
+    ASSERT_EQ(out.skin_colour.has_value(), f.skin_colour.has_value()) << i;
+    if (f.skin_colour) EXPECT_LE((*out.skin_colour - *f.skin_colour).cwiseAbs().maxCoeff(), 0.5f / 255 + 1e-6f) << i;
+    ASSERT_TRUE(dec_without.Decode(enc_without.Encode(f), &out, &why)) << why;
+    EXPECT_FALSE(out.skin_colour.has_value());
+  }
+  FrameParams bright = SyntheticTalkingHead(Model(), 0);
+  bright.skin_colour = Eigen::Vector3f(1.5f, 0.5f, 0.5f);  // encodable, refused on decode
+  ParamEncoder e2(with);
+  ParamDecoder d2(with);
+  FrameParams out;
+  std::string why;
+  EXPECT_FALSE(d2.Decode(e2.Encode(bright), &out, &why));
+  EXPECT_NE(why.find("out of range"), std::string::npos) << why;
 }
 
 TEST(ParamCodec, SubsetDecodesUnsentComponentsAsZero) {

@@ -48,10 +48,24 @@ TEST(Convert, FrameParamsRoundTripAndLengthChecks) {
   EXPECT_EQ(back.cam_translation, p.cam_translation);
   EXPECT_EQ(back.sequence, 17u);
   EXPECT_EQ(back.confidence, 0.75f);
-  m.add_jaw(1.f);  // 4 values
+  EXPECT_FALSE(back.skin_colour.has_value());  // not measured: absent, not black
+  p.skin_colour = Eigen::Vector3f(0.6f, 0.4f, 0.3f);
+  ToProto(p, &m);
+  ASSERT_TRUE(FromProto(m, &back));
+  ASSERT_TRUE(back.skin_colour.has_value());
+  EXPECT_EQ(*back.skin_colour, *p.skin_colour);
+  m.add_skin_colour(1.f);  // 4 values
   std::string why;
   EXPECT_FALSE(FromProto(m, &back, &why));
+  EXPECT_NE(why.find("skin_colour"), std::string::npos) << why;
+  ToProto(p, &m);
+  m.add_jaw(1.f);  // 4 values
+  EXPECT_FALSE(FromProto(m, &back, &why));
   EXPECT_NE(why.find("jaw"), std::string::npos);
+  // A frame whose skin colour is outside 0..1 is not a valid frame.
+  p.skin_colour = Eigen::Vector3f(0.6f, std::nanf(""), 0.3f);
+  EXPECT_FALSE(p.IsValid(&why));
+  EXPECT_NE(why.find("skin colour"), std::string::npos) << why;
 }
 
 TEST(Recording, WritesAndReadsEveryFrame) {

@@ -12,6 +12,7 @@
 #include "common/core/rotation.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "common/headmodel/skin_colour.h"
 #include "common/tracking/background_identity.h"
 #include "common/tracking/frame_tracker.h"
 
@@ -174,9 +175,23 @@ TEST(OfflineTracker, ColourFramesAreFittedWithTheGivenIdentityAndCamera) {
   EXPECT_EQ(t.subject.intrinsics.width, 640);
   EXPECT_NEAR(t.subject.intrinsics.fx, FakeHeadSource::camera().fx, 1e-9);
   EXPECT_LT(t.report["landmark_error_iod_mean"].get<double>(), 0.1);
+  const HeadModelOutput posed = Model().Forward(reference.params());
   for (int n = 0; n < 6; ++n) {
     const RigidTransform truth = FakeHeadSource::CamFromHead(n);
     EXPECT_LT((t.frames[n].cam_translation.cast<double>() - truth.translation).norm(), 0.03) << "frame " << n;
+    // Each frame carries its skin colour: the median where the true landmarks
+    // put the cheeks, nose and chin, up to the fit's few pixels of error.
+    Landmarks2d landmarks;
+    for (int l = 0; l < kNumLandmarks; ++l)
+      landmarks[l] = FakeHeadSource::camera().Project(truth.Apply(posed.landmarks.row(l).transpose().cast<double>()));
+    CapturedFrame frame;
+    std::string problem;
+    FakeHeadSource source(n + 1, false);
+    for (int k = 0; k <= n; ++k) ASSERT_EQ(source.Read(&frame, &problem), ReadStatus::kFrame);
+    const std::optional<Eigen::Vector3f> true_colour = SkinColour(frame.bgr, landmarks);
+    ASSERT_TRUE(true_colour && t.frames[n].skin_colour) << "frame " << n;
+    EXPECT_LT((*t.frames[n].skin_colour - *true_colour).cwiseAbs().maxCoeff(), 0.03f) << "frame " << n;
+    EXPECT_GT(true_colour->maxCoeff(), 0.2f) << "lit skin, not the dark background";
   }
 }
 
