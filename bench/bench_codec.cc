@@ -2,6 +2,7 @@
 // synthetic talking-head sequence of the built-in head or on a recording of
 // any head model; with an avatar, the PSNR the quantisation costs (against the
 // built-in head's own renders, or a prepared dataset's held-out frames).
+#include <algorithm>
 #include <opencv2/core.hpp>
 #include <stdexcept>
 
@@ -190,6 +191,16 @@ nlohmann::json RunCodecSuite(const BenchOptions& options) {
   out["bits_per_frame_key_mean"] = key_bits.Mean();
   out["bits_per_frame_delta_mean"] = delta_bits.Mean();
   out["payload_kbps_at_30fps"] = bits.Mean() * 30 / 1000;
+  {
+    // The skin colour's share: the same frames coded by a layout without it.
+    ParamEncoder without(CodecLayout::FromModel(model, options.codec_error_m, {}, options.key_interval, false));
+    double bits_without = 0;
+    for (const FrameParams& f : frames) bits_without += 8.0 * without.Encode(f).size();
+    bits_without /= static_cast<double>(frames.size());
+    out["bits_per_frame_mean_without_skin_colour"] = bits_without;
+    out["frames_with_skin_colour"] =
+        std::count_if(frames.begin(), frames.end(), [](const FrameParams& f) { return f.skin_colour.has_value(); });
+  }
   out["max_abs_error"] = {{"expression", max_abs_err[0]},
                           {"joint_rotation_rad", max_abs_err[1]},
                           {"cam_rotation_rad", max_abs_err[2]},
