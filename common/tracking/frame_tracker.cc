@@ -275,7 +275,8 @@ TrackedFrame FrameTracker::TrackObserved(const cv::Mat& bgr, const cv::Mat& dept
   r.fit_ms = watch.ElapsedMs();
   if (r.fitted) {
     *params = last_;
-    if (options_.skin_colour) params->skin_colour = SkinColour(bgr, fitter_.Project(last_, camera));
+    r.model_landmarks = fitter_.Project(last_, camera);
+    if (options_.skin_colour) params->skin_colour = SkinColour(bgr, r.model_landmarks);
   }
   return r;
 }

@@ -49,14 +49,15 @@ struct TrackedFrame {
   bool identity_frozen_now = false;  // this frame completed the RGB-D identity
   // Background identity: fitted with the identity not yet made (neutral shape at first).
   bool provisional_identity = false;
-  double landmarks_ms = 0;     // detection/tracking + landmarks
-  double fit_ms = 0;           // head-model fit
-  double depth_ms = 0;         // RGB-D: depth made on demand (stereo matching in the face's box)
-  cv::Mat depth_m;             // RGB-D: the depth the fit read
-  double rgbd_accuracy_m = 0;  // RGB-D: point-to-mesh RMS after the fit
-  int contour_rejected = 0;    // RGB-D: contour landmarks taken for background
-  int rigid_points = 0;        // rigid points followed by optical flow into this frame's fit
-  std::string problem;         // why not fitted, when a fit failed
+  double landmarks_ms = 0;        // detection/tracking + landmarks
+  double fit_ms = 0;              // head-model fit
+  double depth_ms = 0;            // RGB-D: depth made on demand (stereo matching in the face's box)
+  cv::Mat depth_m;                // RGB-D: the depth the fit read
+  double rgbd_accuracy_m = 0;     // RGB-D: point-to-mesh RMS after the fit
+  int contour_rejected = 0;       // RGB-D: contour landmarks taken for background
+  int rigid_points = 0;           // rigid points followed by optical flow into this frame's fit
+  Landmarks2d model_landmarks{};  // fitted: the fitted model's 68 landmarks in the frame (pixels)
+  std::string problem;            // why not fitted, when a fit failed
 };
 
 // Rigid points seen in a reference frame (`reference`: head-frame points and

@@ -313,7 +313,6 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
       repairs[r] += (t.face.repaired >> r) & 1;
     }
     OfflineFrame seen{index, &frame, t.fitted, cv::Mat()};
-    Landmarks2d model_landmarks{};
     std::array<Eigen::Vector2d, 2> model_pupils;
     bool have_pupils = false;
     if (t.fitted) {
@@ -337,14 +336,13 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         seen.mask = HeadMask(frame, t.face.raw, o.mask);
         if (sample) appearance_samples.push_back({frame.clone(), seen.mask, params, camera});
       }
-      model_landmarks = tracker.fitter().Project(params, camera);
       have_pupils = tracker.fitter().ProjectPupils(params, camera, &model_pupils[0], &model_pupils[1]);
-      quality.Add(index, model_landmarks, t.face.raw);
+      quality.Add(index, t.model_landmarks, t.face.raw);
     }
     if (observer) observer(seen);
     if (overlay) {
       cv::Mat shown;
-      DrawOverlay(frame, t, t.fitted ? &model_landmarks : nullptr, t.fitted && have_pupils ? &model_pupils : nullptr,
+      DrawOverlay(frame, t, t.fitted ? &t.model_landmarks : nullptr, t.fitted && have_pupils ? &model_pupils : nullptr,
                   &shown);
       overlay->Write(shown);
     }
