@@ -23,8 +23,12 @@ long MinorFaults() {
 }
 
 // A talking, slightly moving head in front of the camera: frame i of a loop.
-FrameParams MovingHead(const HeadModel& model, int i) {
+// With `skin_colour`, the frame carries the camera's skin colour as a sender's
+// frames do (a warm tone drifting a little), so that the receiver matches its
+// picture to it.
+FrameParams MovingHead(const HeadModel& model, int i, bool skin_colour = false) {
   FrameParams p;
+  if (skin_colour) p.skin_colour = Eigen::Vector3f(0.72f + 0.05f * std::sin(0.02f * i), 0.52f, 0.42f);
   p.expression = Eigen::VectorXf::Zero(model.num_expression());
   for (int e = 0; e < model.num_expression(); ++e) p.expression[e] = 0.5f * std::sin(0.1f * i + e);
   p.jaw = Eigen::Vector3f(0.15f * (1 + std::sin(0.3f * i)), 0, 0);
@@ -33,18 +37,19 @@ FrameParams MovingHead(const HeadModel& model, int i) {
 }
 
 nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& config, int frames,
-                             AvatarRendererOptions renderer_options = {}) {
+                             AvatarRendererOptions renderer_options = {}, bool skin_colour = false) {
   auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
   Avatar avatar = Avatar::CreateRandom(config, *model, DefaultSubject(*model, config.output_size), 1);
   renderer_options.threads = options.threads;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
   cv::Mat image;
   AvatarTimings t;
-  for (int i = 0; i < std::min(options.warmup, 5); ++i) renderer.Render(MovingHead(*model, i), &image, &t);
+  for (int i = 0; i < std::min(options.warmup, 5); ++i) renderer.Render(MovingHead(*model, i, skin_colour), &image, &t);
   SampleStats total, head, sample, surface, mlp, composite, upsample, convert, rays, samples;
   const long faults_before = MinorFaults();
   for (int i = 0; i < frames; ++i) {
-    if (!renderer.Render(MovingHead(*model, i), &image, &t)) throw std::runtime_error("render refused its parameters");
+    if (!renderer.Render(MovingHead(*model, i, skin_colour), &image, &t))
+      throw std::runtime_error("render refused its parameters");
     total.Add(t.total_ms);
     head.Add(t.head_model_ms);
     sample.Add(t.sample_ms);
@@ -117,6 +122,11 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
       timings(MeasureConfig(options, two_levels, frames), {{"renderer_channels", two_levels.renderer_channels},
                                                            {"feature_size", two_levels.feature_size()},
                                                            {"samples_per_ray", two_levels.samples_per_ray}});
+  // The subject's default with frames that carry the camera's skin colour, as
+  // a default sender's do: the receiver measures its picture's skin and scales
+  // the head to match (in the "convert" stage).
+  out["subject_default_skin_colour"] =
+      timings(MeasureConfig(options, subject, frames, {}, true), {{"skin_colour", true}});
   // The subject's default again with the convolutions on images in libtorch's
   // default layout (channels first), side by side: what channels-last buys.
   AvatarRendererOptions channels_first;

@@ -5,8 +5,10 @@
 # test frames, the landmark error by region and the blink correlation (dlib on
 # avatar and true frames), the frames whose fit the tracker lost, and the
 # avatar's creation time (prep + fine-tune), the frames whose brow or mouth
-# landmarks the tracker disputed and repaired; then the receiver's frame rate at
-# 256² and 512² (headcast-bench render, default subject configuration).
+# landmarks the tracker disputed and repaired, and the PSNR/SSIM on 150 of the
+# avatar's own training frames (what it fits against what it generalises to);
+# then the receiver's frame rate at 256² and 512² (headcast-bench render,
+# default subject configuration).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N (3000, as headcast-train create)] [--ict DIR]
 #       [--clips "d9 d10 ..."]
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
@@ -59,6 +61,9 @@ for clip in $clips; do
   step "$clip: eval"
   run "eval_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
     --data "$out/ds_$clip" --out "$out/eval_$clip" --orbit-frames 0
+  step "$clip: eval on training frames"
+  run "eval_train_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
+    --data "$out/ds_$clip" --out "$out/eval_train_$clip" --split train --max-frames 150 --orbit-frames 0 --no-landmarks
 done
 for r in 256 512; do
   [ "$render" = 1 ] || break
@@ -80,9 +85,11 @@ for c in clips:
     ds = json.load(open(os.path.join(out, f"ds_{c}", "dataset.json")))
     t = json.load(open(os.path.join(out, f"time_{c}.json")))
     track = json.load(open(os.path.join(out, f"ds_{c}", "track_report.json")))
+    tr = json.load(open(os.path.join(out, f"eval_train_{c}", "eval.json")))["eval"]
     checks = track.get("landmark_checks") or {}
     rows.append({"clip": f"talking_{c}", "test_psnr_db": e["psnr_db"], "test_ssim": e["ssim"],
                  "worst_5pct_psnr_db": sum(worst) / len(worst), "test_frames": e["frames"],
+                 "train_psnr_db": tr["psnr_db"], "train_ssim": tr["ssim"], "train_frames": tr["frames"],
                  "landmark_error_iod": fid.get("error_iod"), "landmarks_found": fid.get("found_in_both"),
                  "blink_correlation": (fid.get("blink") or {}).get("correlation"),
                  "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x"),
@@ -97,7 +104,10 @@ for r in ("256", "512"):
     if not os.path.exists(os.path.join(out, f"render_{r}.json")):
         continue
     j = json.load(open(os.path.join(out, f"render_{r}.json")))
-    render[r] = {k: j["subject_default"][k] for k in ("fps_median", "ms_median", "ms_p95")}
+    # Frames that carry a skin colour, as a default sender's do (the receiver then matches it).
+    row = j.get("subject_default_skin_colour", j["subject_default"])
+    render[r] = {k: row[k] for k in ("fps_median", "ms_median", "ms_p95")}
+    render[r]["skin_colour"] = "subject_default_skin_colour" in j
     render[r]["threads"] = j["threads"]
 result = {"command": command, "iterations": iterations, "rows": rows, "render_subject_default": render}
 json.dump(result, open(os.path.join(out, "four_clips.json"), "w"), indent=2)
@@ -105,17 +115,20 @@ def f(v, fmt):
     return "–" if v is None else format(v, fmt)
 L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
-     "frames, over the true eye distance.", "",
-     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
-     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+     "frames, over the true eye distance. Training frames: the first 150 of the avatar's own training frames "
+     "through the same render path (no per-frame offsets).", "",
+     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
     L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | "
              f"{f(x['landmark_disputed_frames'], 'd')} / {f(x['landmark_repaired_frames'], 'd')} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
+             f"{x['train_psnr_db']:.2f} / {x['train_ssim']:.4f} | "
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
              f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} |")
-L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration: surface texture with its conditioned branch, bounded matte): " +
+L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration: surface texture with its conditioned branch, bounded matte" +
+      (", frames carrying a skin colour to match" if all(v["skin_colour"] for v in render.values()) else "") + "): " +
       "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
                 for r, v in render.items())]
 open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")

@@ -58,6 +58,10 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
                   "standard deviation of noise added to real frames' expression coefficients as the networks see "
                   "them (not the mesh; 0: off)")
       ->capture_default_str();
+  app->add_option("--anchor-weight", fit->anchor_weight,
+                  "pull of the networks' weights toward those training started from (the general model), per "
+                  "step x learning rate (0: off)")
+      ->capture_default_str();
   app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
       ->capture_default_str();
   app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");

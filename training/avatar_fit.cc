@@ -57,6 +57,7 @@ void FitOptions::Check() const {
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
       .InRange("freeze_cnerf_layers", freeze_cnerf_layers, 0, 64)
       .InRange("expression_noise", expression_noise, 0.0, 10.0)
+      .InRange("anchor_weight", anchor_weight, 0.0, 1000.0)
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
       .InRange("z_scale_min", z_scale_min, 0.3, 1.0)
       .InRange("z_scale_max", z_scale_max, 1.0, 3.0)
@@ -304,6 +305,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     if (p.requires_grad() &&
         std::none_of(surface_params.begin(), surface_params.end(), [&](const auto& q) { return q.is_same(p); }))
       params.push_back(p);
+  // The weights training started from (before a resume loads a checkpoint's:
+  // the anchor is the general model's, not the interrupted run's).
+  std::vector<torch::Tensor> anchors;
+  if (options.anchor_weight > 0)
+    for (const torch::Tensor& p : params) anchors.push_back(p.detach().clone());
   Offsets offsets;
   if (data.real && options.learn_offsets && options.loss.offset_weight > 0) {
     offsets = MakeOffsets(config, data.real->size(), options.freeze_identity);
@@ -421,6 +427,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       info.synthetic = static_cast<int>(std::lround(group->Sum(info.synthetic)));
     }
     adam.step();
+    if (!anchors.empty()) {
+      torch::NoGradGuard no_grad;
+      const double pull = options.LearningRateAt(step) * options.anchor_weight;
+      for (size_t i = 0; i < anchors.size(); ++i) params[i].sub_(pull * (params[i] - anchors[i]));
+    }
     if (average) average->Update(options.WeightAverageDecayAt(step));
     result.steps.push_back(info);
     if (writes && !options.checkpoint_dir.empty() &&

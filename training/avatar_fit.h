@@ -91,6 +91,13 @@ struct FitOptions {
   // frames span few of psi's combinations, and an avatar that keys detail to
   // exact ones draws unseen expressions badly. 0: off.
   double expression_noise = 0;
+  // A pull of the networks' weights back toward those training started from
+  // (the general model, for a fine-tune), applied after each step as
+  // w -= rate x anchor_weight x (w - w0) (decoupled, as AdamW's decay is toward
+  // zero): a few hundred frames then move the networks only as far as they must,
+  // and an unseen expression is answered more as the general model answers it.
+  // The surface texture (new to the fine-tune) and the offsets are not pulled. 0: off.
+  double anchor_weight = 0;
   // Real training frames are drawn by how rare their expression is among
   // them (RareExpressionWeights); strength 0: uniformly.
   RareExpressionOptions rare_expressions;

@@ -559,6 +559,36 @@ TEST(TrainAvatar, RegionWeightsAndExpressionNoiseShapeTheLossRepeatably) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// The anchor pulls the networks' weights back toward where training started:
+// a moderate pull leaves them nearer than no pull does, a pull of one whole
+// step's worth (weight x rate = 1) puts them back exactly; bad weights refused.
+TEST(TrainAvatar, TheAnchorPullsTheWeightsBackTowardTheStart) {
+  const std::string dir = WriteRenderedDataset("dataset_anchor", 4, 1);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  const auto moved = [&](double anchor_weight) {
+    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+    std::vector<torch::Tensor> start;
+    for (const torch::Tensor& p : avatar.modules().cnerf->parameters()) start.push_back(p.detach().clone());
+    FitOptions f;
+    f.iterations = 3;
+    f.batch = 2;
+    f.learning_rate = 1e-2;
+    f.anchor_weight = anchor_weight;
+    TrainAvatar(avatar, Model(), TrainingData{nullptr, &real}, f);
+    double d = 0;
+    const std::vector<torch::Tensor> now = avatar.modules().cnerf->parameters();
+    for (size_t i = 0; i < now.size(); ++i) d += (now[i] - start[i]).square().sum().item<double>();
+    return std::sqrt(d);
+  };
+  const double free = moved(0), pulled = moved(20), back = moved(100);
+  EXPECT_GT(free, 1e-3);
+  EXPECT_LT(pulled, 0.9 * free);
+  EXPECT_LT(back, 1e-6);
+  FitOptions bad;
+  bad.anchor_weight = -1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 // c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
 // loopback TCP) end with the weights of one process running the whole batch.
 TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
