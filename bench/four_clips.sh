@@ -115,7 +115,7 @@ def f(v, fmt):
     return "–" if v is None else format(v, fmt)
 L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
-     "frames, over the true eye distance. Training frames: the first 150 of the avatar's own training frames "
+     "frames, over the true eye distance. Training frames: 150 of the avatar's own training frames, spread evenly over them, "
      "through the same render path (no per-frame offsets).", "",
      "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
