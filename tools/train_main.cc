@@ -216,6 +216,11 @@ int main(int argc, char** argv) {
                    "tracking: extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark "
                    "pixels: lids close with the blink shapes")
       ->capture_default_str();
+  prep->add_option("--eye-look-prior-shapes", p.eye_look_prior_shapes,
+                   "tracking: which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep "
+                   "their lids)")
+      ->check(CLI::IsMember({"all", "vertical"}))
+      ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "
                    "landmark pixels): what every key frame shows goes into the shape")

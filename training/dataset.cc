@@ -42,6 +42,8 @@ void PrepOptions::Check() const {
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .NonNegative("expression_range_weight", expression_range_weight)
       .NonNegative("eye_look_prior", eye_look_prior)
+      .That(eye_look_prior_shapes == "all" || eye_look_prior_shapes == "vertical",
+            "eye_look_prior_shapes must be all or vertical")
       .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
       .That(std::find(kPredictorViewsPoints.begin(), kPredictorViewsPoints.end(), predictor_views_points) !=
                 kPredictorViewsPoints.end(),
@@ -129,6 +131,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
   track.tracker.fit.expression_range_weight = o.expression_range_weight;
   track.tracker.fit.eye_look_prior = o.eye_look_prior;
+  track.tracker.fit.eye_look_prior_shapes = o.eye_look_prior_shapes;
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.predictor_views = o.predictor_views;
@@ -327,6 +330,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"predictor_views", o.predictor_views},
         {"predictor_views_points", o.predictor_views_points},
         {"gaze", o.gaze},
+        {"eye_look_prior", o.eye_look_prior},
+        {"eye_look_prior_shapes", o.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";

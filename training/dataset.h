@@ -52,7 +52,8 @@ struct PrepOptions {
   double rigid_flow_weight = HeadFitterOptions{}.rigid_flow_weight;  // HeadFitterOptions::rigid_flow_weight
   // HeadFitterOptions::expression_range_weight: how hard a coefficient is held in the model's range
   double expression_range_weight = HeadFitterOptions{}.expression_range_weight;
-  double eye_look_prior = HeadFitterOptions{}.eye_look_prior;  // HeadFitterOptions::eye_look_prior
+  double eye_look_prior = HeadFitterOptions{}.eye_look_prior;                     // HeadFitterOptions::eye_look_prior
+  std::string eye_look_prior_shapes = HeadFitterOptions{}.eye_look_prior_shapes;  // all or vertical
   double crop_scale = 2.2;  // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
   // head model's silhouette dilated by this fraction of the crop edge: pixels

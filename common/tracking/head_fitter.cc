@@ -19,6 +19,8 @@ void HeadFitterOptions::Check() const {
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
   c.NonNegative("eye_look_prior", eye_look_prior);
+  c.That(eye_look_prior_shapes == "all" || eye_look_prior_shapes == "vertical",
+         "eye_look_prior_shapes must be all or vertical, not \"" + eye_look_prior_shapes + "\"");
   c.InRange("expression_limit", expression_limit, 0.1, 5.0)
       .NonNegative("expression_range_weight", expression_range_weight);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
@@ -76,8 +78,10 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   // Once per fitter, not per frame: the names decide which coefficients the eyeLook prior weighs.
   const std::vector<std::string>& names = model.data().expression_names;
   expression_prior_weights_.assign(num_expression_, std::sqrt(options.expression_prior));
+  const bool vertical_only = options.eye_look_prior_shapes == "vertical";
   for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i)
-    if (names[i].rfind("eyeLook", 0) == 0)
+    if (names[i].rfind(vertical_only ? "eyeLookUp" : "eyeLook", 0) == 0 ||
+        (vertical_only && names[i].rfind("eyeLookDown", 0) == 0))
       expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
   rigid_vertices_ = RigidHeadVertices(model, MakeBasis(PoseVector::Zero(), true).base, 64);
   SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <string>
 #include <vector>
 
 #include "common/core/camera.h"
@@ -45,6 +46,10 @@ struct HeadFitterOptions {
   // then conditioned on one code for lowered eyes and for shut ones. Weighted,
   // the fit closes lids with the blink shapes and gaze stays with the joints.
   double eye_look_prior = 0;
+  // Which eyeLook shapes the prior weighs: "all" eight, or "vertical" (Up and
+  // Down) only — the lid confusion is vertical, while In and Out move the lids
+  // with a sideways look that the avatar's eyes should follow.
+  std::string eye_look_prior_shapes = "all";
   double jaw_prior = 10;        // weight of |jaw|^2 (radians^2)
   double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
   int max_iterations = 25;      // Levenberg-Marquardt iterations per frame

@@ -251,5 +251,44 @@ TEST(Gaze, TheEyeLookPriorClosesLidsWithTheBlinkShapes) {
   EXPECT_GT(fitted_blink[1], 0.4);  // measured 0.47 and 0.14
   EXPECT_LT(fitted_look[1], 0.2);
 }
+
+// The prior on the vertical eyeLook shapes only: lids lowered by eyeLookDown
+// still close with the blink shapes, while the lids of a sideways look
+// (eyeLookIn on one eye, eyeLookOut on the other) keep their own shapes,
+// which the prior on all eight pulls toward zero.
+TEST(Gaze, TheVerticalEyeLookPriorLeavesSidewaysLooks) {
+  const HeadModel* m = Ict();
+  if (!m) GTEST_SKIP() << "needs ../shared/data (ICT-FaceKit)";
+  auto index = [&](const char* name) {
+    const int i = m->ExpressionIndex(name);
+    EXPECT_GE(i, 0) << name;
+    return i;
+  };
+  const int blink = index("eyeBlink_L"), down = index("eyeLookDown_L");
+  const int in = index("eyeLookIn_L"), out = index("eyeLookOut_R");
+  auto fit = [&](const std::string& shapes, const std::vector<int>& truth_shapes) {
+    HeadFitterOptions o;
+    o.eye_look_prior = 100;
+    o.eye_look_prior_shapes = shapes;
+    HeadFitter fitter(*m, o);
+    FrameParams truth = Looking(*m, 0, 0);
+    for (int i : truth_shapes) truth.expression[i] = 1;
+    FrameParams f = truth;
+    f.expression.setZero();
+    EXPECT_TRUE(fitter.Fit(fitter.Project(truth, kCamera), kCamera, &f).ok);
+    return f.expression;
+  };
+  const Eigen::VectorXf lowered = fit("vertical", {index("eyeLookDown_L"), index("eyeLookDown_R")});
+  const Eigen::VectorXf aside_all = fit("all", {in, out}), aside_vertical = fit("vertical", {in, out});
+  std::cout << "lowered lids, vertical prior: blink " << lowered[blink] << ", eyeLookDown " << lowered[down]
+            << "; a look aside: eyeLookIn_L / eyeLookOut_R " << aside_all[in] << " / " << aside_all[out] << " (all), "
+            << aside_vertical[in] << " / " << aside_vertical[out] << " (vertical)\n";
+  EXPECT_GT(lowered[blink], 0.4);
+  EXPECT_LT(std::abs(lowered[down]), 0.2);
+  EXPECT_GT(aside_vertical[in] + aside_vertical[out], aside_all[in] + aside_all[out] + 0.5);
+  HeadFitterOptions wrong;
+  wrong.eye_look_prior_shapes = "sideways";
+  EXPECT_THROW(wrong.Check(), std::invalid_argument);
+}
 }  // namespace
 }  // namespace headcast
