@@ -78,11 +78,13 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   // Once per fitter, not per frame: the names decide which coefficients the eyeLook prior weighs.
   const std::vector<std::string>& names = model.data().expression_names;
   expression_prior_weights_.assign(num_expression_, std::sqrt(options.expression_prior));
-  const bool vertical_only = options.eye_look_prior_shapes == "vertical";
+  auto weighed = [&](const std::string& name) {
+    auto starts = [&](const char* prefix) { return name.rfind(prefix, 0) == 0; };
+    return options.eye_look_prior_shapes == "vertical" ? starts("eyeLookUp") || starts("eyeLookDown")
+                                                       : starts("eyeLook");
+  };
   for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i)
-    if (names[i].rfind(vertical_only ? "eyeLookUp" : "eyeLook", 0) == 0 ||
-        (vertical_only && names[i].rfind("eyeLookDown", 0) == 0))
-      expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
+    if (weighed(names[i])) expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
   rigid_vertices_ = RigidHeadVertices(model, MakeBasis(PoseVector::Zero(), true).base, 64);
   SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));
 }
