@@ -116,7 +116,7 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
       ->capture_default_str();
   app.add_option("--eye-look-prior-shapes", t.tracker.fit.eye_look_prior_shapes,
                  "which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep their lids)")
-      ->check(CLI::IsMember({"all", "vertical"}))
+      ->check(CLI::IsMember(kEyeLookPriorShapes))
       ->capture_default_str();
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "

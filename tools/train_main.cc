@@ -219,7 +219,7 @@ int main(int argc, char** argv) {
   prep->add_option("--eye-look-prior-shapes", p.eye_look_prior_shapes,
                    "tracking: which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep "
                    "their lids)")
-      ->check(CLI::IsMember({"all", "vertical"}))
+      ->check(CLI::IsMember(kEyeLookPriorShapes))
       ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "

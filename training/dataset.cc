@@ -42,7 +42,8 @@ void PrepOptions::Check() const {
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .NonNegative("expression_range_weight", expression_range_weight)
       .NonNegative("eye_look_prior", eye_look_prior)
-      .That(eye_look_prior_shapes == "all" || eye_look_prior_shapes == "vertical",
+      .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
+                kEyeLookPriorShapes.end(),
             "eye_look_prior_shapes must be all or vertical")
       .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
       .That(std::find(kPredictorViewsPoints.begin(), kPredictorViewsPoints.end(), predictor_views_points) !=

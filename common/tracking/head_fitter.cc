@@ -19,7 +19,8 @@ void HeadFitterOptions::Check() const {
   c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
   c.NonNegative("eye_look_prior", eye_look_prior);
-  c.That(eye_look_prior_shapes == "all" || eye_look_prior_shapes == "vertical",
+  c.That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
+             kEyeLookPriorShapes.end(),
          "eye_look_prior_shapes must be all or vertical, not \"" + eye_look_prior_shapes + "\"");
   c.InRange("expression_limit", expression_limit, 0.1, 5.0)
       .NonNegative("expression_range_weight", expression_range_weight);

@@ -28,6 +28,9 @@ struct RigidObservations {
   std::vector<Eigen::Vector2d> observed;  // pixels
 };
 
+// The values of HeadFitterOptions::eye_look_prior_shapes.
+inline const std::vector<std::string> kEyeLookPriorShapes = {"all", "vertical"};
+
 struct HeadFitterOptions {
   int num_expression = 0;          // expression components fitted (0: all the model has)
   double expression_prior = 2e-3;  // weight of sum(psi^2) against squared pixels
@@ -49,11 +52,11 @@ struct HeadFitterOptions {
   // Which eyeLook shapes the prior weighs: "all" eight, or "vertical" (Up and
   // Down) only — the lid confusion is vertical, while In and Out move the lids
   // with a sideways look that the avatar's eyes should follow.
-  std::string eye_look_prior_shapes = "all";
-  double jaw_prior = 10;        // weight of |jaw|^2 (radians^2)
-  double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
-  int max_iterations = 25;      // Levenberg-Marquardt iterations per frame
-  double huber_px = 3;          // robust loss scale on landmark residuals, pixels
+  std::string eye_look_prior_shapes = "all";  // one of kEyeLookPriorShapes
+  double jaw_prior = 10;                      // weight of |jaw|^2 (radians^2)
+  double contour_weight = 0.5;                // landmarks 0..16 sit on a contour the model only approximates
+  int max_iterations = 25;                    // Levenberg-Marquardt iterations per frame
+  double huber_px = 3;                        // robust loss scale on landmark residuals, pixels
   // Gaze (the eye joints), fitted to located irises when the model's eyes are articulated.
   double iris_weight = 1;        // an iris against a landmark
   double gaze_prior = 10;        // weight of the eyes' pitch and yaw^2 (radians^2) against squared pixels
