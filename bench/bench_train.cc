@@ -32,7 +32,7 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
   {
     SyntheticData data(model, so, subject, 1);
     Avatar avatar = Avatar::CreateRandom(config, model, subject, 1);
-    const TrainResult r = timed(avatar, TrainingData{&data, nullptr}, fit);
+    const TrainResult r = timed(avatar, TrainingData{&data, {}}, fit);
     out["pretrain_samples_per_s"] = r.samples_per_s;
     out["pretrain_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
   }
@@ -49,7 +49,9 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
     f.freeze_cnerf_layers = SubjectOptions{}.freeze_layers;
     f.loss.regions = SubjectFitDefaults().loss.regions;
     f.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, 0.25};
-    const TrainResult r = timed(avatar, TrainingData{&data, real ? &*real : nullptr}, f);
+    TrainingData samples{&data, {}};
+    if (real) samples.real.push_back(&*real);
+    const TrainResult r = timed(avatar, samples, f);
     out["finetune_samples_per_s"] = r.samples_per_s;
     out["finetune_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
     out["finetune_data"] = real ? "prepared dataset " + o.dataset + " (real frames, 25 % renders falling to 0)"

@@ -282,7 +282,8 @@ int main(int argc, char** argv) {
   AddSurfaceFlags(pretrain, &g.config, &g.fit);
   AddMatteFlags(pretrain, &g.config, &g.fit);
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
-  pretrain->add_option("--real", g.real_dataset, "a prepared dataset whose training frames are mixed in");
+  pretrain->add_option("--real", g.real_datasets,
+                       "a prepared dataset whose training frames are mixed in (repeat for several people)");
   pretrain->add_option("--mix-m", g.fit.mix.m, "METHOD eq. 9: synthetic only up to step M")->capture_default_str();
   pretrain->add_option("--mix-n", g.fit.mix.n_end, "METHOD eq. 9: p reaches p_min at step N")->capture_default_str();
   pretrain->add_option("--p-min", g.fit.mix.p_min, "METHOD eq. 9")->capture_default_str();

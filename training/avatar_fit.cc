@@ -188,6 +188,39 @@ class WeightAverage {
   std::vector<torch::Tensor> params_, average_;
 };
 
+// The real training frames of every dataset as one list: where each is
+// (dataset, position) and its row among the per-frame offsets (the datasets'
+// frames one after another, so a checkpoint's offsets are for these datasets
+// in this order).
+class RealFrames {
+ public:
+  struct Frame {
+    const PreparedDataset* data;
+    int position;
+    int offset_row;
+  };
+  RealFrames(const std::vector<const PreparedDataset*>& datasets, int resolution) {
+    for (size_t d = 0; d < datasets.size(); ++d) {
+      const std::string which = datasets.size() == 1 ? "the dataset" : "dataset " + std::to_string(d + 1);
+      if (!datasets[d]) throw std::invalid_argument("TrainAvatar: " + which + " is missing (null)");
+      const PreparedDataset& data = *datasets[d];
+      if (data.train().empty()) throw std::invalid_argument("TrainAvatar: " + which + " has no training frames");
+      if (data.resolution() != resolution)
+        throw std::invalid_argument("TrainAvatar: " + which + "'s crops are " + std::to_string(data.resolution()) +
+                                    " pixels, the avatar renders " + std::to_string(resolution));
+      for (int i : data.train()) frames_.push_back({&data, i, rows_ + i});
+      rows_ += data.size();
+    }
+  }
+  bool empty() const { return frames_.empty(); }
+  const std::vector<Frame>& frames() const { return frames_; }
+  int offset_rows() const { return rows_; }
+
+ private:
+  std::vector<Frame> frames_;
+  int rows_ = 0;
+};
+
 // Each sample's draws (synthetic or real, which frame, augmentation, ray
 // jitter) from its own generator: a resumed run, or one split over ranks,
 // makes exactly the draws of one uninterrupted process.
@@ -287,13 +320,9 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
 TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
                         const std::function<void(const StepInfo&)>& progress) {
   options.Check();
-  if (!data.synthetic && !data.real) throw std::invalid_argument("TrainAvatar: no training data");
-  if (data.real && data.real->train().empty())
-    throw std::invalid_argument("TrainAvatar: the dataset has no training frames");
+  if (!data.synthetic && data.real.empty()) throw std::invalid_argument("TrainAvatar: no training data");
   const AvatarConfig& config = avatar.config();
-  if (data.real && data.real->resolution() != config.output_size)
-    throw std::invalid_argument("TrainAvatar: dataset crops are " + std::to_string(data.real->resolution()) +
-                                " pixels, the avatar renders " + std::to_string(config.output_size));
+  const RealFrames real(data.real, config.output_size);
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
@@ -311,8 +340,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (options.anchor_weight > 0)
     for (const torch::Tensor& p : params) anchors.push_back(p.detach().clone());
   Offsets offsets;
-  if (data.real && options.learn_offsets && options.loss.offset_weight > 0) {
-    offsets = MakeOffsets(config, data.real->size(), options.freeze_identity);
+  if (!real.empty() && options.learn_offsets && options.loss.offset_weight > 0) {
+    offsets = MakeOffsets(config, real.offset_rows(), options.freeze_identity);
     params.push_back(offsets.geometry);
     params.push_back(offsets.appearance);
   }
@@ -340,9 +369,9 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);
   const LossOptions& w = options.loss;
   std::optional<std::discrete_distribution<size_t>> draw_frame;
-  if (data.real && options.rare_expressions.strength > 0) {
+  if (!real.empty() && options.rare_expressions.strength > 0) {
     std::vector<Eigen::VectorXf> expressions;
-    for (int i : data.real->train()) expressions.push_back(data.real->params(i).expression);
+    for (const RealFrames::Frame& f : real.frames()) expressions.push_back(f.data->params(f.position).expression);
     const std::vector<double> weights = RareExpressionWeights(expressions, options.rare_expressions);
     std::vector<double> sorted = weights;
     std::sort(sorted.begin(), sorted.end(), std::greater<>());
@@ -358,7 +387,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   for (int step = result.first_step; step < options.iterations; ++step) {
     modules.train();
     std::uniform_real_distribution<double> u01(0, 1);
-    const double p_synthetic = !data.real ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
+    const double p_synthetic = real.empty() ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
     for (size_t g = 0; g < adam.param_groups().size(); ++g)
       static_cast<torch::optim::AdamOptions&>(adam.param_groups()[g].options())
           .lr(options.LearningRateAt(step) * (g == 1 ? options.surface_lr_scale : 1.0));
@@ -375,18 +404,20 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
                     &rng);
         ++info.synthetic;
       } else {
-        const std::vector<int>& train = data.real->train();
-        real_index =
-            train[draw_frame ? (*draw_frame)(rng) : std::uniform_int_distribution<size_t>(0, train.size() - 1)(rng)];
-        const RealSample& s = data.real->At(real_index);
+        const RealFrames::Frame& f =
+            real.frames()[draw_frame ? (*draw_frame)(rng)
+                                     : std::uniform_int_distribution<size_t>(0, real.frames().size() - 1)(rng)];
+        real_index = f.offset_row;
+        const RealSample& s = f.data->At(f.position);
+        const SubjectParams& subject = f.data->subject();
         FrameParams frame = s.params;
         cv::Mat image = s.image_bgr, mask = s.mask;
         if (u01(rng) < options.z_augmentation) {
           const double scale = std::exp(std::uniform_real_distribution<double>(std::log(options.z_scale_min),
                                                                                std::log(options.z_scale_max))(rng));
-          ChangeDistance(scale, data.real->subject().intrinsics, &frame, &image, &mask);
+          ChangeDistance(scale, subject.intrinsics, &frame, &image, &mask);
         }
-        p = Prepare(config, model, data.real->subject(), frame, image, mask, &sampler, w.regions, false, &rng);
+        p = Prepare(config, model, subject, frame, image, mask, &sampler, w.regions, false, &rng);
       }
       if (real_index >= 0 && options.expression_noise > 0) {
         std::normal_distribution<float> noise(0.0f, static_cast<float>(options.expression_noise));
@@ -455,7 +486,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
 
 TrainResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,
                            const std::function<void(const StepInfo&)>& progress) {
-  return TrainAvatar(avatar, model, TrainingData{&data, nullptr}, options, progress);
+  return TrainAvatar(avatar, model, TrainingData{&data, {}}, options, progress);
 }
 
 namespace {

@@ -129,10 +129,13 @@ struct FitOptions {
 // gained is in bench/DEFAULTS.md.
 double SubjectWeightAverage(int iterations);
 
-// Where samples come from; either may be null, not both.
+// Where samples come from: synthetic renders, real frames, or both.
 struct TrainingData {
   const SyntheticData* synthetic = nullptr;
-  const PreparedDataset* real = nullptr;  // its train() frames
+  // The train() frames of every dataset, each with its own subject (beta,
+  // tau, camera): several people teach networks that are then fine-tuned to
+  // another. Drawn over their union, so a longer video gets more draws.
+  std::vector<const PreparedDataset*> real;
 };
 
 struct StepInfo {

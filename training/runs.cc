@@ -1,6 +1,7 @@
 // headcast-train's subcommands.
 #include "training/runs.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -126,6 +127,9 @@ cv::Mat Stack(const std::vector<cv::Mat>& rows) {
 void PretrainOptions::Check() const {
   OptionsCheck c("PretrainOptions");
   CheckRun(resolution, outputs, &c);
+  for (size_t i = 0; i < real_datasets.size(); ++i)
+    c.That(std::find(real_datasets.begin(), real_datasets.begin() + i, real_datasets[i]) == real_datasets.begin() + i,
+           "real dataset " + real_datasets[i] + " is given twice");
   c.ThrowIfErrors();
   fit.Check();
 }
@@ -139,9 +143,10 @@ nlohmann::json RunPretrain(PretrainOptions o) {
                                  : Avatar::Load(o.init, model).WithRuntimeSwitches(o.config);
   o.synthetic.image_size = o.resolution;
   SyntheticData synthetic(model, o.synthetic, base, o.fit.seed + 100);
-  std::optional<PreparedDataset> real;
-  if (!o.real_dataset.empty()) real = PreparedDataset::Load(o.real_dataset, model, o.resolution);
-  const TrainingData data{&synthetic, real ? &*real : nullptr};
+  std::vector<PreparedDataset> real;
+  for (const std::string& dir : o.real_datasets) real.push_back(PreparedDataset::Load(dir, model, o.resolution));
+  TrainingData data{&synthetic, {}};
+  for (const PreparedDataset& d : real) data.real.push_back(&d);
   const int eval_frames = o.outputs.eval_frames;
   const TrainResult fitted = TrainWithReports(avatar, model, data, o.fit, o.outputs, [&](Avatar& a) {
     return EvaluateOnSynthetic(a, model, synthetic, eval_frames);
@@ -155,19 +160,19 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     cv::hconcat(s.image_bgr, RenderAvatarBgr(avatar, model, s.subject, s.frame), row);
     rows.push_back(row);
   }
-  nlohmann::json summary = {{"trained", true},
-                            {"stage", real ? "pretrain (synthetic renders mixed with real frames, METHOD eq. 9)"
-                                           : "pretrain (synthetic renders of the head model)"},
-                            {"head_model", model.data().name},
-                            {"resolution", o.resolution},
-                            {"fit", FitJson(o.fit, fitted, real.has_value())},
-                            {"eval", EvalJson(eval, "held-out synthetic renders")}};
-  if (real)
-    summary["mix"] = {{"dataset", o.real_dataset},
-                      {"m", o.fit.mix.m},
-                      {"n", o.fit.mix.n_end},
-                      {"p_min", o.fit.mix.p_min},
-                      {"p_max", o.fit.mix.p_max}};
+  nlohmann::json summary = {
+      {"trained", true},
+      {"stage", !real.empty() ? "pretrain (synthetic renders mixed with real frames, METHOD eq. 9)"
+                              : "pretrain (synthetic renders of the head model)"},
+      {"head_model", model.data().name},
+      {"resolution", o.resolution},
+      {"fit", FitJson(o.fit, fitted, !real.empty())},
+      {"eval", EvalJson(eval, "held-out synthetic renders")}};
+  nlohmann::json train_frames = nlohmann::json::array();  // per dataset
+  for (const PreparedDataset& d : real) train_frames.push_back(d.train().size());
+  if (!real.empty())
+    summary["mix"] = {{"datasets", o.real_datasets}, {"train_frames", train_frames}, {"m", o.fit.mix.m},
+                      {"n", o.fit.mix.n_end},        {"p_min", o.fit.mix.p_min},     {"p_max", o.fit.mix.p_max}};
   Finish(avatar, summary, Stack(rows), o.outputs);
   return summary;
 }
@@ -253,7 +258,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   fit.freeze_identity = true;
   fit.freeze_cnerf_layers = o.from_scratch ? 0 : o.freeze_layers;
   fit.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, o.synthetic_start};
-  const TrainingData training{o.synthetic_start > 0 ? &synthetic : nullptr, &data};
+  const TrainingData training{o.synthetic_start > 0 ? &synthetic : nullptr, {&data}};
   std::vector<int> eval_positions = data.test().empty() ? data.train() : data.test();
   std::vector<int> periodic = eval_positions;
   if (static_cast<int>(periodic.size()) > o.outputs.eval_frames) {

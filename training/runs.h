@@ -33,7 +33,9 @@ struct PretrainOptions {
   std::string init;     // continue from this .hcavatar
   AvatarConfig config;  // architecture (output_size is set from resolution)
   SyntheticDataOptions synthetic;
-  std::string real_dataset;  // a prepared dataset to mix in (optional)
+  // Prepared datasets whose training frames are mixed in (optional): other
+  // people's real faces (lids, irises, teeth) for the networks a fine-tune starts from.
+  std::vector<std::string> real_datasets;
   FitOptions fit;
   RunOutputs outputs;
   void Check() const;
