@@ -278,7 +278,7 @@ int main(int argc, char** argv) {
   pretrain->add_option("--resolution", g.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
-  AddArchitectureFlags(pretrain, &g.config, "");
+  const std::vector<CLI::Option*> pretrain_network = AddArchitectureFlags(pretrain, &g.config, "without --init: ");
   AddSurfaceFlags(pretrain, &g.config, &g.fit);
   AddMatteFlags(pretrain, &g.config, &g.fit);
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
@@ -440,6 +440,10 @@ int main(int argc, char** argv) {
             throw std::invalid_argument(option->get_name() +
                                         " sizes a new network: a fine-tune keeps its general model's (" + s.general +
                                         "); give it to pretrain, or with --from-scratch");
+      if (pretrain->parsed() && !g.init.empty())
+        for (const CLI::Option* option : pretrain_network)
+          if (option->count() > 0)
+            throw std::invalid_argument(option->get_name() + " sizes a new network: --init continues " + g.init + "'s");
       std::unique_ptr<LocalRanks> ranks;
       if (processes > 1) {
         if (fit.distributed.world_size > 1)

@@ -139,8 +139,16 @@ nlohmann::json RunPretrain(PretrainOptions o) {
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   o.config.output_size = o.resolution;  // CreateRandom fits the conditioning sizes to the model
   const SubjectParams base = DefaultSubject(model, o.resolution);
-  Avatar avatar = o.init.empty() ? Avatar::CreateRandom(o.config, model, base, o.fit.seed)
-                                 : Avatar::Load(o.init, model).WithRuntimeSwitches(o.config);
+  Avatar avatar = [&] {
+    if (o.init.empty()) return Avatar::CreateRandom(o.config, model, base, o.fit.seed);
+    // Continued with its own networks, texture and matte (their sizes fitted
+    // to the head model when it was made), at this resolution.
+    const Avatar init = Avatar::Load(o.init, model);
+    AvatarConfig c = init.config();
+    c.output_size = o.resolution;
+    c.canonical_samples = o.config.canonical_samples;
+    return init.WithRuntimeSwitches(c);
+  }();
   o.synthetic.image_size = o.resolution;
   SyntheticData synthetic(model, o.synthetic, base, o.fit.seed + 100);
   std::vector<PreparedDataset> real;

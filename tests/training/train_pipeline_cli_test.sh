@@ -26,6 +26,19 @@ masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
 
 "$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
   > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
+# Continued on real frames: the general model's own sizes, the dataset's training split.
+"$bin/headcast-train" pretrain --resolution 128 --iterations 2 --batch 2 --eval 2 --init "$tmp/general.hcavatar" \
+  --real "$tmp/ds" --out "$tmp/general2.hcavatar" --json "$tmp/g2.json" > /dev/null 2> "$tmp/g2.err" &&
+  [ "$(json "$tmp/g2.json" "j['mix']['train_frames'] == [$fitted - 8] and 'real frames' in j['stage']")" = True ] &&
+  ok "pretrain --init continues a general model, mixed with a dataset's training frames" ||
+  bad "pretrain --init --real: $(tail -2 "$tmp/g2.err")"
+out=$("$bin/headcast-train" pretrain --init "$tmp/general.hcavatar" --real "$tmp/ds" --real "$tmp/ds" \
+  --out "$tmp/x.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "given twice" <<<"$out" && ok "pretrain: a dataset given twice refused" ||
+  bad "pretrain --real twice: $out"
+out=$("$bin/headcast-train" pretrain --init "$tmp/general.hcavatar" --mlp-width 32 --out "$tmp/x.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "sizes a new network" <<<"$out" && ok "pretrain --init: a network size refused" ||
+  bad "pretrain --init --mlp-width: $out"
 
 # Data parallel: two processes on loopback train what one process trains with the whole batch.
 dp=(pretrain --resolution 128 --iterations 6 --batch 4 --eval 3 --seed 5)
