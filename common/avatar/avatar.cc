@@ -110,6 +110,10 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
   Avatar a;
   a.impl_ = std::make_unique<Impl>(config);
   a.impl_->subject = impl_->subject;
+  // The subject's camera renders the new size (the same field of view), or
+  // the avatar would save a file its own Load refuses.
+  if (config.output_size != c.output_size)
+    a.impl_->subject.intrinsics = impl_->subject.intrinsics.Resized(config.output_size, config.output_size);
   a.impl_->fingerprint = impl_->fingerprint;
   a.impl_->camera_contract = impl_->camera_contract;
   a.impl_->training_summary = impl_->training_summary;

@@ -393,6 +393,24 @@ TEST_F(AvatarFileTest, RoundTripRendersIdentically) {
   EXPECT_TRUE(ReadZip(path_).count("preview.png"));
 }
 
+// An avatar switched to another output size (a general model continued or
+// fine-tuned at 256) keeps its field of view, and what it saves loads again.
+TEST_F(AvatarFileTest, AnotherOutputSizeKeepsTheFieldOfViewAndLoadsAgain) {
+  const Avatar a = Avatar::Load(path_, *Builtin());
+  AvatarConfig bigger = a.config();
+  bigger.output_size = 256;
+  const Avatar b = a.WithRuntimeSwitches(bigger);
+  const PinholeCamera &k128 = a.subject().intrinsics, &k256 = b.subject().intrinsics;
+  EXPECT_EQ(k256.width, 256);
+  EXPECT_EQ(k256.height, 256);
+  EXPECT_NEAR(k256.fy, 2 * k128.fy, 1e-9);
+  EXPECT_NEAR(k256.cx, (k128.cx + 0.5) * 2 - 0.5, 1e-9);  // pixel centres
+  const std::string out = dir_ + "/b256.hcavatar";
+  b.Save(out);
+  EXPECT_EQ(LoadError(out, *Builtin()), "loaded");
+  EXPECT_EQ(Avatar::ReadManifest(out)["output_resolution"], 256);
+}
+
 TEST_F(AvatarFileTest, RefusesOtherVersionsHeadModelsAndBrokenFiles) {
   std::string e = LoadError(WithManifest("v2", [](nlohmann::json* m) { (*m)["format_version"] = 2; }), *Builtin());
   EXPECT_NE(e.find("format version 2"), std::string::npos) << e;
