@@ -2,7 +2,9 @@
 #include "proto/recording_tools.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <limits>
@@ -112,6 +114,20 @@ ExportFormat ParseExportFormat(const std::string& name) {
   if (name == "csv") return ExportFormat::kCsv;
   if (name == "npz") return ExportFormat::kNpz;
   throw std::invalid_argument("--format wants json, csv or npz (got '" + name + "')");
+}
+
+ExportFormat ExportFormatFor(const std::string& name, const std::string& out_path) {
+  std::string extension = std::filesystem::path(out_path).extension().string();
+  if (!extension.empty()) extension.erase(0, 1);
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const bool known = extension == "json" || extension == "csv" || extension == "npz";
+  if (name.empty()) return ParseExportFormat(known ? extension : "json");
+  const ExportFormat format = ParseExportFormat(name);
+  if (known && extension != name)
+    throw std::invalid_argument("--format " + name + " into " + out_path + ": the file would not be the " + extension +
+                                " its name says (drop --format, or name the file ." + name + ")");
+  return format;
 }
 
 void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::string& out_path) {

@@ -28,6 +28,10 @@ nlohmann::json SummariseRecording(const LoadedRecording& recording);
 enum class ExportFormat { kJson, kCsv, kNpz };
 // "json", "csv", "npz"; throws std::invalid_argument otherwise.
 ExportFormat ParseExportFormat(const std::string& name);
+// The format of an export to `out_path`: `name` when given, else the path's
+// extension (.json, .csv, .npz), else json. A name that contradicts one of
+// those extensions is refused: the file would not be what its name says.
+ExportFormat ExportFormatFor(const std::string& name, const std::string& out_path);
 // Writes every frame. json: {"header": {...}, "frames": [{...}]}; csv: one
 // row a frame (sequence, time, confidence, expr_0.., jaw_x.., ...), the
 // header's facts in '#' lines first; npz: one array per parameter group

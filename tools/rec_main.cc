@@ -18,13 +18,13 @@ int main(int argc, char** argv) {
   std::string log_level;
   app.add_option("--log", log_level, "log level: trace, debug, info, warn, error");
 
-  std::string in, out, format = "json";
+  std::string in, out, format;
   auto* info = app.add_subcommand("info", "header, frames, duration, gaps and parameter ranges, as JSON");
   info->add_option("recording", in, ".hcrec file")->required();
 
   auto* exp = app.add_subcommand("export", "every frame to JSON, CSV or npz (numpy.load)");
   exp->add_option("recording", in, ".hcrec file")->required();
-  exp->add_option("--format", format, "json, csv or npz")->capture_default_str();
+  exp->add_option("--format", format, "json, csv or npz (default: the --out file's extension, else json)");
   exp->add_option("--out", out, "output file")->required();
 
   auto* imp = app.add_subcommand("import", "a json or npz export back to a recording, value for value");
@@ -52,8 +52,12 @@ int main(int argc, char** argv) {
       std::cout << SummariseRecording(LoadRecording(in)).dump(2) << "\n";
     } else if (exp->parsed()) {
       const LoadedRecording r = LoadRecording(in);
-      ExportRecording(r, ParseExportFormat(format), out);
-      spdlog::info("wrote {} ({} frames, {})", out, r.frames.size(), format);
+      const ExportFormat f = ExportFormatFor(format, out);
+      ExportRecording(r, f, out);
+      spdlog::info("wrote {} ({} frames, {})", out, r.frames.size(),
+                   f == ExportFormat::kNpz   ? "npz"
+                   : f == ExportFormat::kCsv ? "csv"
+                                             : "json");
     } else if (imp->parsed()) {
       const LoadedRecording r = ImportRecording(in);
       WriteRecording(out, r.info, r.frames);

@@ -41,6 +41,13 @@ out=$("$rec" cut "$tmp/p.hcrec" --from 2 --to 1 --out "$tmp/x.hcrec" 2>&1); rc=$
 echo garbage > "$tmp/g.hcrec"
 out=$("$rec" info "$tmp/g.hcrec" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "not a headcast parameter recording" <<<"$out" && ok "foreign file refused" || bad "foreign: $out"
+# Without --format, the file's extension says it; a --format against the extension is refused.
+"$rec" export "$tmp/p.hcrec" --out "$tmp/q.npz" 2>/dev/null && cmp -s "$tmp/p.npz" "$tmp/q.npz" &&
+  "$rec" export "$tmp/p.hcrec" --out "$tmp/q.data" 2>/dev/null && cmp -s "$tmp/p.json" "$tmp/q.data" &&
+  ok "export: the format from the file's extension (.npz), json for others" || bad "export by extension"
+out=$("$rec" export "$tmp/p.hcrec" --format json --out "$tmp/r.npz" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "would not be the npz its name says" <<<"$out" && [ ! -e "$tmp/r.npz" ] &&
+  ok "export: --format json into a .npz refused" || bad "export format against extension: $out"
 out=$("$rec" export "$tmp/p.hcrec" --format xml --out "$tmp/p.xml" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "json, csv or npz" <<<"$out" && ok "unknown format refused" || bad "format: $out"
 head -c $(( $(stat -c %s "$tmp/p.hcrec") - 7 )) "$tmp/p.hcrec" > "$tmp/cut.hcrec"
