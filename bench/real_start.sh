@@ -85,8 +85,9 @@ def figures(d):
             "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x")}
 rows = []
 for c in clips:
-    rows.append({"clip": f"talking_{c}",
-                 "pretrain": json.load(open(os.path.join(out, f"pretrain_no_{c}.json")))["mix"],
+    mix = json.load(open(os.path.join(out, f"pretrain_no_{c}.json")))["mix"]
+    mix["datasets"] = ["DIR/" + os.path.basename(d) for d in mix["datasets"]]  # no machine paths in what is written
+    rows.append({"clip": f"talking_{c}", "pretrain": mix,
                  "pretrain_s": json.load(open(os.path.join(out, f"time_no_{c}.json")))["pretrain_s"],
                  "from_general": figures(os.path.join(datasets, f"eval_{c}")),
                  "from_real_start": figures(os.path.join(out, f"eval_{c}")),
