@@ -159,6 +159,14 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--canonical-samples,!--no-canonical-samples", config->canonical_samples,
                 "move CNeRF samples into the neutral head through the posed triangle under their ray "
                 "(the mesh carries the motion; off: rigid head frame, the thesis's avatar)");
+  app->add_option_function<std::string>(
+         "--motion-conditioning",
+         [config](const std::string& name) { config->motion_conditioning = ParseMotionConditioning(name); },
+         "what of each frame's motion the networks are told: full (neck, jaw, eyes, expression; the thesis's "
+         "avatar), no_expression (the expression coefficients left out) or neck (the neck's rotation only); the "
+         "posed mesh carries all of it in every mode")
+      ->default_str(MotionConditioningName(config->motion_conditioning))
+      ->check(CLI::IsMember({"full", "no_expression", "neck"}));
 }
 
 // The outline: coverage predicted beside the RGB, bounded or not by the dataset's mask rules.

@@ -158,6 +158,12 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
     o.geometry_mask.narrow(1, 0, config.num_shape).zero_();  // beta first
     o.appearance_mask.narrow(1, config.appearance_dim() - config.num_texture, config.num_texture).zero_();  // tau last
   }
+  // What the networks are not told of a frame's motion, a per-frame code
+  // must not tell them either: the training frames would be memorised there.
+  if (config.motion_conditioning != MotionConditioning::kFull)
+    o.geometry_mask.narrow(1, config.num_shape + 12, config.num_expression).zero_();
+  if (config.motion_conditioning == MotionConditioning::kNeck)
+    o.geometry_mask.narrow(1, config.num_shape + 3, 9).zero_();  // jaw and eyes
   return o;
 }
 
@@ -322,6 +328,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   options.Check();
   if (!data.synthetic && data.real.empty()) throw std::invalid_argument("TrainAvatar: no training data");
   const AvatarConfig& config = avatar.config();
+  if (options.expression_noise > 0 && config.motion_conditioning != MotionConditioning::kFull)
+    throw std::invalid_argument(
+        "TrainAvatar: expression_noise needs an avatar told the expression (motion conditioning "
+        "full, not " +
+        std::string(MotionConditioningName(config.motion_conditioning)) + ")");
   const RealFrames real(data.real, config.output_size);
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();

@@ -147,6 +147,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     AvatarConfig c = init.config();
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;
+    c.motion_conditioning = o.config.motion_conditioning;
     return init.WithRuntimeSwitches(c);
   }();
   o.synthetic.image_size = o.resolution;
@@ -246,6 +247,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;  // the subject's choice, whatever the general model's
+    c.motion_conditioning = o.config.motion_conditioning;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }

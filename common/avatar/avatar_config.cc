@@ -33,6 +33,24 @@ MatteMode ParseMatteMode(const std::string& name) {
   throw std::invalid_argument("unknown matte '" + name + "' (none, learned or bounded)");
 }
 
+const char* MotionConditioningName(MotionConditioning mode) {
+  switch (mode) {
+    case MotionConditioning::kFull:
+      return "full";
+    case MotionConditioning::kNoExpression:
+      return "no_expression";
+    case MotionConditioning::kNeck:
+      return "neck";
+  }
+  return "?";
+}
+
+MotionConditioning ParseMotionConditioning(const std::string& name) {
+  for (MotionConditioning m : {MotionConditioning::kFull, MotionConditioning::kNoExpression, MotionConditioning::kNeck})
+    if (name == MotionConditioningName(m)) return m;
+  throw std::invalid_argument("unknown motion conditioning '" + name + "' (full, no_expression or neck)");
+}
+
 void AvatarConfig::Check() const {
   OptionsCheck c("AvatarConfig");
   CheckCommon(&c);
@@ -96,7 +114,8 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"surface_levels", surface_levels},
           {"matte", MatteModeName(matte)},
           {"matte_rules", matte_rules.ToJson()},
-          {"matte_core", matte_core}};
+          {"matte_core", matte_core},
+          {"motion_conditioning", MotionConditioningName(motion_conditioning)}};
 }
 
 AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
@@ -136,6 +155,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.matte = ParseMatteMode(j.value("matte", std::string("none")));
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);
+    c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
   }

@@ -24,6 +24,19 @@ enum class MatteMode {
 const char* MatteModeName(MatteMode mode);
 MatteMode ParseMatteMode(const std::string& name);  // throws std::invalid_argument naming the choices
 
+// What of a frame's motion the networks are told. The posed mesh carries all
+// of it in every mode (canonical samples, the surface texture); what the
+// networks are not told they cannot tie to the training frames' look, so an
+// expression they never saw is drawn by the mesh rather than by the nearest
+// one they memorised.
+enum class MotionConditioning {
+  kFull,          // neck, jaw, eyes and the expression coefficients (the thesis's avatar)
+  kNoExpression,  // neck, jaw and eyes; the expression coefficients are zero
+  kNeck,          // the neck's rotation only; jaw, eyes and expression are zero
+};
+const char* MotionConditioningName(MotionConditioning mode);
+MotionConditioning ParseMotionConditioning(const std::string& name);  // throws std::invalid_argument
+
 // What a subject's avatar gets by default (headcast-train subject, create):
 // surface-texture channels and the matte.
 inline constexpr int kSubjectSurfaceFeatures = 8;
@@ -102,6 +115,9 @@ struct AvatarConfig : AvatarCommonConfig {
   // rarely (a wide-open jaw); the learnt coverage draws the hair beyond them.
   // Off by default: within the run-to-run spread on talking_d9 and d10.
   double matte_core = 0;
+
+  // A run-time switch: the networks' sizes are the same in every mode.
+  MotionConditioning motion_conditioning = MotionConditioning::kFull;
 
   bool has_surface() const { return surface_features > 0; }
   int surface_hidden_channels() const { return surface_hidden > 0 ? surface_hidden : 2 * surface_features; }

@@ -256,6 +256,50 @@ TEST(CanonicalSamples, NeedMeshGuidedSamplingAndTravelInTheFile) {
   EXPECT_THROW(c.Check(), std::invalid_argument);
 }
 
+// What a mode leaves out of the conditioning is zero whatever the frame says;
+// what it keeps is the frame's. The mode travels in the file; a foreign name
+// is refused.
+TEST(MotionConditioning, TellsTheNetworksOnlyWhatItsModeKeeps) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.num_expression = Builtin()->num_expression();
+  const SubjectParams subject = DefaultSubject(*Builtin(), c.output_size);
+  FrameParams f = Expressive();
+  f.left_eye = Eigen::Vector3f(0.1f, -0.2f, 0);
+  f.right_eye = Eigen::Vector3f(0.1f, -0.2f, 0);
+  const int motion = c.num_shape;  // neck (3), jaw (3), eyes (6), then psi
+  auto told = [&](MotionConditioning mode) {
+    c.motion_conditioning = mode;
+    return MakeConditioning(c, subject, f).geometry;
+  };
+  const torch::Tensor full = told(MotionConditioning::kFull);
+  EXPECT_FLOAT_EQ(full[0][motion + 1].item<float>(), 0.3f);   // neck y
+  EXPECT_FLOAT_EQ(full[0][motion + 3].item<float>(), 0.25f);  // jaw x
+  EXPECT_FLOAT_EQ(full[0][motion + 7].item<float>(), -0.2f);  // left eye y
+  EXPECT_FLOAT_EQ(full[0][motion + 12].item<float>(), 1.5f);  // psi 0
+  const torch::Tensor no_expression = told(MotionConditioning::kNoExpression);
+  EXPECT_TRUE(torch::equal(no_expression.narrow(1, 0, motion + 12), full.narrow(1, 0, motion + 12)));
+  EXPECT_EQ(no_expression.narrow(1, motion + 12, c.num_expression).abs().max().item<float>(), 0.f);
+  const torch::Tensor neck = told(MotionConditioning::kNeck);
+  EXPECT_TRUE(torch::equal(neck.narrow(1, 0, motion + 3), full.narrow(1, 0, motion + 3)));
+  EXPECT_EQ(neck.narrow(1, motion + 3, c.conditioning_dim() - motion - 3).abs().max().item<float>(), 0.f);
+
+  for (MotionConditioning m :
+       {MotionConditioning::kFull, MotionConditioning::kNoExpression, MotionConditioning::kNeck}) {
+    c.motion_conditioning = m;
+    EXPECT_EQ(AvatarConfig::FromJson(c.ToJson()).motion_conditioning, m) << MotionConditioningName(m);
+  }
+  nlohmann::json j = c.ToJson();
+  j.erase("motion_conditioning");
+  EXPECT_EQ(AvatarConfig::FromJson(j).motion_conditioning, MotionConditioning::kFull) << "files from before it";
+  j["motion_conditioning"] = "expression";
+  try {
+    AvatarConfig::FromJson(j);
+    ADD_FAILURE() << "a foreign mode accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("full, no_expression or neck"), std::string::npos) << e.what();
+  }
+}
+
 TEST(SurfaceTexture, SamplesItsPlanesAtCanonicalPoints) {
   AvatarConfig c = TinyWithSurface();
   SurfaceTexture texture(c);

@@ -531,6 +531,40 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   EXPECT_THROW(TrainAvatar(wrong, Model(), TrainingData{nullptr, {&real}}, f), std::invalid_argument);
 }
 
+// An avatar told only the neck's rotation: the per-frame offsets stay zero on
+// what it is not told (jaw, eyes, expression), or the training frames would
+// be memorised there; expression noise, which has nothing to act on, is refused.
+TEST(TrainAvatar, OffsetsKeepOutOfWhatTheNetworksAreNotTold) {
+  const std::string dir = WriteRenderedDataset("dataset_motion", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  AvatarConfig config = Tiny();
+  config.motion_conditioning = MotionConditioning::kNeck;
+  Avatar avatar = Avatar::CreateRandom(config, Model(), real.subject(), 4);
+  FitOptions f;
+  f.iterations = 8;
+  f.batch = 2;
+  f.freeze_identity = true;
+  f.checkpoint_dir = testing::TempDir("ckpt_motion");
+  f.checkpoint_every = 8;
+  TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
+  std::string latest;
+  std::getline(std::ifstream(f.checkpoint_dir + "/LATEST"), latest);
+  std::vector<torch::Tensor> offsets;
+  torch::load(offsets, f.checkpoint_dir + "/" + latest + "/offsets.pt");
+  const AvatarConfig& c = avatar.config();
+  EXPECT_GT(offsets[0].narrow(1, c.num_shape, 3).abs().max().item<double>(), 0) << "the neck's offsets learn";
+  EXPECT_EQ(offsets[0].narrow(1, c.num_shape + 3, c.conditioning_dim() - c.num_shape - 3).abs().max().item<double>(),
+            0.0);
+  f.expression_noise = 0.1;
+  f.checkpoint_dir.clear();
+  try {
+    TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
+    ADD_FAILURE() << "expression noise accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("expression_noise"), std::string::npos) << e.what();
+  }
+}
+
 // Several people's datasets: every frame drawn with its own dataset's subject,
 // the offsets one row per frame of the datasets one after another. Networks
 // that also saw the second person draw that person's held-out frames better
