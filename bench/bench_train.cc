@@ -36,9 +36,11 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
     out["pretrain_samples_per_s"] = r.samples_per_s;
     out["pretrain_ms_per_step"] = 1e3 * r.seconds / fit.iterations;
   }
-  // Fine-tune (METHOD §6): four CNeRF layers frozen, beta/tau frozen; on a
-  // prepared dataset's frames when given, else on the subject's own renders.
+  // Fine-tune as `headcast-train subject` does (its frozen CNeRF layers and
+  // region weights, beta/tau frozen); on a prepared dataset's frames when
+  // given, else on the subject's own renders.
   {
+    const SubjectOptions subject_defaults;
     so.vary_identity = false;
     SyntheticData data(model, so, subject, 2);
     std::optional<PreparedDataset> real;
@@ -46,7 +48,7 @@ nlohmann::json RunTrainSuite(const BenchOptions& o) {
     Avatar avatar = Avatar::CreateRandom(config, model, real ? real->subject() : subject, 1);
     FitOptions f = fit;
     f.freeze_identity = true;
-    f.freeze_cnerf_layers = SubjectOptions{}.freeze_layers;
+    f.freeze_cnerf_layers = subject_defaults.freeze_layers;
     f.loss.regions = SubjectFitDefaults().loss.regions;
     f.mix = MixSchedule{0, std::max(1, fit.iterations), 0.0, 0.25};
     TrainingData samples{&data, {}};

@@ -262,7 +262,9 @@ TEST(NeuralRenderer, TwoLevelsUpsampleFourTimesAndAWindowDrawsTheSamePixels) {
     const bool must_learn = p.key().find("_branch") != std::string::npos || p.key().rfind("post.", 0) == 0 ||
                             p.key().rfind("to_", 0) == 0 || p.key().rfind("input_", 0) == 0 ||
                             p.key().rfind("surface_out", 0) == 0;
-    if (must_learn) EXPECT_GT(p.value().grad().abs().sum().item<float>(), 0.f) << p.key();
+    if (must_learn) {
+      EXPECT_GT(p.value().grad().abs().sum().item<float>(), 0.f) << p.key();
+    }
     learning += must_learn;
   }
   EXPECT_EQ(learning, 2 * 10 + 4 + 2) << "per level two branches, post, to_rgb, to_alpha; the inputs; surface_out";
@@ -579,7 +581,9 @@ TEST(AvatarRenderer, TheSkinColourOfTheFrameIsMatched) {
   const std::optional<Eigen::Vector3f> now = SkinColour(matched, landmarks);
   ASSERT_TRUE(now.has_value());
   for (int k = 0; k < 3; ++k)
-    if ((*drawn)[k] > 0.1f) EXPECT_NEAR((*now)[k], target[k], 2.5f / 255) << "channel " << k;
+    if ((*drawn)[k] > 0.1f) {
+      EXPECT_NEAR((*now)[k], target[k], 2.5f / 255) << "channel " << k;
+    }
   EXPECT_EQ(matched.at<cv::Vec3b>(0, 0), own.at<cv::Vec3b>(0, 0));  // the background
   EXPECT_GT(cv::norm(own, matched, cv::NORM_L1), 0);
   p.skin_colour.reset();
