@@ -11,6 +11,7 @@
 # default subject configuration).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N (3000, as headcast-train create)] [--ict DIR]
 #       [--clips "d9 d10 ..."]
+#       [--z-augmentation P]        probability of the distance augmentation (0, as headcast-train create)
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
 #       [--prep-flags "FLAGS"]      extra `headcast-train prep` flags (default: none)
 #       [--no-render]               skip the receiver's frame rate (ablations of the avatar only)
@@ -23,11 +24,12 @@ bin=${HEADCAST_BIN:-$root/build/bin}
 [ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
 out=$1; shift
 command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
-name=four_clips iterations=3000 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
+name=four_clips iterations=3000 z_augmentation=0 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
     --iterations) iterations=$2; shift 2 ;;
+    --z-augmentation) z_augmentation=$2; shift 2 ;;
     --ict) ict=$2; shift 2 ;;
     --clips) clips=$2; shift 2 ;;
     --subject-flags) subject_flags=$2; shift 2 ;;
@@ -54,8 +56,8 @@ for clip in $clips; do
   step "$clip: fine-tune ($iterations steps) $subject_flags"
   # shellcheck disable=SC2086  # the extra flags are words
   run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
-    --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
-    --json "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
+    --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" \
+    --z-augmentation "$z_augmentation" --json "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
   t2=$(date +%s.%N)
   "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
   step "$clip: eval"
