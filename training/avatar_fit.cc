@@ -160,10 +160,8 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
   }
   // What the networks are not told of a frame's motion, a per-frame code
   // must not tell them either: the training frames would be memorised there.
-  if (config.motion_conditioning != MotionConditioning::kFull)
-    o.geometry_mask.narrow(1, config.num_shape + 12, config.num_expression).zero_();
-  if (config.motion_conditioning == MotionConditioning::kNeck)
-    o.geometry_mask.narrow(1, config.num_shape + 3, 9).zero_();  // jaw and eyes
+  for (int i = config.num_shape; i < config.conditioning_dim(); ++i)
+    if (!config.Conditions(i)) o.geometry_mask[0][i] = 0;
   return o;
 }
 
@@ -435,7 +433,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         torch::Tensor psi = torch::empty({1, config.num_expression});
         for (int k = 0; k < config.num_expression; ++k) psi[0][k] = noise(rng);
         p.inputs.conditioning.geometry =
-            p.inputs.conditioning.geometry + torch::constant_pad_nd(psi, {config.num_shape + 12, 0});
+            p.inputs.conditioning.geometry + torch::constant_pad_nd(psi, {config.expression_offset(), 0});
       }
       torch::Tensor offset_penalty = torch::zeros({});
       if (real_index >= 0 && offsets.enabled()) {

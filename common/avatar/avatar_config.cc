@@ -51,6 +51,12 @@ MotionConditioning ParseMotionConditioning(const std::string& name) {
   throw std::invalid_argument("unknown motion conditioning '" + name + "' (full, no_expression or neck)");
 }
 
+bool AvatarConfig::Conditions(int i) const {
+  if (i < pose_offset()) return true;
+  if (i >= expression_offset()) return motion_conditioning == MotionConditioning::kFull;
+  return motion_conditioning != MotionConditioning::kNeck || i < pose_offset() + 3;  // the neck is the first joint
+}
+
 void AvatarConfig::Check() const {
   OptionsCheck c("AvatarConfig");
   CheckCommon(&c);

@@ -126,7 +126,13 @@ struct AvatarConfig : AvatarCommonConfig {
   int renderer_levels() const { return static_cast<int>(renderer_channels.size()) - 1; }
   int feature_stride() const { return 1 << renderer_levels(); }  // output pixels per feature-map pixel
   int feature_size() const { return output_size / feature_stride(); }
-  int conditioning_dim() const { return num_shape + 12 + num_expression; }  // beta, neck/jaw/eyes, psi
+  // The conditioning vector: beta, the neck, jaw and eye rotations (3 each), psi.
+  int pose_offset() const { return num_shape; }
+  int expression_offset() const { return num_shape + 12; }
+  int conditioning_dim() const { return expression_offset() + num_expression; }
+  // Whether the motion conditioning tells the networks the conditioning's
+  // element i (beta always; the joints and psi as the mode keeps them).
+  bool Conditions(int i) const;
   int motion_dim() const { return 12 + num_expression; }   // the conditioning without beta: what changes per frame
   int appearance_dim() const { return 27 + num_texture; }  // lambda, tau
   int encoding_dim() const { return 3 + 6 * pe_frequencies; }

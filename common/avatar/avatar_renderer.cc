@@ -18,12 +18,12 @@ AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& 
   std::vector<float> g(c.conditioning_dim(), 0.f), a(c.appearance_dim(), 0.f);
   for (int i = 0; i < std::min<int>(c.num_shape, subject.shape.size()); ++i) g[i] = subject.shape[i];
   const Eigen::Vector3f* pose[] = {&frame.neck, &frame.jaw, &frame.left_eye, &frame.right_eye};
-  const int joints = c.motion_conditioning == MotionConditioning::kNeck ? 1 : 4;
-  for (int j = 0; j < joints; ++j)
-    for (int k = 0; k < 3; ++k) g[c.num_shape + 3 * j + k] = (*pose[j])[k];
-  if (c.motion_conditioning == MotionConditioning::kFull)
-    for (int i = 0; i < std::min<int>(c.num_expression, frame.expression.size()); ++i)
-      g[c.num_shape + 12 + i] = frame.expression[i];
+  for (int j = 0; j < 4; ++j)
+    for (int k = 0; k < 3; ++k) g[c.pose_offset() + 3 * j + k] = (*pose[j])[k];
+  for (int i = 0; i < std::min<int>(c.num_expression, frame.expression.size()); ++i)
+    g[c.expression_offset() + i] = frame.expression[i];
+  for (int i = c.num_shape; i < c.conditioning_dim(); ++i)
+    if (!c.Conditions(i)) g[i] = 0;
   for (int i = 0; i < 27; ++i) a[i] = subject.light[i];
   for (int i = 0; i < std::min<int>(c.num_texture, subject.texture.size()); ++i) a[27 + i] = subject.texture[i];
   return {torch::tensor(g).view({1, -1}), torch::tensor(a).view({1, -1})};
