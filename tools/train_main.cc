@@ -70,6 +70,11 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
       ->capture_default_str();
   app->add_option("--z-augmentation", fit->z_augmentation, "probability of the distance augmentation on real frames")
       ->capture_default_str();
+  app->add_option("--roll-augmentation", fit->roll_augmentation,
+                  "probability of turning a real frame's camera about its optical axis")
+      ->capture_default_str();
+  app->add_option("--roll-max-degrees", fit->roll_max_degrees, "largest turn of the roll augmentation")
+      ->capture_default_str();
   app->add_option("--checkpoint-dir", fit->checkpoint_dir,
                   "checkpoint here (atomically) every --checkpoint-every steps");
   app->add_option("--checkpoint-every", fit->checkpoint_every, "steps between checkpoints")->capture_default_str();

@@ -61,6 +61,8 @@ void FitOptions::Check() const {
       .InRange("z_augmentation", z_augmentation, 0.0, 1.0)
       .InRange("z_scale_min", z_scale_min, 0.3, 1.0)
       .InRange("z_scale_max", z_scale_max, 1.0, 3.0)
+      .InRange("roll_augmentation", roll_augmentation, 0.0, 1.0)
+      .InRange("roll_max_degrees", roll_max_degrees, 0.0, 90.0)
       .InRange("threads", threads, 0, 256);
   c.That(!resume || !checkpoint_dir.empty(), "resume needs a checkpoint_dir");
   c.ThrowIfErrors();
@@ -81,6 +83,23 @@ double FitOptions::WeightAverageDecayAt(int step) const {
 }
 
 double SubjectWeightAverage(int iterations) { return iterations < 9 ? 0.0 : std::min(0.999, 1.0 - 8.0 / iterations); }
+
+void TurnCamera(double angle, const PinholeCamera& camera, FrameParams* frame, cv::Mat* image, cv::Mat* mask) {
+  const double c = std::cos(angle), s = std::sin(angle);
+  // Camera points turn by Rz(angle); in pixels that is K Rz K^-1, a rotation
+  // about the principal point when the focal lengths are equal.
+  const double a = c, b = -s * camera.fx / camera.fy, d = s * camera.fy / camera.fx;
+  const cv::Matx23d affine(a, b, camera.cx - a * camera.cx - b * camera.cy, d, c,
+                           camera.cy - d * camera.cx - c * camera.cy);
+  cv::Mat turned_image, turned_mask;
+  cv::warpAffine(*image, turned_image, affine, image->size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+  cv::warpAffine(*mask, turned_mask, affine, mask->size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT);
+  *image = turned_image;
+  *mask = turned_mask;
+  RigidTransform turn;
+  turn.rotation << c, -s, 0, s, c, 0, 0, 0, 1;
+  frame->SetCamFromHead(turn * frame->CamFromHead());
+}
 
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask) {
   const cv::Vec3f rgb = HeadRenderOptions{}.background_rgb;
@@ -425,6 +444,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
           const double scale = std::exp(std::uniform_real_distribution<double>(std::log(options.z_scale_min),
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, subject.intrinsics, &frame, &image, &mask);
+        }
+        if (u01(rng) < options.roll_augmentation) {
+          const double limit = options.roll_max_degrees * M_PI / 180;
+          TurnCamera(std::uniform_real_distribution<double>(-limit, limit)(rng), subject.intrinsics, &frame, &image,
+                     &mask);
         }
         p = Prepare(config, model, subject, frame, image, mask, &sampler, w.regions, false, &rng);
       }

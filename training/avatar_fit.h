@@ -107,6 +107,12 @@ struct FitOptions {
   // (the picture scaled about the head's centre, the translation with it).
   double z_augmentation = 0.5;
   double z_scale_min = 0.8, z_scale_max = 1.25;
+  // Roll augmentation of real frames: with this probability the camera is
+  // turned about its optical axis by an angle drawn in +-roll_max_degrees
+  // (TurnCamera). A short video holds the head upright within a few degrees;
+  // a head tilted further is a picture the 2D renderer never saw.
+  double roll_augmentation = 0;
+  double roll_max_degrees = 10;
   // Checkpoints: every `checkpoint_every` steps the weights, the optimiser
   // state, the offsets and the step go to CHECKPOINT_DIR/step-N/, then
   // CHECKPOINT_DIR/LATEST is switched to it (a rename: a crash or kill -9 loses
@@ -196,6 +202,12 @@ Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n);
 
 // The avatar's picture (BGR) for a subject and frame, e.g. beside its ground truth.
 cv::Mat RenderAvatarBgr(Avatar& avatar, const HeadModel& model, const SubjectParams& subject, const FrameParams& frame);
+
+// The frame as a camera turned by `angle` (radians) about its optical axis
+// would see it: the image and mask (CV_8U) turned about the principal point,
+// cam_from_head turned with them. Exact for a pinhole camera (no depth is
+// needed); what comes in at the corners is background.
+void TurnCamera(double angle, const PinholeCamera& camera, FrameParams* frame, cv::Mat* image, cv::Mat* mask);
 
 // A real frame's target: the masked image on the renders' background colour (BGR).
 cv::Mat MaskedTarget(const cv::Mat& image_bgr, const cv::Mat& mask);

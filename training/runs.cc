@@ -103,6 +103,8 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"threads_per_process", f.threads}};
   if (real) {  // only real frames are augmented and get offsets
     j["z_augmentation"] = f.z_augmentation;
+    j["roll_augmentation"] = f.roll_augmentation;
+    j["roll_max_degrees"] = f.roll_max_degrees;
     j["learned_offsets"] = f.learn_offsets;
     j["rare_expressions"] = f.rare_expressions.strength;
   }

@@ -744,5 +744,53 @@ TEST(Interpolation, FlowPutsAMovingHeadHalfWay) {
   EXPECT_NEAR(h.expression[0], p.expression[0] + 0.5f, 1e-6);
 }
 
+// A turned camera sees each point of the head where the turned picture moved
+// it: a dot drawn at a point's projection lands on the point's projection
+// through the turned cam_from_head, with unequal focal lengths too; the
+// head's distance is unchanged, and what comes in at the corners is background.
+TEST(TurnCamera, MovesThePictureAsTheTurnedCameraSeesTheHead) {
+  PinholeCamera camera;
+  camera.fx = 300;
+  camera.fy = 330;
+  camera.cx = 131;
+  camera.cy = 122;
+  camera.width = camera.height = 256;
+  FrameParams f;
+  f.cam_rotation = Eigen::Vector3f(0.1f, -0.2f, 0.05f);
+  f.cam_translation = Eigen::Vector3f(0.04f, -0.03f, 0.5f);
+  const std::vector<Eigen::Vector3d> points = {
+      {0, 0, 0}, {0.05, 0.03, 0.02}, {-0.04, 0.06, -0.01}, {0.02, -0.07, 0.03}};
+  for (double angle : {0.3, -0.2}) {
+    for (const Eigen::Vector3d& point : points) {
+      const Eigen::Vector2d at = camera.Project(f.CamFromHead().Apply(point));
+      cv::Mat mask(256, 256, CV_8U, cv::Scalar(0)), image(256, 256, CV_8UC3, cv::Scalar(0, 0, 0));
+      cv::circle(mask, cv::Point(std::lround(at.x()), std::lround(at.y())), 3, cv::Scalar(255), cv::FILLED);
+      cv::circle(image, cv::Point(std::lround(at.x()), std::lround(at.y())), 3, cv::Scalar(255, 255, 255), cv::FILLED);
+      FrameParams g = f;
+      TurnCamera(angle, camera, &g, &image, &mask);
+      const Eigen::Vector2d expected = camera.Project(g.CamFromHead().Apply(point));
+      for (const cv::Mat& m : {mask, image}) {
+        cv::Mat grey;
+        if (m.channels() == 3)
+          cv::cvtColor(m, grey, cv::COLOR_BGR2GRAY);
+        else
+          grey = m;
+        const cv::Moments mo = cv::moments(grey);
+        ASSERT_GT(mo.m00, 0) << "the dot left the picture";
+        EXPECT_NEAR(mo.m10 / mo.m00, expected.x(), 1.0) << angle;
+        EXPECT_NEAR(mo.m01 / mo.m00, expected.y(), 1.0) << angle;
+      }
+      EXPECT_GT((expected - at).norm(), 3.0) << "the turn moved nothing";
+      EXPECT_NEAR(g.cam_translation.norm(), f.cam_translation.norm(), 1e-6);
+      EXPECT_NEAR(g.CamFromHead().Apply(point).z(), f.CamFromHead().Apply(point).z(), 1e-6);
+    }
+  }
+  cv::Mat full(256, 256, CV_8U, cv::Scalar(255)), image(256, 256, CV_8UC3, cv::Scalar(9, 9, 9));
+  FrameParams g = f;
+  TurnCamera(0.3, camera, &g, &image, &full);
+  EXPECT_EQ(full.at<uint8_t>(0, 0), 0);
+  EXPECT_EQ(full.at<uint8_t>(128, 128), 255);
+}
+
 }  // namespace
 }  // namespace headcast
