@@ -266,6 +266,10 @@ int main(int argc, char** argv) {
                    "all, no-eyes, outline (jaw line and nose)")
       ->check(CLI::IsMember(kPredictorViewsPoints))
       ->capture_default_str();
+  prep->add_option("--pose-smoothing", p.pose_smoothing,
+                   "tracking: the head's placement smoothed over time after every frame is fitted, sigma in frames "
+                   "(0: as fitted)")
+      ->capture_default_str();
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")

@@ -18,6 +18,7 @@
 #include "common/raster/rasterizer.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/offline_tracker.h"
+#include "common/tracking/pose_smoothing.h"
 #include "proto/recording.h"
 #include "training/interpolation.h"
 #include "training/run_report.h"
@@ -51,6 +52,7 @@ void PrepOptions::Check() const {
             "predictor_views_points is all, no-eyes or outline")
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
+      .InRange("pose_smoothing", pose_smoothing, 0.0, 100.0)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
                 kLandmarkFilterModes.end(),
             "landmark_filter is causal, off or two-sided");
@@ -155,6 +157,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
     WriteImage((masks_dir / FrameFileName(f.index)).string(), f.mask);
   });
   t.fitted = tracked.frames;
+  SmoothHeadPlacement(o.pose_smoothing, &t.fitted);
   t.info = MakeRecordingInfo(model, tracked.fps, tracked.subject, "headcast-train prep " + o.input);
   t.report = tracked.report;
   WriteRecording((dir / "params.hcrec").string(), t.info, t.fitted);
@@ -334,7 +337,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"eye_look_prior", o.eye_look_prior},
         {"eye_look_prior_shapes", o.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
-        {"landmark_filter", o.landmark_filter}}}};
+        {"landmark_filter", o.landmark_filter},
+        {"pose_smoothing", o.pose_smoothing}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }

@@ -86,6 +86,9 @@ struct PrepOptions {
   std::string landmark_filter = "off";
   double landmark_filter_hz = FaceTrackerOptions{}.filter_min_cutoff;  // causal, two-sided: cutoff at rest
   double landmark_filter_beta = FaceTrackerOptions{}.filter_beta;      // causal, two-sided: speed coefficient
+  // The head's placement smoothed over time after every frame is fitted
+  // (SmoothHeadPlacement), sigma in frames; 0: as fitted.
+  double pose_smoothing = 0;
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;
