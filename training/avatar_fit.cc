@@ -445,7 +445,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, subject.intrinsics, &frame, &image, &mask);
         }
-        if (u01(rng) < options.roll_augmentation) {
+        // Drawn only when on: runs without it keep the draws (and figures) of before it existed.
+        if (options.roll_augmentation > 0 && u01(rng) < options.roll_augmentation) {
           const double limit = options.roll_max_degrees * M_PI / 180;
           TurnCamera(std::uniform_real_distribution<double>(-limit, limit)(rng), subject.intrinsics, &frame, &image,
                      &mask);
