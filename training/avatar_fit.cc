@@ -84,6 +84,21 @@ double FitOptions::WeightAverageDecayAt(int step) const {
 
 double SubjectWeightAverage(int iterations) { return iterations < 9 ? 0.0 : std::min(0.999, 1.0 - 8.0 / iterations); }
 
+namespace {
+
+// A real frame's picture and mask moved by `affine` (source to destination
+// pixels): the image interpolated, the mask kept binary; what comes in at the
+// edges is background.
+void WarpFrame(const cv::Matx23d& affine, cv::Mat* image, cv::Mat* mask) {
+  cv::Mat warped_image, warped_mask;
+  cv::warpAffine(*image, warped_image, affine, image->size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+  cv::warpAffine(*mask, warped_mask, affine, mask->size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT);
+  *image = warped_image;
+  *mask = warped_mask;
+}
+
+}  // namespace
+
 void TurnCamera(double angle, const PinholeCamera& camera, FrameParams* frame, cv::Mat* image, cv::Mat* mask) {
   const double c = std::cos(angle), s = std::sin(angle);
   // Camera points turn by Rz(angle); in pixels that is K Rz K^-1, a rotation
@@ -91,11 +106,7 @@ void TurnCamera(double angle, const PinholeCamera& camera, FrameParams* frame, c
   const double a = c, b = -s * camera.fx / camera.fy, d = s * camera.fy / camera.fx;
   const cv::Matx23d affine(a, b, camera.cx - a * camera.cx - b * camera.cy, d, c,
                            camera.cy - d * camera.cx - c * camera.cy);
-  cv::Mat turned_image, turned_mask;
-  cv::warpAffine(*image, turned_image, affine, image->size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-  cv::warpAffine(*mask, turned_mask, affine, mask->size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT);
-  *image = turned_image;
-  *mask = turned_mask;
+  WarpFrame(affine, image, mask);
   RigidTransform turn;
   turn.rotation << c, -s, 0, s, c, 0, 0, 0, 1;
   frame->SetCamFromHead(turn * frame->CamFromHead());
@@ -152,11 +163,7 @@ PreparedSample Prepare(const AvatarConfig& config, const HeadModel& model, const
 void ChangeDistance(double scale, const PinholeCamera& camera, FrameParams* frame, cv::Mat* image, cv::Mat* mask) {
   const Eigen::Vector2d c = camera.Project(frame->cam_translation.cast<double>());
   const cv::Matx23d affine(scale, 0, (1 - scale) * c.x(), 0, scale, (1 - scale) * c.y());
-  cv::Mat warped_image, warped_mask;
-  cv::warpAffine(*image, warped_image, affine, image->size(), cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-  cv::warpAffine(*mask, warped_mask, affine, mask->size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT);
-  *image = warped_image;
-  *mask = warped_mask;
+  WarpFrame(affine, image, mask);
   frame->cam_translation /= static_cast<float>(scale);
 }
 
