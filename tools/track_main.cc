@@ -82,6 +82,11 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
                  "weight of each rigid head point (forehead, hairline) followed by optical flow from the previous "
                  "frame, against a landmark (0: off)")
       ->capture_default_str();
+  app.add_option("--photometric-anchor", t.anchor.weight,
+                 "recorded input: once every frame is fitted, the head's placement is held to the grey levels of "
+                 "its rigid part (forehead, temples, crown) over the clip and every frame fitted again; each "
+                 "anchored point's weight against a landmark (0: off)")
+      ->capture_default_str();
   app.add_option("--predictor-views", t.tracker.face.predictor_views,
                  "the shape predictor runs on this many views of each face (the box, its mirror, the box smaller "
                  "and larger), each landmark their median")

@@ -270,6 +270,11 @@ int main(int argc, char** argv) {
                    "tracking: the head's placement smoothed over time after every frame is fitted, sigma in frames "
                    "(0: as fitted)")
       ->capture_default_str();
+  prep->add_option("--photometric-anchor", p.photometric_anchor,
+                   "tracking: once every frame is fitted, the head's placement is held to the grey levels of its "
+                   "rigid part (forehead, temples, crown) over the clip and every frame fitted again; each anchored "
+                   "point's weight against a landmark (0: off)")
+      ->capture_default_str();
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")

@@ -53,6 +53,7 @@ void PrepOptions::Check() const {
       .Positive("landmark_filter_hz", landmark_filter_hz)
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
       .InRange("pose_smoothing", pose_smoothing, 0.0, 100.0)
+      .InRange("photometric_anchor", photometric_anchor, 0.0, 100.0)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
                 kLandmarkFilterModes.end(),
             "landmark_filter is causal, off or two-sided");
@@ -147,6 +148,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
     track.identity = ReadTrackingIdentity(o.identity_from, model);
     track.identity_source = o.identity_from;
   }
+  track.anchor.weight = o.photometric_anchor;
   track.masks = true;
   track.mask.working_size = o.mask_working_size;
   track.overlay = (dir / "preview.mp4").string();
@@ -338,7 +340,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"eye_look_prior_shapes", o.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter},
-        {"pose_smoothing", o.pose_smoothing}}}};
+        {"pose_smoothing", o.pose_smoothing},
+        {"photometric_anchor", o.photometric_anchor}}}};
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }

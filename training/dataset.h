@@ -89,6 +89,9 @@ struct PrepOptions {
   // The head's placement smoothed over time after every frame is fitted
   // (SmoothHeadPlacement), sigma in frames; 0: as fitted.
   double pose_smoothing = 0;
+  // The head's placement held to its appearance over the clip, then every
+  // frame fitted again (OfflineTrackOptions::anchor); weight 0: off.
+  double photometric_anchor = 0;
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

@@ -200,6 +200,86 @@ void RefitHeld(FrameTracker& tracker, const PinholeCamera& camera, std::vector<H
   held->clear();
 }
 
+// Holds every fitted frame's head placement to its appearance over the clip
+// (PhotometricAnchor): per round, the points' reference grey levels from the
+// current fits, then each frame aligned to them and fitted again to its
+// landmarks with the aligned points holding the pose. Reads the input again
+// twice a round. Returns the report's entry.
+nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o, const FrameSourceFactory& open,
+                           const Eigen::VectorXd& identity, const PinholeCamera& camera,
+                           const std::map<uint64_t, FaceObservation>& faces, std::vector<FrameParams>* frames) {
+  PhotometricAnchor anchor(model, identity, o.anchor);
+  HeadFitterOptions fit_options = o.tracker.fit;
+  fit_options.rigid_flow_weight = o.anchor.weight;
+  HeadFitter fitter(model, fit_options);
+  fitter.SetIdentity(identity);
+  std::map<uint64_t, FrameParams*> by_sequence;
+  for (FrameParams& f : *frames)
+    if (faces.count(f.sequence)) by_sequence[f.sequence] = &f;
+  // Each fitted frame's grey image, read again in order; `use` gets it with its params.
+  auto each_frame = [&](const std::function<void(const cv::Mat&, FrameParams*, const FaceObservation&)>& use) {
+    std::unique_ptr<FrameSource> source = open();
+    int index = 0;
+    for (;;) {
+      if (o.max_frames > 0 && index >= o.max_frames) break;
+      CapturedFrame captured;
+      std::string problem;
+      const ReadStatus status = source->Read(&captured, &problem);
+      if (status == ReadStatus::kEnd) break;
+      if (status == ReadStatus::kSkipped) continue;
+      const auto it = by_sequence.find(static_cast<uint64_t>(index++));
+      if (it == by_sequence.end()) continue;
+      const FaceObservation& face = faces.at(it->first);
+      const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
+      use(AnchorGray(captured.bgr, o.anchor.blur_iod * iod), it->second, face);
+    }
+  };
+  nlohmann::json rounds = nlohmann::json::array();
+  for (int round = 0; round < o.anchor.rounds; ++round) {
+    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation&) { anchor.Observe(gray, *f, camera); });
+    const int referenced = anchor.Reference();
+    SampleStats shift, before, after;
+    int refitted = 0, rejected = 0;
+    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation& face) {
+      FrameParams aligned = *f;
+      const AnchorAlignment a = anchor.Align(gray, camera, &aligned);
+      const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
+      if (!a.ok || a.shift_px > o.anchor.max_shift_iod * iod) {
+        ++rejected;
+        return;
+      }
+      shift.Add(a.shift_px);
+      before.Add(a.rms_before);
+      after.Add(a.rms_after);
+      const RigidObservations rigid = anchor.Observations(aligned, camera, o.anchor.fit_points);
+      FrameParams refit = *f;
+      if (fitter.Fit(face.landmarks, camera, &refit, &face.irises, &rigid).ok) {
+        refit.sequence = f->sequence;
+        *f = refit;
+        ++refitted;
+      } else {
+        ++rejected;
+      }
+    });
+    spdlog::info("photometric anchor, round {}: {} points referenced, {} frames fitted again, {} kept, shift {:.2f} px",
+                 round + 1, referenced, refitted, rejected, shift.empty() ? 0.0 : shift.Median());
+    rounds.push_back({{"points_referenced", referenced},
+                      {"frames_refitted", refitted},
+                      {"frames_kept", rejected},
+                      {"shift_px_median", shift.empty() ? 0.0 : shift.Median()},
+                      {"shift_px_p95", shift.empty() ? 0.0 : shift.Percentile(95)},
+                      {"grey_rms_before_median", before.empty() ? 0.0 : before.Median()},
+                      {"grey_rms_after_median", after.empty() ? 0.0 : after.Median()}});
+  }
+  return {{"options", o.anchor.ToJson()},
+          {"points", anchor.num_points()},
+          {"rounds", rounds},
+          {"what",
+           "the head's placement held to the grey levels of its rigid part (forehead, temples, crown) over the "
+           "clip, then every frame fitted again; shift: how far the alignment moved those points; frames_kept: "
+           "frames whose alignment failed or moved them beyond max_shift_iod, left as first fitted"}};
+}
+
 }  // namespace
 
 void OfflineTrackOptions::Check() const {
@@ -213,6 +293,9 @@ void OfflineTrackOptions::Check() const {
   c.That(!(two_sided_filter && IsCamera(input)),
          "two_sided_filter needs a recorded input (a live camera cannot be read twice)");
   c.That(!(calibrate && identity.size() > 0), "calibrate and a given identity exclude each other");
+  anchor.Check();
+  c.That(!(anchor.enabled() && IsCamera(input)),
+         "the photometric anchor needs a recorded input (a live camera cannot be read again)");
   if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
   c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");
   c.ThrowIfErrors();
@@ -263,6 +346,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   int recovered = 0;  // frames where the followed box slipped and the detector found the face again
   // Frames whose region's landmarks disagreed with the flow, and were carried by it.
   std::array<int, kNumRepairRegions> disputes{}, repairs{};
+  std::map<uint64_t, FaceObservation> faces;  // what the photometric anchor fits again (RGB frames)
   int disputed_frames = 0, repaired_frames = 0;
   Stopwatch watch;
   for (;;) {
@@ -325,10 +409,12 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
         accuracy_mm.Add(1e3 * t.rgbd_accuracy_m);
         contour_rejected += t.contour_rejected;
       }
-      if (t.identity_frame)
+      if (t.identity_frame) {
         held.push_back({t.face.landmarks, t.depth_m.clone(), params});
-      else
+      } else {
         out.frames.push_back(params);
+        if (o.anchor.enabled() && !t.with_depth) faces[params.sequence] = t.face;
+      }
       if (t.identity_frozen_now) RefitHeld(tracker, camera, &held, &out.frames);
       // Every 15th fitted frame, up to 8, for the texture and light fit.
       const bool sample = o.fit_appearance && fitted % 15 == 1 && appearance_samples.size() < 8;
@@ -352,6 +438,9 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   std::sort(out.frames.begin(), out.frames.end(),
             [](const FrameParams& a, const FrameParams& b) { return a.sequence < b.sequence; });
   out.frames_read = frames;
+  nlohmann::json anchored;
+  if (o.anchor.enabled() && !faces.empty())
+    anchored = AnchorTrack(model, o, open, tracker.identity(), camera, faces, &out.frames);
   SubjectParams& subject = out.subject;
   subject.shape = tracker.identity().cast<float>();
   subject.texture = Eigen::VectorXf::Zero(model.num_texture());
@@ -407,6 +496,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
   }
   if (calibration) report["calibration"] = calibration->report;
+  if (!anchored.is_null()) report["photometric_anchor"] = anchored;
   if (appearance.ok)
     report["appearance"] = {{"frames", appearance_samples.size()},
                             {"pixels", appearance.pixels},

@@ -17,6 +17,7 @@
 #include "common/headmodel/params.h"
 #include "common/tracking/frame_tracker.h"
 #include "common/tracking/head_mask.h"
+#include "common/tracking/photometric_anchor.h"
 
 namespace headcast {
 
@@ -42,6 +43,10 @@ struct OfflineTrackOptions {
   HeadMaskOptions mask;
   FrameTrackerOptions tracker;
   std::string overlay;  // MP4 of the frames with detected and fitted landmarks (empty: none)
+  // Recorded RGB input: once every frame is fitted, the head's placement is
+  // held to its appearance over the clip and each frame fitted again
+  // (photometric_anchor.h). Masks and the overlay are the first fits'.
+  PhotometricAnchorOptions anchor;
   void Check() const;
 };
 

@@ -25,6 +25,17 @@ grep -q '"focal_px"' "$tmp/c.json" && awk "BEGIN{exit !($cerr < 0.03)}" &&
 eerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/e.json" | awk '{print $2}')
 grep -q '"fitted_frames": 60' "$tmp/e.json" && awk "BEGIN{exit !($eerr < 0.03)}" &&
   ok "--eye-look-prior 100: 60 frames fitted (error $eerr IOD)" || bad "eye-look prior: $(cat "$tmp/e.json")"
+"$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
+  --photometric-anchor 0.5 --out "$tmp/a14.hcrec" --json "$tmp/a.json" > /dev/null 2>&1
+aerr=$(grep -o '"landmark_error_iod_mean": [0-9.]*' "$tmp/a.json" | awk '{print $2}')
+refitted=$(grep -o '"frames_refitted": [0-9]*' "$tmp/a.json" | tail -1 | awk '{print $2}')
+referenced=$(grep -o '"points_referenced": [0-9]*' "$tmp/a.json" | tail -1 | awk '{print $2}')
+grep -q '"fitted_frames": 60' "$tmp/a.json" && awk "BEGIN{exit !($aerr < 0.03 && ${refitted:-0} >= 55 && ${referenced:-0} >= 50)}" &&
+  ok "--photometric-anchor: $refitted of 60 frames fitted again to $referenced points (error $aerr IOD)" ||
+  bad "photometric anchor: $(cat "$tmp/a.json")"
+out=$("$bin/headcast-track" --input /dev/video97 --photometric-anchor 1 --out "$tmp/c.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "needs a recorded input" <<<"$out" && ok "--photometric-anchor on a camera refused" ||
+  bad "anchor on a camera: rc=$rc $out"
 out=$("$bin/headcast-track" --input "$data/video/talking_d14.mp4" --eye-look-prior -1 --out "$tmp/n.hcrec" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q -- "--eye-look-prior must be >= 0" <<<"$out" && ok "negative --eye-look-prior refused by name" ||
   bad "negative prior: rc=$rc $out"
