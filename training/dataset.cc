@@ -149,6 +149,10 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
     track.identity_source = o.identity_from;
   }
   track.anchor.weight = o.photometric_anchor;
+  if (IsLiveCameraSource(o.input) && o.photometric_anchor > 0) {
+    spdlog::info("prep: no photometric anchor on a live camera (it cannot be read again)");
+    track.anchor.weight = 0;
+  }
   track.masks = true;
   track.mask.working_size = o.mask_working_size;
   track.overlay = (dir / "preview.mp4").string();

@@ -90,8 +90,9 @@ struct PrepOptions {
   // (SmoothHeadPlacement), sigma in frames; 0: as fitted.
   double pose_smoothing = 0;
   // The head's placement held to its appearance over the clip, then every
-  // frame fitted again (OfflineTrackOptions::anchor); weight 0: off.
-  double photometric_anchor = 0;
+  // frame fitted again (OfflineTrackOptions::anchor; recorded input, not a
+  // live camera); weight 0: off. On by measurement (DEFAULTS.md).
+  double photometric_anchor = 0.5;
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

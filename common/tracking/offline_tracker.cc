@@ -15,11 +15,11 @@
 #include "common/tracking/appearance_fit.h"
 
 namespace headcast {
-namespace {
-
-bool IsCamera(const std::string& input) {
+bool IsLiveCameraSource(const std::string& input) {
   return input.rfind("/dev/", 0) == 0 || input.find(":/dev/") != std::string::npos;
 }
+
+namespace {
 
 // The full frame's camera: calibrated, given, the source's, or from the field of view.
 PinholeCamera FirstFrameCamera(const OfflineTrackOptions& o, const std::optional<PinholeCamera>& calibrated,
@@ -289,12 +289,13 @@ void OfflineTrackOptions::Check() const {
   OptionsCheck c("OfflineTrackOptions");
   c.NotEmpty("input", input).NonNegative("max_frames", max_frames).InRange("fov_deg", fov_deg, 1, 179);
   c.InRange("calibration_frames", calibration_frames, 3, 10000);
-  c.That(!(calibrate && IsCamera(input)), "calibrate needs a recorded input (a live camera cannot be read twice)");
-  c.That(!(two_sided_filter && IsCamera(input)),
+  c.That(!(calibrate && IsLiveCameraSource(input)),
+         "calibrate needs a recorded input (a live camera cannot be read twice)");
+  c.That(!(two_sided_filter && IsLiveCameraSource(input)),
          "two_sided_filter needs a recorded input (a live camera cannot be read twice)");
   c.That(!(calibrate && identity.size() > 0), "calibrate and a given identity exclude each other");
   anchor.Check();
-  c.That(!(anchor.enabled() && IsCamera(input)),
+  c.That(!(anchor.enabled() && IsLiveCameraSource(input)),
          "the photometric anchor needs a recorded input (a live camera cannot be read again)");
   if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
   c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");

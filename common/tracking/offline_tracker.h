@@ -50,6 +50,10 @@ struct OfflineTrackOptions {
   void Check() const;
 };
 
+// Whether OpenFrameSource reads `input` from a live camera (/dev/videoN, or
+// zed:/dev/videoN): it cannot be read twice.
+bool IsLiveCameraSource(const std::string& input);
+
 // How the landmarks are taken over time, by name (--landmark-filter of prep and
 // headcast-track): "causal" (the live filter), "off" (as found) or "two-sided"
 // (two_sided_filter). Throws std::invalid_argument for another name.
