@@ -275,9 +275,10 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
           {"points", anchor.num_points()},
           {"rounds", rounds},
           {"what",
-           "the head's placement held to the grey levels of its rigid part (forehead, temples, crown) over the "
-           "clip, then every frame fitted again; shift: how far the alignment moved those points; frames_kept: "
-           "frames whose alignment failed or moved them beyond max_shift_iod, left as first fitted"}};
+           "the head's placement held to the grey levels of the face above the nose's base (forehead, brows, "
+           "nose, temples) over the clip, then every frame fitted again; shift: how far the alignment moved those "
+           "points; frames_kept: frames whose alignment failed or moved them beyond max_shift_iod, left as first "
+           "fitted"}};
 }
 
 }  // namespace
