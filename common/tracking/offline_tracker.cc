@@ -216,8 +216,8 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
   std::map<uint64_t, FrameParams*> by_sequence;
   for (FrameParams& f : *frames)
     if (faces.count(f.sequence)) by_sequence[f.sequence] = &f;
-  // Each fitted frame's grey image, read again in order; `use` gets it with its params.
-  auto each_frame = [&](const std::function<void(const cv::Mat&, FrameParams*, const FaceObservation&)>& use) {
+  // Each fitted frame's grey image, read again in order; `use` gets it with its params, landmarks and eye distance.
+  auto each_frame = [&](const std::function<void(const cv::Mat&, FrameParams*, const FaceObservation&, double)>& use) {
     std::unique_ptr<FrameSource> source = open();
     int index = 0;
     for (;;) {
@@ -231,19 +231,19 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
       if (it == by_sequence.end()) continue;
       const FaceObservation& face = faces.at(it->first);
       const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
-      use(AnchorGray(captured.bgr, o.anchor.blur_iod * iod), it->second, face);
+      use(AnchorGray(captured.bgr, o.anchor.blur_iod * iod), it->second, face, iod);
     }
   };
   nlohmann::json rounds = nlohmann::json::array();
   for (int round = 0; round < o.anchor.rounds; ++round) {
-    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation&) { anchor.Observe(gray, *f, camera); });
+    each_frame(
+        [&](const cv::Mat& gray, FrameParams* f, const FaceObservation&, double) { anchor.Observe(gray, *f, camera); });
     const int referenced = anchor.Reference();
     SampleStats shift, before, after;
     int refitted = 0, rejected = 0;
-    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation& face) {
+    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation& face, double iod) {
       FrameParams aligned = *f;
       const AnchorAlignment a = anchor.Align(gray, camera, &aligned);
-      const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
       if (!a.ok || a.shift_px > o.anchor.max_shift_iod * iod) {
         ++rejected;
         return;
