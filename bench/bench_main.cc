@@ -59,6 +59,9 @@ int main(int argc, char** argv) {
   add_common(track);
   track->add_option("--video", options.video, "video to track")->required();
   track->add_option("--head-model", options.head_model, "builtin or a model .npz");
+  track->add_option("--avatar", options.avatar,
+                    "an .hcavatar carrying a photometric anchor (prepared with one): also track as the sender does "
+                    "with it, side by side");
   headmodel->add_option("--head-model", options.head_model, "also time this model .npz (builtin: only the built-in)");
   auto* meshfit = app.add_subcommand("meshfit", "head model fitted to synthetic scans: weights vs uniform, topologies");
   meshfit->add_option("--trials", options.repeats, "scans per figure")->check(CLI::Range(1, 1000));

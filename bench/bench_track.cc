@@ -2,6 +2,8 @@
 // landmarks, head-model fit) on a video, through the FrameTracker the sender and
 // headcast-track use.
 #include <deque>
+#include <memory>
+#include <optional>
 
 #include "bench/bench.h"
 #include "common/core/image_io.h"
@@ -37,6 +39,21 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
     throw std::invalid_argument("track: give --video (e.g. ../shared/data/video/talking_d9.mp4)");
   const HeadModel model = LoadHeadModelSpec(options.head_model);
   FrameTracker tracker(model);
+  // With an avatar carrying the photometric anchor: the sender's rule with it
+  // on the same frames beside the landmark fit (both with the avatar's identity).
+  std::unique_ptr<FrameTracker> anchored;
+  if (!options.avatar.empty()) {
+    const std::optional<AnchorReference> reference = ReadAvatarAnchorReference(options.avatar);
+    if (!reference) throw std::invalid_argument("track: " + options.avatar + " carries no photometric anchor");
+    const Eigen::VectorXd identity = ReadTrackingIdentity(options.avatar, model);
+    tracker.SetIdentity(identity);
+    anchored = std::make_unique<FrameTracker>(model);
+    anchored->SetIdentity(identity);
+    anchored->SetAnchor(*reference);
+  }
+  SampleStats anchored_total, anchor_ms;
+  int anchored_frames = 0;
+  FrameParams anchored_params;
   // Drift: the tracked landmarks against those of a detection on every frame
   // (untimed), with the box drawn by the last detection's margins (the
   // default) and by fixed margins.
@@ -66,6 +83,12 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
     total.Add(t.landmarks_ms + t.fit_ms);
     track_ms.Add(t.landmarks_ms);
     fit_ms.Add(t.fit_ms);
+    if (anchored) {
+      const TrackedFrame a = anchored->Track(frame, cv::Mat(), frames / fps, camera, &anchored_params);
+      anchored_total.Add(a.landmarks_ms + a.fit_ms);
+      if (a.fitted) anchor_ms.Add(a.anchor_ms);
+      anchored_frames += a.anchored;
+    }
     ++frames;
     const FaceObservation fixed_obs = fixed_tracker.Track(frame, frames / fps);
     const FaceObservation ref = reference.Track(frame, frames / fps);
@@ -115,6 +138,17 @@ nlohmann::json RunTrackSuite(const BenchOptions& options) {
       std::to_string(kMaxPredictorViews) +
       " views (--predictor-views): ms per frame, and the raw landmarks' jitter (second difference over consecutive "
       "frames, mean over the 68, over the outer-eye-corner distance)";
+  if (anchored) {
+    out["anchored_what"] =
+        "the same frames tracked as the sender does with an avatar carrying the photometric anchor (--avatar): the "
+        "landmark fit, the alignment to its references, the fit again; ms per frame, the anchor's share, frames "
+        "anchored (the others kept their landmark fit)";
+    out["anchored_ms_per_frame_median"] = anchored_total.Median();
+    out["anchored_ms_per_frame_p95"] = anchored_total.Percentile(95);
+    out["anchor_ms_median"] = anchor_ms.empty() ? 0.0 : anchor_ms.Median();
+    out["anchor_ms_p95"] = anchor_ms.empty() ? 0.0 : anchor_ms.Percentile(95);
+    out["anchored_frames"] = anchored_frames;
+  }
   out["one_view_ms_median"] = one_view_ms.Median();
   out["all_views_ms_median"] = all_views_ms.Median();
   out["one_view_jitter_iod_median"] = one_view_jitter.stats().Median();

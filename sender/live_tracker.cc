@@ -24,6 +24,7 @@ std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOpti
 LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& options)
     : options_(options), tracker_(model, options.tracker) {
   if (options.identity.size() > 0) tracker_.SetIdentity(options.identity);
+  if (options.anchor) tracker_.SetAnchor(*options.anchor);
 }
 
 LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params) {
@@ -37,8 +38,8 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   camera_->height = bgr.rows;
   const TrackedFrame t =
       tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params, frame.depth_on_demand.get());
-  return {t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,       t.fit_ms,
-          t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now};
+  return {t.fitted,         t.with_depth,           t.face.status,         t.landmarks_ms, t.fit_ms,   t.depth_ms,
+          t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,     t.anchor_ms};
 }
 
 }  // namespace headcast

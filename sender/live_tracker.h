@@ -22,6 +22,9 @@ struct LiveTrackerOptions {
   std::optional<CameraContract> contract;
   double fov_deg = 40;       // vertical field of view when nothing better is known
   Eigen::VectorXd identity;  // shape beta (empty: neutral); the avatar's own, ideally
+  // The avatar's photometric anchor (ReadAvatarAnchorReference): the head's
+  // placement held to the appearance its training frames were fitted to.
+  std::optional<AnchorReference> anchor;
 };
 
 struct LiveTrackResult {
@@ -34,6 +37,8 @@ struct LiveTrackResult {
   bool identity_frame = false;  // RGB-D: fitted with a free shape (the first frames, before the identity is frozen)
   bool provisional_identity = false;  // RGB-D, identity fitted beside tracking: not made yet
   bool identity_frozen_now = false;   // RGB-D: the identity was made at this frame
+  bool anchored = false;              // fitted again with the placement held to the anchor's references
+  double anchor_ms = 0;               // the anchor's alignment and fit (within fit_ms)
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.

@@ -38,7 +38,8 @@ struct SenderFlags {
   int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
-  double health_check_s = 0;  // > 0: only ask the receiver's health, this long at most
+  bool photometric_anchor = true;  // the avatar's, when --identity-from names one that carries it
+  double health_check_s = 0;       // > 0: only ask the receiver's health, this long at most
   std::string input, identity_from, intrinsics, camera_size = "640x480";
   SourceOptions source;
   LiveTrackerOptions live;
@@ -68,6 +69,9 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       "RGB-D fit) or zed:SOURCE (side-by-side stereo; needs --stereo-calibration)");
   app.add_option("--identity-from", f.identity_from,
                  "--input: the person's shape: the avatar's own (.hcavatar) or a PARAMS.json (headcast-fit-mesh)");
+  app.add_flag("!--no-photometric-anchor", f.photometric_anchor,
+               "--input: fit landmarks only, without holding the head's placement to the appearance the avatar's "
+               "training frames were fitted to (the photometric anchor its file carries)");
   app.add_option("--intrinsics", f.intrinsics, "--input: camera fx,fy,cx,cy in pixels");
   app.add_option("--fov", f.live.fov_deg, "--input: vertical field of view when intrinsics are unknown")
       ->capture_default_str();
@@ -152,6 +156,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   if (!f.identity_from.empty()) {
     f.live.identity = ReadTrackingIdentity(f.identity_from, model);
     f.live.contract = ReadAvatarCameraContract(f.identity_from);
+    if (f.photometric_anchor) f.live.anchor = ReadAvatarAnchorReference(f.identity_from);
+    if (f.live.anchor)
+      spdlog::info("photometric anchor: {} reference points from {}", f.live.anchor->referenced(), f.identity_from);
   }
   if (!f.intrinsics.empty()) f.live.camera = ParseIntrinsics(f.intrinsics, "--intrinsics");
   // The tracker first: a camera's clock (and a paced file's) starts at open,
@@ -174,8 +181,8 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   clock.Restart();                  // the stream's time starts once the tracker is ready
   constexpr size_t kKept = 100000;  // a camera session may run for days
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept), depth_ms(kKept), frame_ms(kKept),
-      tracking_frame_ms(kKept), provisional_frame_ms(kKept);
-  int read = 0, fitted = 0, skipped = 0, with_depth = 0, identity_frames = 0;
+      tracking_frame_ms(kKept), provisional_frame_ms(kKept), anchor_ms(kKept);
+  int read = 0, fitted = 0, skipped = 0, with_depth = 0, identity_frames = 0, anchored = 0;
   std::optional<double> first_fit_s, identity_made_s;  // stream clock
   uint64_t sequence = 0;
   std::ofstream frames_csv;
@@ -214,6 +221,8 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     if (!first_fit_s) first_fit_s = clock.ElapsedSeconds();
     fit_ms.Add(r.fit_ms);
     if (r.with_depth) depth_ms.Add(r.depth_ms);
+    if (f.live.anchor && !r.with_depth) anchor_ms.Add(r.anchor_ms);
+    anchored += r.anchored;
     // Capture to parameters: from the capture stamp for live sources; for
     // files read as fast as possible, the work on this thread (decoding,
     // rectifying, landmarks, depth, fit).
@@ -248,6 +257,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"landmarks_ms_p95", p95(landmarks_ms)},
           {"fit_ms_median", median(fit_ms)},
           {"fit_ms_p95", p95(fit_ms)},
+          {"photometric_anchor", f.live.anchor.has_value()},
+          {"frames_anchored", anchored},
+          {"anchor_ms_median", median(anchor_ms)},
           {"depth_ms_median", median(depth_ms)},
           {"capture_to_params_ms_median", median(frame_ms)},
           {"capture_to_params_ms_p95", p95(frame_ms)},

@@ -24,6 +24,7 @@ struct TrackFlags {
   OfflineTrackOptions track;
   std::string head_model = "builtin", out, report, masks_dir, log_level, identity_from, intrinsics;
   std::string camera_size = "640x480";
+  bool avatar_anchor = false;
 };
 
 void AddFlags(CLI::App& app, TrackFlags& f) {
@@ -130,6 +131,9 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   AddCameraFlags(app, s, f.camera_size);
   app.add_option("--identity-from", f.identity_from,
                  "take the identity (shape) from an avatar (.hcavatar) or a headcast-fit-mesh PARAMS.json");
+  app.add_flag("--avatar-anchor", f.avatar_anchor,
+               "with --identity-from an avatar: hold each frame's placement to the photometric anchor its file "
+               "carries as the frame is fitted, as the live sender does");
   app.add_option("--log", f.log_level, "log level");
 }
 
@@ -142,6 +146,12 @@ int Run(TrackFlags& f) {
   if (!f.identity_from.empty()) {
     t.identity = ReadTrackingIdentity(f.identity_from, model);
     t.identity_source = f.identity_from;
+  }
+  if (f.avatar_anchor) {
+    if (f.identity_from.empty()) throw std::invalid_argument("--avatar-anchor needs --identity-from AVATAR");
+    t.anchor_reference = ReadAvatarAnchorReference(f.identity_from);
+    if (!t.anchor_reference)
+      throw std::invalid_argument(f.identity_from + ": carries no photometric anchor (prepared without one?)");
   }
   t.masks = !f.masks_dir.empty();
   if (t.masks) std::filesystem::create_directories(f.masks_dir);

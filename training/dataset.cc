@@ -346,6 +346,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"landmark_filter", o.landmark_filter},
         {"pose_smoothing", o.pose_smoothing},
         {"photometric_anchor", o.photometric_anchor}}}};
+  // The references the frames were fitted to, for the avatar to carry to the sender.
+  const nlohmann::json anchor = track_report.value("photometric_anchor", nlohmann::json::object());
+  if (anchor.is_object() && anchor.contains("reference") && !anchor.at("reference").is_null())
+    manifest["tracking_anchor"] = anchor.at("reference");
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }
@@ -423,6 +427,15 @@ std::optional<CameraContract> PreparedDataset::camera_contract() const {
   c.crop_side = crop.at("side");
   c.Check();
   return c;
+}
+
+std::optional<AnchorReference> PreparedDataset::anchor_reference() const {
+  if (!manifest_.contains("tracking_anchor")) return std::nullopt;
+  try {
+    return AnchorReference::FromJson(manifest_.at("tracking_anchor"));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(dir_ + "/dataset.json: tracking_anchor: " + e.what());
+  }
 }
 
 const FrameParams& PreparedDataset::params(int i) const {

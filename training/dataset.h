@@ -30,6 +30,7 @@
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/head_mask.h"
+#include "common/tracking/photometric_anchor.h"
 
 namespace headcast {
 
@@ -134,6 +135,9 @@ class PreparedDataset {
   // The full frames' camera and the crop (datasets prepared before the
   // source size was recorded have none).
   std::optional<CameraContract> camera_contract() const;
+  // The photometric anchor's references its frames were fitted to (none when
+  // prepared without the anchor, or before they were recorded).
+  std::optional<AnchorReference> anchor_reference() const;
   // The rules its masks were cut with (datasets from before they were
   // recorded: the defaults, which they were made with unless prepped otherwise).
   MatteRules matte_rules() const;

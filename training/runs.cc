@@ -260,6 +260,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
   }();
   avatar.mutable_subject() = subject;
   if (const std::optional<CameraContract> contract = data.camera_contract()) avatar.set_camera_contract(*contract);
+  if (const std::optional<AnchorReference> anchor = data.anchor_reference())
+    avatar.set_tracking_anchor(anchor->ToJson());
   // The subject's own renders, decaying to none (METHOD §6): beta and tau stay the subject's.
   SyntheticDataOptions synthetic_options;
   synthetic_options.image_size = o.resolution;

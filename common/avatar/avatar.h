@@ -60,6 +60,12 @@ class Avatar {
   // trained on a prepared video: general models, older files).
   const std::optional<CameraContract>& camera_contract() const;
   void set_camera_contract(const CameraContract& contract);
+  // What the tracker held the head's placement to in the training frames (the
+  // photometric anchor's references, tracking's AnchorReference as JSON; null:
+  // none). Carried, not read, here: the sender reads it so that it tracks by
+  // the rule the avatar was trained with (ReadAvatarAnchorReference).
+  const nlohmann::json& tracking_anchor() const;
+  void set_tracking_anchor(const nlohmann::json& reference);
   nlohmann::json& training_summary();
   const nlohmann::json& training_summary() const;
   AvatarModules& modules();

@@ -52,6 +52,17 @@ std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path) 
   }
 }
 
+std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path) {
+  if (!IsAvatarFile(path)) return std::nullopt;
+  const nlohmann::json manifest = ReadAvatarManifest(path);
+  if (!manifest.contains("tracking_anchor") || manifest.at("tracking_anchor").is_null()) return std::nullopt;
+  try {
+    return AnchorReference::FromJson(manifest.at("tracking_anchor"));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
+}
+
 Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model) {
   if (!IsAvatarFile(path)) return ReadIdentityFromMeshFit(path, model);
   const nlohmann::json manifest = ReadAvatarManifest(path);
@@ -98,6 +109,50 @@ void FrameTracker::SetIdentity(const Eigen::VectorXd& shape, bool frozen) {
   fitter_.SetIdentity(shape);
   if (rgbd_) rgbd_->SetIdentity(shape);
   identity_frozen_ = frozen;
+  if (anchor_reference_) MakeAnchor();
+}
+
+void FrameTracker::SetAnchor(const AnchorReference& reference) {
+  reference.options.Check();
+  if (!reference.options.enabled())
+    throw std::invalid_argument("photometric anchor: the references were made with weight 0");
+  anchor_reference_ = reference;
+  try {
+    MakeAnchor();
+  } catch (...) {
+    anchor_reference_.reset();
+    throw;
+  }
+}
+
+void FrameTracker::MakeAnchor() {
+  const AnchorReference& r = *anchor_reference_;
+  auto anchor = std::make_unique<PhotometricAnchor>(model_, identity_, r.options);
+  anchor->SetReference(r.grey);
+  HeadFitterOptions fit = options_.fit;
+  fit.rigid_flow_weight = r.options.weight;
+  anchor_fitter_ = std::make_unique<HeadFitter>(model_, fit);
+  anchor_fitter_->SetIdentity(identity_);
+  anchor_ = std::move(anchor);
+}
+
+void FrameTracker::AnchorFrame(const cv::Mat& bgr, const FaceObservation& face, const PinholeCamera& camera,
+                               TrackedFrame* r) {
+  Stopwatch watch;
+  const PhotometricAnchorOptions& o = anchor_reference_->options;
+  const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
+  FrameParams aligned = last_;
+  const AnchorAlignment a = anchor_->Align(AnchorGray(bgr, o.blur_iod * iod), camera, &aligned);
+  if (a.ok && a.shift_px <= o.max_shift_iod * iod) {
+    const RigidObservations rigid = anchor_->Observations(aligned, camera, o.fit_points);
+    FrameParams refit = last_;
+    if (anchor_fitter_->Fit(face.landmarks, camera, &refit, &face.irises, &rigid).ok) {
+      last_ = refit;
+      r->anchored = true;
+      r->anchor_shift_px = a.shift_px;
+    }
+  }
+  r->anchor_ms = watch.ElapsedMs();
 }
 
 RgbdFitter& FrameTracker::Rgbd(bool calibrating) {
@@ -264,6 +319,7 @@ TrackedFrame FrameTracker::TrackObserved(const cv::Mat& bgr, const cv::Mat& dept
       r.rigid_points = static_cast<int>(rigid.head.size());
     }
     r.fitted = FitTrackedFace(fitter_, r.face, camera, &last_, r.rigid_points > 0 ? &rigid : nullptr).ok;
+    if (r.fitted && anchor_) AnchorFrame(bgr, r.face, camera, &r);
     // A new reference when there is none or most of its points are lost.
     if (options_.fit.rigid_flow_weight > 0 && r.fitted &&
         (reference_.head.empty() || 2 * r.rigid_points < static_cast<int>(reference_.head.size()))) {

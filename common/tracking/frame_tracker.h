@@ -18,6 +18,7 @@
 #include "common/tracking/background_identity.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
+#include "common/tracking/photometric_anchor.h"
 #include "common/tracking/rgbd_fitter.h"
 
 namespace headcast {
@@ -49,13 +50,19 @@ struct TrackedFrame {
   bool identity_frozen_now = false;  // this frame completed the RGB-D identity
   // Background identity: fitted with the identity not yet made (neutral shape at first).
   bool provisional_identity = false;
-  double landmarks_ms = 0;        // detection/tracking + landmarks
-  double fit_ms = 0;              // head-model fit
-  double depth_ms = 0;            // RGB-D: depth made on demand (stereo matching in the face's box)
-  cv::Mat depth_m;                // RGB-D: the depth the fit read
-  double rgbd_accuracy_m = 0;     // RGB-D: point-to-mesh RMS after the fit
-  int contour_rejected = 0;       // RGB-D: contour landmarks taken for background
-  int rigid_points = 0;           // rigid points followed by optical flow into this frame's fit
+  double landmarks_ms = 0;     // detection/tracking + landmarks
+  double fit_ms = 0;           // head-model fit
+  double depth_ms = 0;         // RGB-D: depth made on demand (stereo matching in the face's box)
+  cv::Mat depth_m;             // RGB-D: the depth the fit read
+  double rgbd_accuracy_m = 0;  // RGB-D: point-to-mesh RMS after the fit
+  int contour_rejected = 0;    // RGB-D: contour landmarks taken for background
+  int rigid_points = 0;        // rigid points followed by optical flow into this frame's fit
+  // With an anchor (SetAnchor): the frame was fitted again with its
+  // placement held to the references; how far the alignment moved the
+  // points, and the time it all took (within fit_ms).
+  bool anchored = false;
+  double anchor_shift_px = 0;
+  double anchor_ms = 0;
   Landmarks2d model_landmarks{};  // fitted: the fitted model's 68 landmarks in the frame (pixels)
   std::string problem;            // why not fitted, when a fit failed
 };
@@ -75,6 +82,17 @@ class FrameTracker {
   void SetIdentity(const Eigen::VectorXd& shape, bool frozen = true);
   const Eigen::VectorXd& identity() const { return identity_; }
   bool identity_frozen() const { return identity_frozen_; }
+
+  // Holds each colour frame's head placement to these references (an
+  // avatar's, ReadAvatarAnchorReference) as the offline pass held the
+  // avatar's training frames: the landmark fit, then the pose aligned to the
+  // references' grey levels, then the frame fitted again with the aligned
+  // points at the references' weight. A frame whose alignment fails or moves
+  // the points too far keeps its landmark fit. The points follow the identity
+  // (SetIdentity remakes them). Throws std::invalid_argument when the
+  // references do not match the points their options make.
+  void SetAnchor(const AnchorReference& reference);
+  bool anchored() const { return anchor_ != nullptr; }
 
   // Tracks one frame; `depth_m` empty for colour-only frames, or
   // `depth_on_demand` asked for depth in the face's box once the landmarks
@@ -120,6 +138,13 @@ class FrameTracker {
   std::vector<Eigen::VectorXd> calibration_shapes_;
   RgbdFitResult last_rgbd_;
   FrameParams last_;
+  // The photometric anchor (SetAnchor): its references, the points made for
+  // the identity, and a fitter holding the pose to them.
+  void MakeAnchor();
+  void AnchorFrame(const cv::Mat& bgr, const FaceObservation& face, const PinholeCamera& camera, TrackedFrame* r);
+  std::optional<AnchorReference> anchor_reference_;
+  std::unique_ptr<PhotometricAnchor> anchor_;
+  std::unique_ptr<HeadFitter> anchor_fitter_;
   // Rigid points: the frame they were taken in and where they were seen there.
   cv::Mat reference_gray_;
   RigidObservations reference_;
@@ -134,6 +159,11 @@ Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& m
 // The camera contract an avatar file (.hcavatar) records, if any; nothing for
 // other files. Throws naming the file when it is unreadable or the contract malformed.
 std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path);
+
+// The photometric anchor's references an avatar file (.hcavatar) carries (its
+// training frames were fitted to them), if any; nothing for other files.
+// Throws naming the file when it is unreadable or the references malformed.
+std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path);
 
 // Where the RGB-D fit reads depth around these landmarks: their span with a
 // margin and the forehead above (more than the fit's own cloud box takes).

@@ -204,10 +204,11 @@ void RefitHeld(FrameTracker& tracker, const PinholeCamera& camera, std::vector<H
 // (PhotometricAnchor): per round, the points' reference grey levels from the
 // current fits, then each frame aligned to them and fitted again to its
 // landmarks with the aligned points holding the pose. Reads the input again
-// twice a round. Returns the report's entry.
+// twice a round. Returns the report's entry; *reference: the last round's references.
 nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o, const FrameSourceFactory& open,
                            const Eigen::VectorXd& identity, const PinholeCamera& camera,
-                           const std::map<uint64_t, FaceObservation>& faces, std::vector<FrameParams>* frames) {
+                           const std::map<uint64_t, FaceObservation>& faces, std::vector<FrameParams>* frames,
+                           std::optional<AnchorReference>* reference) {
   PhotometricAnchor anchor(model, identity, o.anchor);
   HeadFitterOptions fit_options = o.tracker.fit;
   fit_options.rigid_flow_weight = o.anchor.weight;
@@ -271,9 +272,15 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
                       {"grey_rms_before_median", before.empty() ? 0.0 : before.Median()},
                       {"grey_rms_after_median", after.empty() ? 0.0 : after.Median()}});
   }
+  nlohmann::json exported;  // null: no point referenced
+  if (anchor.Exported().referenced() > 0) {
+    *reference = anchor.Exported();
+    exported = (*reference)->ToJson();
+  }
   return {{"options", o.anchor.ToJson()},
           {"points", anchor.num_points()},
           {"rounds", rounds},
+          {"reference", exported},
           {"what",
            "the head's placement held to the grey levels of the face above the nose's base (forehead, brows, "
            "nose, temples) over the clip, then every frame fitted again; shift: how far the alignment moved those "
@@ -298,6 +305,8 @@ void OfflineTrackOptions::Check() const {
   anchor.Check();
   c.That(!(anchor.enabled() && IsLiveCameraSource(input)),
          "the photometric anchor needs a recorded input (a live camera cannot be read again)");
+  c.That(!(anchor.enabled() && anchor_reference), "the clip's own anchor and given references exclude each other");
+  c.That(!anchor_reference || identity.size() > 0, "given anchor references need the identity they were made for");
   if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
   c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");
   c.ThrowIfErrors();
@@ -325,6 +334,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   FrameTracker tracker(model, o.tracker);
   tracker.SetIdentity(o.identity.size() > 0 ? o.identity : Eigen::VectorXd::Zero(model.num_shape()),
                       o.identity.size() > 0);
+  if (o.anchor_reference) tracker.SetAnchor(*o.anchor_reference);
   std::vector<FaceObservation> observed;
   if (o.two_sided_filter) observed = ObserveFacesTwoSided(o, open);
   std::optional<IdentityCalibration> calibration;
@@ -344,6 +354,8 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   FitQuality quality;
   SampleStats ms, accuracy_mm;
   int frames = 0, fitted = 0, unreadable = 0, with_depth = 0, contour_rejected = 0, gaze_frames = 0;
+  int anchored_frames = 0;  // given references (anchor_reference)
+  SampleStats anchor_ms;
   std::map<std::string, int> statuses;
   int recovered = 0;  // frames where the followed box slipped and the detector found the face again
   // Frames whose region's landmarks disagreed with the flow, and were carried by it.
@@ -404,6 +416,8 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     if (t.fitted) {
       ++fitted;
       gaze_frames += t.face.irises.left.found || t.face.irises.right.found;
+      anchored_frames += t.anchored;
+      if (o.anchor_reference && !t.with_depth) anchor_ms.Add(t.anchor_ms);
       params.sequence = static_cast<uint64_t>(index);
       params.capture_time_s = captured.capture_time_s;
       params.confidence = 1.f;
@@ -442,7 +456,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   out.frames_read = frames;
   nlohmann::json anchored;
   if (o.anchor.enabled() && !faces.empty())
-    anchored = AnchorTrack(model, o, open, tracker.identity(), camera, faces, &out.frames);
+    anchored = AnchorTrack(model, o, open, tracker.identity(), camera, faces, &out.frames, &out.anchor_reference);
   SubjectParams& subject = out.subject;
   subject.shape = tracker.identity().cast<float>();
   subject.texture = Eigen::VectorXf::Zero(model.num_texture());
@@ -499,6 +513,15 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   }
   if (calibration) report["calibration"] = calibration->report;
   if (!anchored.is_null()) report["photometric_anchor"] = anchored;
+  if (o.anchor_reference)
+    report["photometric_anchor"] = {
+        {"options", o.anchor_reference->options.ToJson()},
+        {"points_referenced", o.anchor_reference->referenced()},
+        {"frames_anchored", anchored_frames},
+        {"anchor_ms_median", anchor_ms.empty() ? 0.0 : anchor_ms.Median()},
+        {"what",
+         "each frame's placement held to given references (an avatar's) as it was fitted, as the live sender "
+         "does; frames_anchored: fitted again with the aligned points (the others keep their landmark fit)"}};
   if (appearance.ok)
     report["appearance"] = {{"frames", appearance_samples.size()},
                             {"pixels", appearance.pixels},

@@ -47,6 +47,10 @@ struct OfflineTrackOptions {
   // held to its appearance over the clip and each frame fitted again
   // (photometric_anchor.h). Masks and the overlay are the first fits'.
   PhotometricAnchorOptions anchor;
+  // Another way: each frame held to these references (an avatar's) as it is
+  // fitted, in the one pass, as the live sender does (FrameTracker::SetAnchor).
+  // Needs the identity they were made for.
+  std::optional<AnchorReference> anchor_reference;
   void Check() const;
 };
 
@@ -77,6 +81,9 @@ struct OfflineTrack {
   double fps = 30;
   int frames_read = 0;
   nlohmann::json report;  // counts, landmark error, jitter, timing, calibration, appearance
+  // The anchor on: the reference grey levels its last round aligned the
+  // frames to (what a live tracker holds the head to, FrameTracker::SetAnchor).
+  std::optional<AnchorReference> anchor_reference;
 };
 
 using FrameSourceFactory = std::function<std::unique_ptr<FrameSource>()>;

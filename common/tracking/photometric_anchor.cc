@@ -8,6 +8,8 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <string>
 
 #include "common/core/options.h"
 #include "common/core/rotation.h"
@@ -34,6 +36,62 @@ cv::Mat AnchorGray(const cv::Mat& bgr, double blur_px) {
   gray.convertTo(gray, CV_32F, 1.0 / 255);
   if (blur_px > 0) cv::GaussianBlur(gray, gray, cv::Size(0, 0), blur_px);
   return gray;
+}
+
+PhotometricAnchorOptions PhotometricAnchorOptions::FromJson(const nlohmann::json& j) {
+  PhotometricAnchorOptions o;
+  try {
+    o.weight = j.at("weight").get<double>();
+    o.points = j.at("points").get<int>();
+    o.fit_points = j.at("fit_points").get<int>();
+    o.rounds = j.at("rounds").get<int>();
+    o.blur_iod = j.at("blur_iod").get<double>();
+    o.huber = j.at("huber").get<double>();
+    o.max_shift_iod = j.at("max_shift_iod").get<double>();
+  } catch (const nlohmann::json::exception& e) {
+    throw std::invalid_argument(std::string("photometric anchor options: ") + e.what());
+  }
+  o.Check();
+  return o;
+}
+
+// Fewer referenced points than this and an alignment does not run.
+constexpr int kMinAlignPoints = 12;
+
+int AnchorReference::referenced() const {
+  return static_cast<int>(std::count_if(grey.begin(), grey.end(), [](double g) { return !std::isnan(g); }));
+}
+
+nlohmann::json AnchorReference::ToJson() const {
+  nlohmann::json values = nlohmann::json::array();
+  for (double g : grey) values.push_back(std::isnan(g) ? nlohmann::json(nullptr) : nlohmann::json(g));
+  return {{"options", options.ToJson()}, {"grey", values}};
+}
+
+AnchorReference AnchorReference::FromJson(const nlohmann::json& j) {
+  AnchorReference r;
+  if (!j.is_object() || !j.contains("options") || !j.contains("grey") || !j.at("grey").is_array())
+    throw std::invalid_argument("photometric anchor reference: wants an object with 'options' and a 'grey' array");
+  r.options = PhotometricAnchorOptions::FromJson(j.at("options"));
+  const nlohmann::json& grey = j.at("grey");
+  if (grey.size() != static_cast<size_t>(r.options.points))
+    throw std::invalid_argument("photometric anchor reference: " + std::to_string(grey.size()) + " grey levels for " +
+                                std::to_string(r.options.points) + " points");
+  r.grey.reserve(grey.size());
+  for (const nlohmann::json& g : grey) {
+    if (g.is_null()) {
+      r.grey.push_back(std::numeric_limits<double>::quiet_NaN());
+      continue;
+    }
+    if (!g.is_number() || !(g.get<double>() >= 0 && g.get<double>() <= 1))
+      throw std::invalid_argument("photometric anchor reference: a grey level that is not a number in 0..1: " +
+                                  g.dump());
+    r.grey.push_back(g.get<double>());
+  }
+  if (r.referenced() < kMinAlignPoints)
+    throw std::invalid_argument("photometric anchor reference: " + std::to_string(r.referenced()) +
+                                " points with a reference, an alignment needs " + std::to_string(kMinAlignPoints));
+  return r;
 }
 
 namespace {
@@ -208,6 +266,13 @@ int PhotometricAnchor::Reference(double min_share) {
   return referenced;
 }
 
+void PhotometricAnchor::SetReference(const std::vector<double>& grey) {
+  if (grey.size() != points_.size())
+    throw std::invalid_argument("photometric anchor: " + std::to_string(grey.size()) + " references for " +
+                                std::to_string(points_.size()) + " points");
+  reference_ = grey;
+}
+
 AnchorAlignment PhotometricAnchor::Align(const cv::Mat& gray, const PinholeCamera& camera, FrameParams* frame) const {
   AnchorAlignment a;
   CV_Assert(gray.type() == CV_32F && gray.isContinuous());
@@ -224,7 +289,7 @@ AnchorAlignment PhotometricAnchor::Align(const cv::Mat& gray, const PinholeCamer
     start_px.push_back(u);
   }
   a.points = static_cast<int>(used.size());
-  if (a.points < 12) return a;
+  if (a.points < kMinAlignPoints) return a;
   // The light first: gain and bias by least squares at the starting pose.
   Eigen::MatrixX2d design(a.points, 2);
   Eigen::VectorXd target(a.points);

@@ -39,6 +39,24 @@ struct PhotometricAnchorOptions {
   void Check() const;
   bool enabled() const { return weight > 0; }
   nlohmann::json ToJson() const;
+  // Throws std::invalid_argument on a missing or mistyped key, or values out of range.
+  static PhotometricAnchorOptions FromJson(const nlohmann::json& j);
+};
+
+// What an offline pass learnt of a person's face for the anchor: the options
+// its points were made with and each point's reference grey level. It travels
+// in the dataset and the avatar, so that the live sender holds the head to the
+// same appearance the avatar's training frames were fitted to: the avatar is
+// driven by the rule it was trained with.
+struct AnchorReference {
+  PhotometricAnchorOptions options;
+  std::vector<double> grey;  // one per point (options.points), 0..1; NaN: none
+  int referenced() const;
+  nlohmann::json ToJson() const;  // a point without a reference is null
+  // Throws std::invalid_argument on a malformed entry: bad options, a count
+  // other than options.points, a grey level outside 0..1, or fewer referenced
+  // points than an alignment needs.
+  static AnchorReference FromJson(const nlohmann::json& j);
 };
 
 // One frame's grey image for the anchor: float, 0..1, blurred by `blur_px`.
@@ -66,6 +84,11 @@ class PhotometricAnchor {
   // `min_share` of the observed frames; clears the observations. Returns the
   // points with a reference.
   int Reference(double min_share = 0.2);
+  // The references learnt elsewhere (an avatar's, made with these options and
+  // this person's shape); throws std::invalid_argument when their count is
+  // not this anchor's.
+  void SetReference(const std::vector<double>& grey);
+  AnchorReference Exported() const { return {options_, reference_}; }
 
   // Moves frame->cam_from_head so that the points' grey levels in `gray`
   // match their reference (a gain and bias per frame absorb the light).

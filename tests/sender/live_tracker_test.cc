@@ -1,5 +1,6 @@
 // The camera contract from the avatar to the live tracker: which camera the
-// sender tracks with, and the contract read from an avatar's manifest.
+// sender tracks with, and the contract read from an avatar's manifest; the
+// photometric anchor's references read from it too.
 #include "sender/live_tracker.h"
 
 #include <gtest/gtest.h>
@@ -71,6 +72,32 @@ TEST(CameraContract, ReadFromTheAvatarsManifest) {
   try {
     ReadAvatarCameraContract(dir + "/broken.hcavatar");
     ADD_FAILURE() << "a negative focal length was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("broken.hcavatar"), std::string::npos);
+  }
+}
+
+TEST(AnchorReference, ReadFromTheAvatarsManifest) {
+  const std::string dir = testing::TempDir("anchor_reference");
+  AnchorReference r;
+  r.options.weight = 0.5;
+  r.options.points = 20;
+  r.grey.assign(20, 0.4);
+  const nlohmann::json manifest = {{"format", "headcast-avatar"}, {"tracking_anchor", r.ToJson()}};
+  WriteZip(dir + "/a.hcavatar", {{"manifest.json", manifest.dump()}});
+  const std::optional<AnchorReference> read = ReadAvatarAnchorReference(dir + "/a.hcavatar");
+  ASSERT_TRUE(read);
+  EXPECT_EQ(read->referenced(), 20);
+  EXPECT_EQ(read->options.weight, 0.5);
+  WriteZip(dir + "/old.hcavatar", {{"manifest.json", nlohmann::json{{"format", "headcast-avatar"}}.dump()}});
+  EXPECT_FALSE(ReadAvatarAnchorReference(dir + "/old.hcavatar"));
+  EXPECT_FALSE(ReadAvatarAnchorReference(dir + "/params.json"));  // not an avatar: none
+  nlohmann::json broken = manifest;
+  broken["tracking_anchor"]["grey"][0] = -0.2;
+  WriteZip(dir + "/broken.hcavatar", {{"manifest.json", broken.dump()}});
+  try {
+    ReadAvatarAnchorReference(dir + "/broken.hcavatar");
+    ADD_FAILURE() << "a negative grey level was accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("broken.hcavatar"), std::string::npos);
   }

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -153,6 +154,60 @@ TEST(PhotometricAnchor, WithoutAReferenceNothingMoves) {
   EXPECT_FALSE(a.ok);
   EXPECT_EQ(fit.cam_translation, start.cam_translation);
   EXPECT_TRUE(anchor.Observations(truth, kCamera, 64).head.empty());
+}
+
+TEST(PhotometricAnchor, ReferencesTravelAsJsonAndMalformedOnesAreRefused) {
+  PhotometricAnchorOptions o;
+  o.weight = 0.5;
+  o.points = 40;
+  PhotometricAnchor anchor(Builtin(), Eigen::VectorXd::Zero(Builtin().num_shape()), o);
+  std::vector<double> grey(40, std::numeric_limits<double>::quiet_NaN());
+  for (int i = 0; i < 30; ++i) grey[i] = 0.01 * i;
+  anchor.SetReference(grey);
+  const AnchorReference r = anchor.Exported();
+  EXPECT_EQ(r.referenced(), 30);
+  const nlohmann::json j = r.ToJson();
+  EXPECT_TRUE(j.at("grey").at(35).is_null());
+  const AnchorReference back = AnchorReference::FromJson(nlohmann::json::parse(j.dump()));
+  EXPECT_EQ(back.options.points, 40);
+  EXPECT_EQ(back.options.weight, 0.5);
+  ASSERT_EQ(back.grey.size(), 40u);
+  EXPECT_DOUBLE_EQ(back.grey[29], 0.29);
+  EXPECT_TRUE(std::isnan(back.grey[39]));
+  // Another anchor made with these options takes them; one with other points does not.
+  PhotometricAnchor same(Builtin(), Eigen::VectorXd::Zero(Builtin().num_shape()), back.options);
+  same.SetReference(back.grey);
+  EXPECT_DOUBLE_EQ(same.reference()[10], 0.1);
+  PhotometricAnchor other(Builtin(), Eigen::VectorXd::Zero(Builtin().num_shape()), PhotometricAnchorOptions{});
+  EXPECT_THROW(other.SetReference(back.grey), std::invalid_argument);
+
+  auto refused = [&](nlohmann::json bad, const std::string& says) {
+    try {
+      AnchorReference::FromJson(bad);
+      ADD_FAILURE() << "accepted: " << bad.dump().substr(0, 200);
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  nlohmann::json bad = j;
+  bad["grey"].erase(0);
+  refused(bad, "39 grey levels for 40 points");
+  bad = j;
+  bad["grey"][3] = 1.5;
+  refused(bad, "not a number in 0..1");
+  bad = j;
+  bad["grey"][3] = "0.2";
+  refused(bad, "not a number in 0..1");
+  bad = j;
+  for (int i = 5; i < 40; ++i) bad["grey"][i] = nullptr;
+  refused(bad, "5 points with a reference");
+  bad = j;
+  bad["options"]["points"] = 2;
+  refused(bad, "points");
+  bad = j;
+  bad["options"].erase("huber");
+  refused(bad, "huber");
+  refused(nlohmann::json::array(), "wants an object");
 }
 
 TEST(PhotometricAnchor, OptionsAreChecked) {

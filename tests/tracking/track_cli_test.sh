@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # headcast-track on real video (../shared/data; skipped without it) and on bad input.
 set -u
-bin=$1; data=$2
+bin=$1; data=$2; python=${3:-/usr/bin/python3}
 source "$(dirname "${BASH_SOURCE[0]}")/../testing/cli_checks.sh"
 trap 'rm -rf "$tmp"' EXIT
 "$bin/headcast-headmodel" convert ict --folder "$data/head-models/ict-facekit" --parts face,head,mouth,eyes --identity 10 \
@@ -33,6 +33,51 @@ referenced=$(grep -o '"points_referenced": [0-9]*' "$tmp/a.json" | tail -1 | awk
 grep -q '"fitted_frames": 60' "$tmp/a.json" && awk "BEGIN{exit !($aerr < 0.03 && ${refitted:-0} >= 55 && ${referenced:-0} >= 50)}" &&
   ok "--photometric-anchor: $refitted of 60 frames fitted again to $referenced points (error $aerr IOD)" ||
   bad "photometric anchor: $(cat "$tmp/a.json")"
+# The sender's rule on the same 60 frames (FrameTracker::SetAnchor): an avatar
+# file carrying the clip's references, as the fine-tune writes them from prep's
+# dataset, and each frame held to them as it is fitted, in one pass. Those fits
+# land nearer the clip's anchored ones than the landmark fits alone do.
+fp=$("$bin/headcast-rec" info "$tmp/a14.hcrec" | grep -o '"head_model_fingerprint": "[0-9a-f]*"' | cut -d'"' -f4)
+"$python" - "$tmp" "$fp" <<'EOF'
+import json, sys, zipfile
+tmp, fp = sys.argv[1], sys.argv[2]
+reference = json.load(open(tmp + '/a.json'))['photometric_anchor']['reference']
+manifest = {'format': 'headcast-avatar', 'head_model': {'fingerprint': fp}, 'subject': {'shape': []}}
+with zipfile.ZipFile(tmp + '/plain.hcavatar', 'w') as z:
+    z.writestr('manifest.json', json.dumps(manifest))
+manifest['tracking_anchor'] = reference
+with zipfile.ZipFile(tmp + '/anchored.hcavatar', 'w') as z:
+    z.writestr('manifest.json', json.dumps(manifest))
+reference['grey'][0] = 'grey'
+with zipfile.ZipFile(tmp + '/broken.hcavatar', 'w') as z:
+    z.writestr('manifest.json', json.dumps(manifest))
+EOF
+"$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
+  --identity-from "$tmp/anchored.hcavatar" --avatar-anchor --out "$tmp/l14.hcrec" --json "$tmp/l.json" > /dev/null 2>&1
+for r in a14 l14 d14; do "$bin/headcast-rec" export "$tmp/$r.hcrec" --out "$tmp/$r.npz" > /dev/null 2>&1; done
+cmp=$("$python" - "$tmp" <<'EOF'
+import json, sys
+import numpy as np
+tmp = sys.argv[1]
+a, l, d = (np.load(f'{tmp}/{r}.npz') for r in ('a14', 'l14', 'd14'))
+def apart(x):  # mean distance of the head's origin from the clip's anchored fits, mm
+    return 1e3 * np.linalg.norm(x['cam_translation'] - a['cam_translation'], axis=1).mean()
+anchored = json.load(open(f'{tmp}/l.json'))['photometric_anchor']['frames_anchored']
+print(anchored, round(apart(l), 2), round(apart(d), 2))
+EOF
+)
+read -r anchored live plain <<<"${cmp:-0 9 0}"
+awk "BEGIN{exit !($anchored >= 55 && $live < 0.5 * $plain)}" &&
+  ok "--avatar-anchor: $anchored of 60 frames held to the avatar's references as fitted; $live mm from the clip's anchored fits (landmarks alone: $plain mm)" ||
+  bad "avatar anchor: ${cmp:-none} $(head -c 600 "$tmp/l.json")"
+out=$("$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 2 \
+  --identity-from "$tmp/plain.hcavatar" --avatar-anchor --out "$tmp/p.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "carries no photometric anchor" <<<"$out" && ok "--avatar-anchor on an avatar without one refused" ||
+  bad "avatar without anchor: rc=$rc $out"
+out=$("$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 2 \
+  --identity-from "$tmp/broken.hcavatar" --avatar-anchor --out "$tmp/b.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "broken.hcavatar" <<<"$out" && grep -q "not a number in 0..1" <<<"$out" &&
+  ok "a malformed anchor reference refused, naming the file" || bad "broken anchor: rc=$rc $out"
 out=$("$bin/headcast-track" --input /dev/video97 --photometric-anchor 1 --out "$tmp/c.hcrec" 2>&1); rc=$?
 [ $rc -ne 0 ] && grep -q "needs a recorded input" <<<"$out" && ok "--photometric-anchor on a camera refused" ||
   bad "anchor on a camera: rc=$rc $out"

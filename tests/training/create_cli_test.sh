@@ -50,12 +50,18 @@ eval "exec $receiver --listen 127.0.0.1:$port --display none --json $tmp/rx.json
   > /dev/null 2> "$tmp/rx.log" &
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "the printed receiver never listened"
-eval "$sender --target 127.0.0.1:$port --frames-csv $tmp/sent.csv" > /dev/null 2> "$tmp/tx.log"
+eval "$sender --target 127.0.0.1:$port --frames-csv $tmp/sent.csv --json $tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -TERM "$rx"; wait "$rx"; rx=
 [ "$(json "$tmp/rx.json" "j['frames_received'] >= 30 and j['rendered'] > 0")" = True ] &&
   ok "the printed receiver and sender commands run a session with the new avatar" ||
   bad "printed commands: $(cat "$tmp/rx.json" 2>&1 | head -c 600) $(tail -2 "$tmp/rx.log")"
+# Prep anchored the training frames (its default); the avatar carries the
+# references and the sender holds the frames it tracks to them.
+[ "$(json "$tmp/me.create/dataset/dataset.json" "len(j['tracking_anchor']['grey'])")" = 400 ] &&
+  [ "$(json "$tmp/tx.json" "j['tracking']['photometric_anchor'] and j['tracking']['frames_anchored'] > 0.8 * j['tracking']['frames_fitted']")" = True ] &&
+  ok "the photometric anchor from prep to avatar to sender: $(json "$tmp/tx.json" "j['tracking']['frames_anchored']") of $(json "$tmp/tx.json" "j['tracking']['frames_fitted']") sent frames anchored" ||
+  bad "anchor to the sender: $(json "$tmp/tx.json" "j['tracking']") $(grep -i anchor "$tmp/tx.log" | head -3)"
 
 # What the receiver showed against the frames the sender tracked (the demo's comparison).
 received=$(json "$tmp/rx.json" "j['frames_received']")
