@@ -52,6 +52,11 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   AddConfigFile(app);
   SenderOptions& o = f.session;
   f.source.realtime = true;
+  // The landmarks as found, as prep takes them for the avatar's training
+  // frames: the live One-Euro filter lags and smooths blinks and lips away,
+  // which costs the picture more than the jitter it removes
+  // (bench/results/fidelity_ablation.md, session 49).
+  f.live.tracker.face.filter = false;
   app.add_option("--log", f.log_level, "log level");
   app.add_option("--target", o.target, "receiver host:port")->capture_default_str();
   app.add_option("--avatar-id", o.avatar_id, "which of the receiver's avatars to drive")->capture_default_str();
@@ -69,6 +74,11 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
       "RGB-D fit) or zed:SOURCE (side-by-side stereo; needs --stereo-calibration)");
   app.add_option("--identity-from", f.identity_from,
                  "--input: the person's shape: the avatar's own (.hcavatar) or a PARAMS.json (headcast-fit-mesh)");
+  app.add_option_function<std::string>(
+         "--landmark-filter", [&f](const std::string& mode) { f.live.tracker.face.filter = mode == "causal"; },
+         "--input: the landmarks over time: off (as found, as prep takes them; the default) or causal (One-Euro "
+         "filtered: steadier, but a frame or two behind, and blinks and lips smoothed away)")
+      ->check(CLI::IsMember({"off", "causal"}));
   app.add_flag("!--no-photometric-anchor", f.photometric_anchor,
                "--input: fit landmarks only, without holding the head's placement to the appearance the avatar's "
                "training frames were fitted to (the photometric anchor its file carries)");
@@ -247,6 +257,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   auto median = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Median(); };
   auto p95 = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Percentile(95); };
   return {{"input", f.input},
+          {"landmark_filter", f.live.tracker.face.filter ? "causal" : "off"},
           {"frames_read", read},
           {"frames_fitted", fitted},
           {"frames_unreadable", skipped},

@@ -1,0 +1,110 @@
+#!/usr/bin/env bash
+# The avatars of a four-clip run driven as a call drives them. Each clip is
+# tracked again by the sender's rule (headcast-track: the avatar's identity,
+# its training camera, the sender's landmark filter), once by landmarks alone
+# (`headcast-sender --no-photometric-anchor`) and once held to the photometric
+# anchor the avatar carries (the sender's default), and each track is
+# evaluated on the clip's held-out frames against the same crops and masks as
+# the run's own row, which prep's parameters drive.
+#   bench/live_drive.sh FOUR_CLIPS_OUT [--clips "d9 d10 ..."] [--landmark-filter causal|off]
+# --landmark-filter: the sender's One-Euro filter (causal, the default) or
+# none, as prep takes them (what the filter's lag and smoothing cost).
+# FOUR_CLIPS_OUT: the folder of `bench/four_clips.sh OUT` (its avatars must
+# carry an anchor: prepared with one, by a build that records it). Writes
+# FOUR_CLIPS_OUT/live_drive_FILTER.{json,md} and prints the table.
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+python=${HEADCAST_PYTHON:-/usr/bin/python3}
+data=${HEADCAST_DATA:-$root/../shared/data}
+bin=${HEADCAST_BIN:-$root/build/bin}
+[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
+out=$1; shift
+command="bench/live_drive.sh FOUR_CLIPS_OUT $*"  # no machine paths in what is written
+name=live_drive clips="d9 d10 d14 d3" filter=causal
+while [ $# -gt 0 ]; do
+  case $1 in
+    --clips) clips=$2; shift 2 ;;
+    --landmark-filter) filter=$2; shift 2 ;;
+    *) echo "$name: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+out=$(cd "$out" && pwd)
+source "$root/bench/avatar_runs.sh"
+model=$out/ict.npz
+[ -f "$model" ] || { echo "$name: no $model (not a four_clips.sh folder?)" >&2; exit 2; }
+for clip in $clips; do
+  ds=$out/ds_$clip avatar=$out/avatar_$clip.hcavatar
+  [ -f "$avatar" ] && [ -f "$ds/dataset.json" ] || { echo "$name: no avatar or dataset of $clip in $out" >&2; exit 2; }
+  camera=$("$python" -c "import json; print(','.join(map(str, json.load(open('$ds/dataset.json'))['crop']['source_camera'])))")
+  for drive in landmarks anchor; do
+    flag=(); [ $drive = anchor ] && flag=(--avatar-anchor)
+    step "$clip: tracked as the sender does ($drive)"
+    run "live_track_${filter}_${drive}_$clip.log" "$bin/headcast-track" --input "$data/video/talking_$clip.mp4" \
+      --head-model "$model" --identity-from "$avatar" --intrinsics "$camera" --landmark-filter "$filter" "${flag[@]}" \
+      --out "$out/live_${filter}_${drive}_$clip.hcrec" --json "$out/live_track_${filter}_${drive}_$clip.json"
+    # The dataset's crops and masks, driven by the live track (the same frames, in order).
+    d=$out/live_ds_${filter}_${drive}_$clip
+    rm -rf "$d" && mkdir -p "$d"
+    ln -s "$ds/256" "$d/256"
+    cp "$ds/dataset.json" "$d/"
+    cp "$out/live_${filter}_${drive}_$clip.hcrec" "$d/params.hcrec"
+    run "live_export_${filter}_${drive}_$clip.log" "$bin/headcast-rec" export "$d/params.hcrec" --out "$d/params.npz"
+    "$python" - "$d" <<'EOF' || { echo "$name: $clip ($drive): the live track fitted other frames than prep" >&2; exit 1; }
+import json, sys
+import numpy as np
+d = sys.argv[1]
+want = json.load(open(f"{d}/dataset.json"))["frame_numbers"]
+got = np.load(f"{d}/params.npz")["sequence"].tolist()
+sys.exit(0 if got == want else 1)
+EOF
+    step "$clip: eval ($drive)"
+    run "live_eval_${filter}_${drive}_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$avatar" \
+      --data "$d" --out "$out/live_eval_${filter}_${drive}_$clip" --orbit-frames 0
+  done
+done
+
+"$python" - "$out" "$command" "$filter" $clips <<'EOF'
+import csv, json, os, sys
+out, command, filt, clips = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
+def row(folder):
+    ev = json.load(open(os.path.join(out, folder, "eval.json")))
+    psnr = sorted(float(r["psnr"]) for r in csv.DictReader(open(os.path.join(out, folder, "per_frame.csv"))))
+    worst = psnr[:max(1, len(psnr) // 20)]
+    fid = ev["expression_fidelity"]
+    fid = fid["result"] if isinstance(fid, dict) else {}
+    return {"psnr_db": ev["eval"]["psnr_db"], "ssim": ev["eval"]["ssim"], "worst_5pct_psnr_db": sum(worst) / len(worst),
+            "landmark_error_iod": (fid.get("error_iod") or {}).get("all"),
+            "blink_correlation": (fid.get("blink") or {}).get("correlation")}
+rows = []
+for c in clips:
+    r = {"clip": f"talking_{c}", "prep": row(f"eval_{c}")}
+    for drive in ("landmarks", "anchor"):
+        r[drive] = row(f"live_eval_{filt}_{drive}_{c}")
+        track = json.load(open(os.path.join(out, f"live_track_{filt}_{drive}_{c}.json")))
+        r[drive]["ms_per_frame_median"] = track["ms_per_frame_median"]
+        if drive == "anchor":
+            a = track["photometric_anchor"]
+            r[drive]["frames_anchored"], r[drive]["frames_fitted"] = a["frames_anchored"], track["fitted_frames"]
+            r[drive]["anchor_ms_median"] = a["anchor_ms_median"]
+    rows.append(r)
+json.dump({"command": command, "landmark_filter": filt, "rows": rows},
+          open(os.path.join(out, f"live_drive_{filt}.json"), "w"), indent=2)
+f = lambda v, fmt: "–" if v is None else format(v, fmt)
+L = [f"Made by `{command}`: each avatar on its clip's 150 held-out frames, the same crops and masks, driven by prep's "
+     "parameters (the four-clip row), by the sender's rule with landmarks alone, and by the sender's rule held to the "
+     "avatar's photometric anchor; the sender's landmarks: " + {"causal": "One-Euro filtered (the sender's default)",
+     "off": "as found (unfiltered, as prep takes them)"}.get(filt, filt) + ". Landmark error: dlib's 68 points on avatar against true frames, over the eye distance; "
+     "ms: headcast-track's tracking per frame (landmarks and fit, one core).", "",
+     "| clip | drive | PSNR (dB) | SSIM | worst 5 % PSNR | landmark error (IOD) | blink corr. | frames anchored | ms per frame (anchor) |",
+     "|---|---|---|---|---|---|---|---|---|"]
+for r in rows:
+    for drive, label in (("prep", "prep's parameters"), ("landmarks", "live, landmarks"), ("anchor", "live, anchored")):
+        x = r[drive]
+        anchored = f"{x['frames_anchored']} / {x['frames_fitted']}" if "frames_anchored" in x else "–"
+        ms = "–" if "ms_per_frame_median" not in x else f"{x['ms_per_frame_median']:.1f}" + (
+            f" ({x['anchor_ms_median']:.1f})" if "anchor_ms_median" in x else "")
+        L.append(f"| {r['clip']} | {label} | {x['psnr_db']:.3f} | {x['ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
+                 f"{f(x['landmark_error_iod'], '.4f')} | {f(x['blink_correlation'], '.2f')} | {anchored} | {ms} |")
+open(os.path.join(out, f"live_drive_{filt}.md"), "w").write("\n".join(L) + "\n")
+print("\n".join(L))
+EOF
