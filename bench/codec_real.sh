@@ -11,13 +11,7 @@
 # Writes OUT/codec_real.{json,md} and prints the table. Tracks and PSNR costs
 # already in OUT are reused (a later run can add clips or avatars).
 set -euo pipefail
-root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-python=${HEADCAST_PYTHON:-/usr/bin/python3}
-data=${HEADCAST_DATA:-$root/../shared/data}
-bin=${HEADCAST_BIN:-$root/build/bin}
-[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
-out=$1; shift
-command="bench/codec_real.sh OUT $*"
+source "$(dirname "${BASH_SOURCE[0]}")/script_start.sh"
 name=codec_real ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" errors="2e-4" avatars=""
 while [ $# -gt 0 ]; do
   case $1 in

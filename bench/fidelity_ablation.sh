@@ -12,13 +12,7 @@
 # --reuse: variants whose avatar is already in OUT are evaluated again, not retrained.
 # Writes OUT/ablation.{json,md} and prints the table.
 set -euo pipefail
-root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-python=${HEADCAST_PYTHON:-/usr/bin/python3}
-data=${HEADCAST_DATA:-$root/../shared/data}
-bin=${HEADCAST_BIN:-$root/build/bin}
-[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
-out=$1; shift
-command="bench/fidelity_ablation.sh OUT $*"  # no machine paths in what is written
+source "$(dirname "${BASH_SOURCE[0]}")/script_start.sh"
 iterations=2000 name=fidelity_ablation dataset="" variants=() person=() reuse=0
 while [ $# -gt 0 ]; do
   case $1 in

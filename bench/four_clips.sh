@@ -17,13 +17,7 @@
 #       [--no-render]               skip the receiver's frame rate (ablations of the avatar only)
 # Writes OUT/four_clips.{json,md} and prints the table; the work stays in OUT.
 set -euo pipefail
-root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-python=${HEADCAST_PYTHON:-/usr/bin/python3}
-data=${HEADCAST_DATA:-$root/../shared/data}
-bin=${HEADCAST_BIN:-$root/build/bin}
-[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
-out=$1; shift
-command="bench/four_clips.sh OUT $*"  # no machine paths in what is written
+source "$(dirname "${BASH_SOURCE[0]}")/script_start.sh"
 name=four_clips iterations=3000 z_augmentation=0 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
 while [ $# -gt 0 ]; do
   case $1 in

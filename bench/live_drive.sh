@@ -13,13 +13,8 @@
 # carry an anchor: prepared with one, by a build that records it). Writes
 # FOUR_CLIPS_OUT/live_drive_FILTER.{json,md} and prints the table.
 set -euo pipefail
-root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-python=${HEADCAST_PYTHON:-/usr/bin/python3}
-data=${HEADCAST_DATA:-$root/../shared/data}
-bin=${HEADCAST_BIN:-$root/build/bin}
-[ $# -ge 1 ] || { sed -n '2,/^[^#]/{/^#/p}' "$0" >&2; exit 2; }
-out=$1; shift
-command="bench/live_drive.sh FOUR_CLIPS_OUT $*"  # no machine paths in what is written
+out_name=FOUR_CLIPS_OUT
+source "$(dirname "${BASH_SOURCE[0]}")/script_start.sh"
 name=live_drive clips="d9 d10 d14 d3" filter=causal
 while [ $# -gt 0 ]; do
   case $1 in
