@@ -39,28 +39,28 @@ nlohmann::json ReadAvatarManifest(const std::string& path) {
   }
 }
 
-}  // namespace
-
-std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path) {
+// An avatar file's manifest entry `key` read by `parse`: nothing for other
+// files or without the entry; a malformed entry throws naming the file.
+template <typename T>
+std::optional<T> ReadAvatarEntry(const std::string& path, const char* key, T (*parse)(const nlohmann::json&)) {
   if (!IsAvatarFile(path)) return std::nullopt;
   const nlohmann::json manifest = ReadAvatarManifest(path);
-  if (!manifest.contains("camera")) return std::nullopt;
+  if (!manifest.contains(key)) return std::nullopt;
   try {
-    return CameraContract::FromJson(manifest.at("camera"));
+    return parse(manifest.at(key));
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": " + e.what());
   }
 }
 
+}  // namespace
+
+std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path) {
+  return ReadAvatarEntry(path, "camera", &CameraContract::FromJson);
+}
+
 std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path) {
-  if (!IsAvatarFile(path)) return std::nullopt;
-  const nlohmann::json manifest = ReadAvatarManifest(path);
-  if (!manifest.contains("tracking_anchor") || manifest.at("tracking_anchor").is_null()) return std::nullopt;
-  try {
-    return AnchorReference::FromJson(manifest.at("tracking_anchor"));
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": " + e.what());
-  }
+  return ReadAvatarEntry(path, "tracking_anchor", &AnchorReference::FromJson);
 }
 
 Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model) {
@@ -109,49 +109,35 @@ void FrameTracker::SetIdentity(const Eigen::VectorXd& shape, bool frozen) {
   fitter_.SetIdentity(shape);
   if (rgbd_) rgbd_->SetIdentity(shape);
   identity_frozen_ = frozen;
-  if (anchor_reference_) MakeAnchor();
+  if (anchor_) MakeAnchor(anchor_->Exported());
 }
 
 void FrameTracker::SetAnchor(const AnchorReference& reference) {
   reference.options.Check();
   if (!reference.options.enabled())
     throw std::invalid_argument("photometric anchor: the references were made with weight 0");
-  anchor_reference_ = reference;
-  try {
-    MakeAnchor();
-  } catch (...) {
-    anchor_reference_.reset();
-    throw;
-  }
+  MakeAnchor(reference);
 }
 
-void FrameTracker::MakeAnchor() {
-  const AnchorReference& r = *anchor_reference_;
-  auto anchor = std::make_unique<PhotometricAnchor>(model_, identity_, r.options);
-  anchor->SetReference(r.grey);
+void FrameTracker::MakeAnchor(const AnchorReference& reference) {
+  auto anchor = std::make_unique<PhotometricAnchor>(model_, identity_, reference.options);
+  anchor->SetReference(reference.grey);
   HeadFitterOptions fit = options_.fit;
-  fit.rigid_flow_weight = r.options.weight;
-  anchor_fitter_ = std::make_unique<HeadFitter>(model_, fit);
-  anchor_fitter_->SetIdentity(identity_);
+  fit.rigid_flow_weight = reference.options.weight;
+  auto fitter = std::make_unique<HeadFitter>(model_, fit);
+  fitter->SetIdentity(identity_);
   anchor_ = std::move(anchor);
+  anchor_fitter_ = std::move(fitter);
 }
 
 void FrameTracker::AnchorFrame(const cv::Mat& bgr, const FaceObservation& face, const PinholeCamera& camera,
                                TrackedFrame* r) {
   Stopwatch watch;
-  const PhotometricAnchorOptions& o = anchor_reference_->options;
   const double iod = (face.landmarks[45] - face.landmarks[36]).norm();
-  FrameParams aligned = last_;
-  const AnchorAlignment a = anchor_->Align(AnchorGray(bgr, o.blur_iod * iod), camera, &aligned);
-  if (a.ok && a.shift_px <= o.max_shift_iod * iod) {
-    const RigidObservations rigid = anchor_->Observations(aligned, camera, o.fit_points);
-    FrameParams refit = last_;
-    if (anchor_fitter_->Fit(face.landmarks, camera, &refit, &face.irises, &rigid).ok) {
-      last_ = refit;
-      r->anchored = true;
-      r->anchor_shift_px = a.shift_px;
-    }
-  }
+  AnchorAlignment a;
+  r->anchored = anchor_->Refit(AnchorGray(bgr, anchor_->options().blur_iod * iod), face.landmarks, &face.irises, iod,
+                               camera, *anchor_fitter_, &last_, &a);
+  if (r->anchored) r->anchor_shift_px = a.shift_px;
   r->anchor_ms = watch.ElapsedMs();
 }
 

@@ -138,11 +138,10 @@ class FrameTracker {
   std::vector<Eigen::VectorXd> calibration_shapes_;
   RgbdFitResult last_rgbd_;
   FrameParams last_;
-  // The photometric anchor (SetAnchor): its references, the points made for
-  // the identity, and a fitter holding the pose to them.
-  void MakeAnchor();
+  // The photometric anchor (SetAnchor): the points made for the identity
+  // with their references, and a fitter holding the pose to them.
+  void MakeAnchor(const AnchorReference& reference);
   void AnchorFrame(const cv::Mat& bgr, const FaceObservation& face, const PinholeCamera& camera, TrackedFrame* r);
-  std::optional<AnchorReference> anchor_reference_;
   std::unique_ptr<PhotometricAnchor> anchor_;
   std::unique_ptr<HeadFitter> anchor_fitter_;
   // Rigid points: the frame they were taken in and where they were seen there.

@@ -243,24 +243,14 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
     SampleStats shift, before, after;
     int refitted = 0, rejected = 0;
     each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation& face, double iod) {
-      FrameParams aligned = *f;
-      const AnchorAlignment a = anchor.Align(gray, camera, &aligned);
-      if (!a.ok || a.shift_px > o.anchor.max_shift_iod * iod) {
-        ++rejected;
-        return;
+      AnchorAlignment a;
+      const bool again = anchor.Refit(gray, face.landmarks, &face.irises, iod, camera, fitter, f, &a);
+      if (a.ok) {
+        shift.Add(a.shift_px);
+        before.Add(a.rms_before);
+        after.Add(a.rms_after);
       }
-      shift.Add(a.shift_px);
-      before.Add(a.rms_before);
-      after.Add(a.rms_after);
-      const RigidObservations rigid = anchor.Observations(aligned, camera, o.anchor.fit_points);
-      FrameParams refit = *f;
-      if (fitter.Fit(face.landmarks, camera, &refit, &face.irises, &rigid).ok) {
-        refit.sequence = f->sequence;
-        *f = refit;
-        ++refitted;
-      } else {
-        ++rejected;
-      }
+      ++(again ? refitted : rejected);
     });
     spdlog::info("photometric anchor, round {}: {} points referenced, {} frames fitted again, {} kept, shift {:.2f} px",
                  round + 1, referenced, refitted, rejected, shift.empty() ? 0.0 : shift.Median());
@@ -273,9 +263,9 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
                       {"grey_rms_after_median", after.empty() ? 0.0 : after.Median()}});
   }
   nlohmann::json exported;  // null: no point referenced
-  if (anchor.Exported().referenced() > 0) {
-    *reference = anchor.Exported();
-    exported = (*reference)->ToJson();
+  if (const AnchorReference last = anchor.Exported(); last.referenced() > 0) {
+    *reference = last;
+    exported = last.ToJson();
   }
   return {{"options", o.anchor.ToJson()},
           {"points", anchor.num_points()},

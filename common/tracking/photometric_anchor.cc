@@ -351,6 +351,20 @@ AnchorAlignment PhotometricAnchor::Align(const cv::Mat& gray, const PinholeCamer
   return a;
 }
 
+bool PhotometricAnchor::Refit(const cv::Mat& gray, const Landmarks2d& landmarks, const EyeIrises* irises, double iod,
+                              const PinholeCamera& camera, const HeadFitter& fitter, FrameParams* frame,
+                              AnchorAlignment* alignment) const {
+  FrameParams aligned = *frame;
+  *alignment = Align(gray, camera, &aligned);
+  if (alignment->ok && alignment->shift_px > options_.max_shift_iod * iod) alignment->ok = false;
+  if (!alignment->ok) return false;
+  const RigidObservations rigid = Observations(aligned, camera, options_.fit_points);
+  FrameParams refit = *frame;
+  if (!fitter.Fit(landmarks, camera, &refit, irises, &rigid).ok) return false;
+  *frame = refit;
+  return true;
+}
+
 RigidObservations PhotometricAnchor::Observations(const FrameParams& frame, const PinholeCamera& camera,
                                                   int count) const {
   std::vector<int> usable;

@@ -93,11 +93,22 @@ class PhotometricAnchor {
   // Moves frame->cam_from_head so that the points' grey levels in `gray`
   // match their reference (a gain and bias per frame absorb the light).
   AnchorAlignment Align(const cv::Mat& gray, const PinholeCamera& camera, FrameParams* frame) const;
+  // One frame anchored, the step the offline pass and the live tracker share:
+  // the pose aligned (Align), then the frame fitted again by `fitter` (its
+  // rigid_flow_weight the anchor's weight) to `landmarks` and `irises` with
+  // fit_points aligned points holding the pose. *frame is left as it was when
+  // the alignment fails or moves the points more than max_shift_iod eye
+  // distances (`iod`, pixels; then *alignment is not ok) or the fit fails.
+  // Returns whether the frame was fitted again.
+  bool Refit(const cv::Mat& gray, const Landmarks2d& landmarks, const EyeIrises* irises, double iod,
+             const PinholeCamera& camera, const HeadFitter& fitter, FrameParams* frame,
+             AnchorAlignment* alignment) const;
   // Up to `count` referenced points visible at `frame`'s pose, spread over
   // them, at its expression, with where that pose projects them: what
   // HeadFitter::Fit holds the pose to.
   RigidObservations Observations(const FrameParams& frame, const PinholeCamera& camera, int count) const;
 
+  const PhotometricAnchorOptions& options() const { return options_; }
   int num_points() const { return static_cast<int>(points_.size()); }
   const std::vector<Eigen::Vector3d>& points() const { return points_; }
   const std::vector<double>& reference() const { return reference_; }  // NaN: none
