@@ -79,6 +79,12 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
          "--input: the landmarks over time: off (as found, as prep takes them; the default) or causal (One-Euro "
          "filtered: steadier, but a frame or two behind, and blinks and lips smoothed away)")
       ->check(CLI::IsMember({"off", "causal"}));
+  app.add_option("--landmark-filter-hz", f.live.tracker.face.filter_min_cutoff,
+                 "--input, --landmark-filter causal: the One-Euro filter at rest, Hz (higher: less lag, more jitter)")
+      ->capture_default_str();
+  app.add_option("--landmark-filter-beta", f.live.tracker.face.filter_beta,
+                 "--input, --landmark-filter causal: the filter's cutoff rise per pixel a second of landmark speed")
+      ->capture_default_str();
   app.add_flag("!--no-photometric-anchor", f.photometric_anchor,
                "--input: fit landmarks only, without holding the head's placement to the appearance the avatar's "
                "training frames were fitted to (the photometric anchor its file carries)");
@@ -258,6 +264,8 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   auto p95 = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Percentile(95); };
   return {{"input", f.input},
           {"landmark_filter", f.live.tracker.face.filter ? "causal" : "off"},
+          {"landmark_filter_hz", f.live.tracker.face.filter_min_cutoff},  // when causal
+          {"landmark_filter_beta", f.live.tracker.face.filter_beta},
           {"frames_read", read},
           {"frames_fitted", fitted},
           {"frames_unreadable", skipped},

@@ -20,6 +20,7 @@
 #include "proto/recording.h"
 #include "training/landmark_agreement.h"
 #include "training/run_report.h"
+#include "training/temporal_agreement.h"
 
 namespace headcast {
 namespace fs = std::filesystem;
@@ -382,6 +383,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
     VideoWriter side((dir / "side_by_side.mp4").string(), fps);
     ProgressLine progress(0, static_cast<int>(positions.size()), 10, "frame");
     int done = 0;
+    TemporalAgreement temporal;
     const EvalResult e = EvaluateOnDataset(
         avatar, model, data, positions,
         [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
@@ -390,6 +392,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
           cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
           side.Write(row);
           if (agreement) agreement->Add(truth, rendered);
+          temporal.Add(data.At(i).frame, truth, rendered);
           if (o.write_frames) {
             char name[32];
             std::snprintf(name, sizeof(name), "_%05d.png", written++);
@@ -417,6 +420,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
                                      "and mean distance"},
                                     {"result", agreement->Summary()}}
                    : fidelity},
+        {"temporal", temporal.Summary()},
         {"videos", {"side_by_side.mp4: ground truth | avatar | head model"}}};
     // Novel views: the first evaluated frame, the head turned on its vertical axis.
     const FrameParams base = data.At(positions.front()).params;

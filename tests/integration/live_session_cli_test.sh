@@ -19,7 +19,8 @@ port=$((20000 + $$ % 20000))
 rx=$!
 wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq.mp4" --fov 45 \
-  --identity-from "$tmp/a.hcavatar" --json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
+  --identity-from "$tmp/a.hcavatar" --landmark-filter causal --landmark-filter-hz 4 --landmark-filter-beta 0.2 \
+  --json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx"; rx=
 fitted=$(json "$tmp/tx.json" "j['tracking']['frames_fitted']")
@@ -37,6 +38,12 @@ shown=$(json "$tmp/rx.json" "j['rendered']")
   [ "$(tail -n +2 "$tmp/shown.csv" | wc -l)" -eq "$shown" ] &&
   ok "receiver got $received frames, showed $shown; glass to glass p50 $p50 ms, logged per shown frame" ||
   bad "receiver: received=$received p50=$p50 $(tail -3 "$tmp/rx.log")"
+[ "$(json "$tmp/tx.json" "(j['tracking']['landmark_filter'], j['tracking']['landmark_filter_hz'], j['tracking']['landmark_filter_beta'])")" = "('causal', 4.0, 0.2)" ] &&
+  ok "the sender's landmark filter as asked (causal, 4 Hz, beta 0.2)" || bad "landmark filter: $(json "$tmp/tx.json" "j['tracking']")"
+"$bin/headcast-sender" --target "127.0.0.1:1" --plaintext --input "$tmp/seq.mp4" --landmark-filter causal \
+  --landmark-filter-hz 0 > /dev/null 2> "$tmp/e.log"
+[ $? -ne 0 ] && grep -q "filter_min_cutoff" "$tmp/e.log" && ok "a filter of 0 Hz is refused, named" ||
+  bad "0 Hz filter: $(tail -2 "$tmp/e.log")"
 "$bin/headcast-sender" --target "127.0.0.1:1" --plaintext --input "$tmp/nothing.mp4" > /dev/null 2> "$tmp/e.log"
 [ $? -ne 0 ] && grep -q "nothing.mp4" "$tmp/e.log" && ok "a missing input is named" || bad "missing input: $(cat "$tmp/e.log")"
 
