@@ -252,6 +252,9 @@ int main(int argc, char** argv) {
                    "training masks: GrabCut segments the head region at about this many pixels across")
       ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
+  prep->add_flag("!--no-skull-fill", p.fill_skull,
+                 "training masks: leave the fitted skull above the brows to GrabCut (which may take dark hair before "
+                 "a dark wall for the wall, and the avatar is then drawn bald)");
   prep->add_flag("!--no-gaze", p.gaze, "do not locate the irises: the eyes look straight ahead");
   prep->add_flag("!--no-landmark-repair", p.landmark_repair,
                  "keep the shape predictor's brows and mouth where they jump against the flow from the previous "

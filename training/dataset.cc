@@ -243,11 +243,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
       const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
       const Landmarks2d crop_landmarks = fitter.Project(params, crop_camera);
-      FillHairNotches(crop_landmarks, &m);
       RasterBuffers silhouette;
       Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
-      cv::bitwise_and(m, MatteBound(silhouette.Mask(), crop_landmarks, o.matte_rules()), m);
-      WriteImage((rd / "masks" / FrameFileName(n)).string(), m);
+      WriteImage((rd / "masks" / FrameFileName(n)).string(),
+                 CutTrainingMask(m, silhouette.Mask(), crop_landmarks, o.matte_rules()));
     }
   }
   progress.Finish();
@@ -325,11 +324,13 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
       {"intrinsics", intrinsics},
       {"subject", {{"shape", shape}, {"texture", texture}, {"light", info.subject.light}}},
       {"identity", track_report.value("identity", std::string("?"))},
-      {"masks",
-       "the tracker's head mask (GrabCut), convex above the brows, within the fitted model's silhouette "
-       "dilated by " +
-           std::to_string(o.mask_margin) + " of the crop edge above the eye line, " + std::to_string(o.side_margin) +
-           " below it" + (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
+      {"masks", "the tracker's head mask (GrabCut), convex above the brows" +
+                    std::string(o.fill_skull ? ", the fitted skull above the brows added" : "") +
+                    ", within the fitted model's silhouette "
+                    "dilated by " +
+                    std::to_string(o.mask_margin) + " of the crop edge above the eye line, " +
+                    std::to_string(o.side_margin) + " below it" +
+                    (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
       {"mask_rules", o.matte_rules().ToJson()},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},

@@ -73,7 +73,9 @@ struct PrepOptions {
   // crop of a 512-pixel video, and the mask's outline is then drawn on that
   // coarser grid.
   int mask_working_size = HeadMaskOptions{}.working_size;
-  MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck}; }
+  // The fitted skull above the brows is head in every mask (FillSkull).
+  bool fill_skull = true;
+  MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck, fill_skull}; }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   int predictor_views = FaceTrackerOptions{}.predictor_views;  // the shape predictor's views of each face, median

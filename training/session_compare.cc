@@ -191,10 +191,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         RasterBuffers silhouette;
         Rasterize(in_camera, model.data().faces, subject.intrinsics, RasterOptions{}, &silhouette);
         const Landmarks2d landmarks = fitter.Project(f, subject.intrinsics);
-        cv::Mat& mask = cut.mask;
-        FillHairNotches(landmarks, &mask);
-        cv::bitwise_and(mask, MatteBound(silhouette.Mask(), landmarks, prep.matte_rules()), mask);
-        return MaskedTarget(cut.image, mask);
+        return MaskedTarget(cut.image, CutTrainingMask(cut.mask, silhouette.Mask(), landmarks, prep.matte_rules()));
       },
       [&](int k, const cv::Mat& target, const cv::Mat& shown) {
         scored.push_back(k);

@@ -18,7 +18,8 @@ void MatteRules::Check() const {
 }
 
 nlohmann::json MatteRules::ToJson() const {
-  return {{"hair_margin", hair_margin}, {"side_margin", side_margin}, {"keep_neck", keep_neck}};
+  return {
+      {"hair_margin", hair_margin}, {"side_margin", side_margin}, {"keep_neck", keep_neck}, {"fill_skull", fill_skull}};
 }
 
 MatteRules MatteRules::FromJson(const nlohmann::json& j) {
@@ -27,6 +28,7 @@ MatteRules MatteRules::FromJson(const nlohmann::json& j) {
     r.hair_margin = j.at("hair_margin");
     r.side_margin = j.at("side_margin");
     r.keep_neck = j.at("keep_neck");
+    r.fill_skull = j.contains("fill_skull") ? j.at("fill_skull").get<bool>() : false;
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("MatteRules: bad or missing field: ") + e.what());
   }
@@ -153,6 +155,30 @@ void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
   cv::fillConvexPoly(filled, hull, cv::Scalar(255));
   cv::bitwise_and(filled, above, filled);
   cv::bitwise_or(*mask, filled, *mask);
+}
+
+void FillSkull(const cv::Mat& silhouette, const Landmarks2d& lm, cv::Mat* mask) {
+  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
+  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
+  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
+  if (!up || !brows.allFinite() || silhouette.size() != mask->size()) return;
+  const int radius = static_cast<int>(std::lround(kSkullInset * (0.5 * (lm[19] + lm[24]) - lm[8]).norm()));
+  cv::Mat skull;
+  if (radius > 0)
+    cv::erode(silhouette, skull, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
+  else
+    skull = silhouette.clone();
+  cv::bitwise_and(skull, HalfPlane(mask->size(), brows, *up), skull);
+  cv::bitwise_or(*mask, skull, *mask);
+}
+
+cv::Mat CutTrainingMask(const cv::Mat& grabcut, const cv::Mat& silhouette, const Landmarks2d& landmarks,
+                        const MatteRules& rules) {
+  cv::Mat m = grabcut.clone();
+  FillHairNotches(landmarks, &m);
+  if (rules.fill_skull) FillSkull(silhouette, landmarks, &m);
+  cv::bitwise_and(m, MatteBound(silhouette, landmarks, rules), m);
+  return m;
 }
 
 cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& lm, int hair_px, int side_px) {

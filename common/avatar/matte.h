@@ -15,18 +15,22 @@
 
 namespace headcast {
 
-// The rules a dataset's masks were cut with (PrepOptions holds the same three).
+// The rules a dataset's masks were cut with (PrepOptions holds the same four).
 struct MatteRules {
   // Above the eye line the mask may reach this fraction of the image edge
   // beyond the model's silhouette (hair); below it, `side_margin` (cheeks, ears).
   double hair_margin = 0.08;
   double side_margin = 0.02;
   bool keep_neck = false;  // false: nothing below the jaw line (landmarks 0..16)
+  // The fitted skull above the brows is head (FillSkull). Rules read from a
+  // file without the key were not (masks cut before it existed).
+  bool fill_skull = true;
   void Check() const;
   nlohmann::json ToJson() const;
   static MatteRules FromJson(const nlohmann::json& j);  // checks
   bool operator==(const MatteRules& o) const {
-    return hair_margin == o.hair_margin && side_margin == o.side_margin && keep_neck == o.keep_neck;
+    return hair_margin == o.hair_margin && side_margin == o.side_margin && keep_neck == o.keep_neck &&
+           fill_skull == o.fill_skull;
   }
 };
 
@@ -66,6 +70,22 @@ cv::Mat MaskReach(const cv::Mat& silhouette, const Landmarks2d& landmarks, int h
 // (CV_8U) becomes its convex hull there. The top of a head is convex; below
 // the brows the ears make it not so, and the mask is left alone.
 void FillHairNotches(const Landmarks2d& landmarks, cv::Mat* mask);
+
+// Adds to `mask` (CV_8U) the silhouette above the brow line (landmarks
+// 17..26), shrunk by kSkullInset face heights (brows to chin): whatever
+// covers the skull (hair, skin, a hat) is head, never background. GrabCut
+// may take dark hair before a dark wall for the wall; its mask then stops at
+// the hairline, and an avatar trained on it is drawn bald. The inset keeps a
+// fit a little wider than a short-haired head from adding the wall beside
+// its temples.
+inline constexpr double kSkullInset = 0.04;
+void FillSkull(const cv::Mat& silhouette, const Landmarks2d& landmarks, cv::Mat* mask);
+
+// A training target's mask (the dataset's and `headcast-train compare`'s):
+// the tracker's GrabCut mask (CV_8U, square, 0 or 255) with its hair notches
+// filled, the skull added (rules.fill_skull), within MatteBound.
+cv::Mat CutTrainingMask(const cv::Mat& grabcut, const cv::Mat& silhouette, const Landmarks2d& landmarks,
+                        const MatteRules& rules);
 
 // The region (CV_8U, 255 inside) a mask cut by `rules` may cover for a head
 // with this silhouette (CV_8U, square) and these landmarks: MaskReach with the

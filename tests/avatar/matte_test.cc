@@ -103,6 +103,61 @@ TEST(MatteRules, TravelAsJsonAndRefuseBadMargins) {
   j = r.ToJson();
   j["side_margin"] = "wide";
   EXPECT_THROW(MatteRules::FromJson(j), std::invalid_argument);
+  j = r.ToJson();
+  j["fill_skull"] = "yes";
+  EXPECT_THROW(MatteRules::FromJson(j), std::invalid_argument);
+  // Rules written before the skull fill existed were cut without it.
+  j = r.ToJson();
+  EXPECT_TRUE(MatteRules::FromJson(j).fill_skull);
+  j.erase("fill_skull");
+  EXPECT_FALSE(MatteRules::FromJson(j).fill_skull);
+}
+
+// GrabCut that took the hair for the wall (a mask that stops at the
+// hairline): the cut mask holds the whole skull above the brows, not what
+// lies beyond it, and leaves the rest of GrabCut's answer as it was.
+TEST(CutTrainingMask, TheSkullAboveTheBrowsIsHead) {
+  const int size = 128;
+  const PosedView v = View(Turned(), size);
+  const Landmarks2d& lm = v.landmarks;
+  const Eigen::Vector2d chin = lm[8], brows = 0.5 * (lm[19] + lm[24]);
+  const Eigen::Vector2d up = (brows - chin).normalized();
+  auto at = [&](const cv::Mat& m, const Eigen::Vector2d& p) -> int {
+    return m.at<uchar>(static_cast<int>(std::lround(p.y())), static_cast<int>(std::lround(p.x())));
+  };
+  // The skull's top along the face's up direction from the brows.
+  double top = 0;
+  while (at(v.silhouette, brows + (top + 1) * up) == 255) top += 1;
+  ASSERT_GT(top, 10) << "no skull above the brows";
+  const double face = (brows - chin).norm();
+  // GrabCut's answer: the head below a hairline 0.2 face heights above the brows.
+  cv::Mat grabcut = v.silhouette.clone();
+  for (int y = 0; y < size; ++y)
+    for (int x = 0; x < size; ++x)
+      if ((Eigen::Vector2d(x, y) - brows).dot(up) > 0.2 * face) grabcut.at<uchar>(y, x) = 0;
+  // ... and a notch it cut out of the cheek, below the brows.
+  const Eigen::Vector2d cheek = 0.5 * (lm[3] + lm[30]);
+  cv::circle(grabcut, cv::Point(cvRound(cheek.x()), cvRound(cheek.y())), 2, cv::Scalar(0), cv::FILLED);
+  ASSERT_EQ(at(grabcut, brows + 0.7 * top * up), 0);
+
+  const MatteRules rules;
+  ASSERT_TRUE(rules.fill_skull);
+  const cv::Mat cut = CutTrainingMask(grabcut, v.silhouette, lm, rules);
+  EXPECT_EQ(at(cut, brows + 0.7 * top * up), 255) << "the skull above the hairline";
+  EXPECT_EQ(at(cut, brows + (top + 4) * up), 0) << "beyond the skull: GrabCut's answer (background)";
+  EXPECT_EQ(at(cut, cheek), 0) << "below the brows the mask is GrabCut's";
+  EXPECT_EQ(cv::countNonZero(cut & ~MatteBound(v.silhouette, lm, rules)), 0) << "within the bound";
+  // The inset: the skull's outline itself is not added.
+  EXPECT_EQ(at(cut, brows + (top - 1) * up), 0);
+
+  MatteRules without = rules;
+  without.fill_skull = false;
+  const cv::Mat as_before = CutTrainingMask(grabcut, v.silhouette, lm, without);
+  EXPECT_EQ(at(as_before, brows + 0.7 * top * up), 0);
+  cv::Mat expected = grabcut.clone();
+  FillHairNotches(lm, &expected);
+  cv::bitwise_and(expected, MatteBound(v.silhouette, lm, without), expected);
+  EXPECT_EQ(cv::countNonZero(as_before != expected), 0) << "without the fill: notches filled, then bounded";
 }
 
 // The bound holds the silhouette above the jaw, grows it by the margins
