@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iomanip>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 #include "common/core/npy.h"
@@ -157,6 +158,12 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
     npz["capture_time_s"] = NpyArray::From<double>({rows}, times.data());
     npz["sequence"] = NpyArray::From<int64_t>({rows}, sequence.data());
     npz["confidence"] = NpyArray::From<float>({rows}, confidence.data());
+    // The face's measured skin colour (RGB, 0..1); NaN where a frame has none.
+    std::vector<float> skin(n * 3, std::numeric_limits<float>::quiet_NaN());
+    for (size_t k = 0; k < n; ++k)
+      if (r.frames[k].skin_colour)
+        for (int i = 0; i < 3; ++i) skin[k * 3 + i] = (*r.frames[k].skin_colour)[i];
+    npz["skin_colour"] = NpyArray::From<float>({rows, 3}, skin.data());
     const SubjectParams& s = r.info.subject;
     npz["shape"] = NpyArray::From<float>({static_cast<int64_t>(s.shape.size())}, s.shape.data());
     npz["texture"] = NpyArray::From<float>({static_cast<int64_t>(s.texture.size())}, s.texture.data());
@@ -182,6 +189,7 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
                           {"confidence", f.confidence},
                           {"expression", Vec(f.expression)}};
       for (const Group& g : kGroups) j[g.name] = Vec3(f.*g.member);
+      j["skin_colour"] = f.skin_colour ? nlohmann::json(Vec3(*f.skin_colour)) : nlohmann::json(nullptr);
       frames.push_back(std::move(j));
     }
     out << nlohmann::json({{"header", HeaderJson(r.info)}, {"frames", frames}}).dump(1) << "\n";
@@ -193,6 +201,7 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
     for (int i = 0; i < e; ++i) out << ",expr_" << i;
     for (const Group& g : kGroups)
       for (const char* axis : {"x", "y", "z"}) out << "," << g.name << "_" << axis;
+    out << ",skin_r,skin_g,skin_b";  // empty where the frame has no measured skin colour
     out << "\n" << std::setprecision(9);
     for (const auto& f : r.frames) {
       out << f.sequence << "," << std::setprecision(15) << f.capture_time_s << std::setprecision(9) << ","
@@ -200,6 +209,10 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
       for (int i = 0; i < e; ++i) out << "," << expression_of(f, i);
       for (const Group& g : kGroups)
         for (int i = 0; i < 3; ++i) out << "," << (f.*g.member)[i];
+      for (int i = 0; i < 3; ++i) {
+        out << ",";
+        if (f.skin_colour) out << (*f.skin_colour)[i];
+      }
       out << "\n";
     }
   }
@@ -232,6 +245,13 @@ Eigen::Vector3f Vec3From(const nlohmann::json& j, const char* name) {
   const auto v = j.at(name).get<std::vector<float>>();
   if (v.size() != 3) throw std::invalid_argument(std::string(name) + " must have 3 values");
   return {v[0], v[1], v[2]};
+}
+
+// A frame's skin colour from an npz row: none when all three are NaN (not measured).
+std::optional<Eigen::Vector3f> SkinColourFrom(const float* rgb) {
+  const Eigen::Vector3f v(rgb[0], rgb[1], rgb[2]);
+  if (v.array().isNaN().all()) return std::nullopt;
+  return v;
 }
 
 template <typename T>
@@ -269,8 +289,11 @@ LoadedRecording ImportRecording(const std::string& path) {
         const float* v = Column<float>(a, g.name, {n, 3});
         for (int64_t k = 0; k < n; ++k) r.frames[k].*g.member = Eigen::Vector3f(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
       }
+      // Exports from before the skin colour was kept have no such array.
+      const float* skin = a.count("skin_colour") ? Column<float>(a, "skin_colour", {n, 3}) : nullptr;
       for (int64_t k = 0; k < n; ++k) {
         FrameParams& f = r.frames[k];
+        if (skin) f.skin_colour = SkinColourFrom(skin + 3 * k);
         f.expression = Eigen::Map<const Eigen::VectorXf>(expression + k * e, e);
         f.capture_time_s = times[k];
         if (sequence[k] < 0) throw std::invalid_argument("a negative sequence number");
@@ -293,6 +316,8 @@ LoadedRecording ImportRecording(const std::string& path) {
         f.capture_time_s = fj.at("capture_time_s").get<double>();
         f.sequence = fj.at("sequence").get<uint64_t>();
         f.confidence = fj.at("confidence").get<float>();
+        // Null: not measured; absent: an export from before the skin colour was kept.
+        if (fj.contains("skin_colour") && !fj.at("skin_colour").is_null()) f.skin_colour = Vec3From(fj, "skin_colour");
         r.frames.push_back(std::move(f));
       }
     }
@@ -301,6 +326,9 @@ LoadedRecording ImportRecording(const std::string& path) {
       bool finite = std::isfinite(f.capture_time_s) && std::isfinite(f.confidence) && f.expression.allFinite();
       for (const Group& g : kGroups) finite = finite && (f.*g.member).allFinite();
       if (!finite) throw std::invalid_argument("frame " + std::to_string(k) + " has a value that is not finite");
+      if (f.skin_colour &&
+          !(f.skin_colour->allFinite() && f.skin_colour->minCoeff() >= 0 && f.skin_colour->maxCoeff() <= 1))
+        throw std::invalid_argument("frame " + std::to_string(k) + ": a skin colour that is not three numbers in 0..1");
     }
     if (r.frames.empty()) throw std::invalid_argument("no frames");
   } catch (const std::exception& e) {

@@ -11,6 +11,7 @@
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
+#include "proto/recording_tools.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -113,6 +114,58 @@ TEST(Recording, CaptureTimesThatAreNotTimesEndTheRecording) {
     std::string cut;
     EXPECT_EQ(ReadRecording(path, nullptr, &cut).size(), 3u) << bad;
     EXPECT_NE(cut.find("is not a time"), std::string::npos) << cut;
+  }
+}
+
+// An export and its import keep each frame's skin colour, and its absence.
+TEST(RecordingExport, KeepsTheSkinColourOrItsAbsence) {
+  const std::string dir = testing::TempDir("skin_export");
+  LoadedRecording r;
+  r.info = Info();
+  for (int i = 0; i < 4; ++i) {
+    r.frames.push_back(SyntheticTalkingHead(Model(), i));
+    if (i % 2 == 0) r.frames.back().skin_colour = Eigen::Vector3f(0.6f + 0.01f * i, 0.45f, 0.3f);
+  }
+  for (const char* name : {"p.json", "p.npz"}) {
+    const std::string path = dir + "/" + name;
+    ExportRecording(r, ExportFormatFor("", path), path);
+    const LoadedRecording back = ImportRecording(path);
+    ASSERT_EQ(back.frames.size(), r.frames.size()) << name;
+    for (size_t k = 0; k < r.frames.size(); ++k) {
+      ASSERT_EQ(back.frames[k].skin_colour.has_value(), r.frames[k].skin_colour.has_value()) << name << " " << k;
+      if (r.frames[k].skin_colour) {
+        EXPECT_EQ(*back.frames[k].skin_colour, *r.frames[k].skin_colour) << name;
+      }
+    }
+  }
+  // The csv has the three columns, empty where there is none.
+  ExportRecording(r, ExportFormat::kCsv, dir + "/p.csv");
+  std::ifstream csv(dir + "/p.csv");
+  std::string line, header, second;
+  while (std::getline(csv, line) && line[0] == '#') {
+  }
+  header = line;
+  std::getline(csv, line);
+  std::getline(csv, second);
+  EXPECT_NE(header.find(",skin_r,skin_g,skin_b"), std::string::npos) << header;
+  const std::string skin = ",0.600000024,0.449999988,0.300000012";
+  EXPECT_EQ(line.substr(line.size() - skin.size()), skin) << line;
+  EXPECT_EQ(second.substr(second.size() - 3), ",,,") << second;
+  // A skin colour beyond 0..1 in an edited export is refused, naming the file.
+  {
+    std::ifstream in(dir + "/p.json");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const size_t at = text.find("0.6", text.find("\"skin_colour\": ["));
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, 3, "1.6");
+    std::ofstream(dir + "/bad.json") << text;
+  }
+  try {
+    ImportRecording(dir + "/bad.json");
+    ADD_FAILURE() << "a skin colour of 1.6 was taken";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("skin colour"), std::string::npos) << e.what();
   }
 }
 
