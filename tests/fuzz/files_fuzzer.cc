@@ -1,7 +1,7 @@
 // libFuzzer target: the files headcast reads from elsewhere, on arbitrary
 // bytes. The first byte picks the reader: an .npy array, an .npz (zip)
 // archive, a parameter recording (.hcrec), a token file, an avatar manifest
-// (its config, subject camera and camera contract), a --config file. Each must refuse bad
+// (its config, subject camera, camera contract and tracking anchor), a --config file. Each must refuse bad
 // bytes with an exception and never crash, hang or allocate what the bytes
 // merely claim (libFuzzer's -rss_limit_mb catches that).
 #include <sys/mman.h>
@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
@@ -18,6 +19,7 @@
 #include "common/core/camera.h"
 #include "common/core/npy.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/anchor_reference.h"
 #include "proto/protocol.h"
 #include "proto/recording.h"
 
@@ -62,10 +64,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         headcast::ReadTokenFile(MemoryFile(data, size).path());
         break;
       case 4: {
+        // Each entry read on its own, as the readers of an avatar file do.
         const nlohmann::json manifest = nlohmann::json::parse(data, data + size);
-        headcast::AvatarConfig::FromJson(manifest.at("config"));
-        headcast::CameraFromJson(manifest.at("subject").at("intrinsics"));
-        headcast::CameraContract::FromJson(manifest.at("camera"));
+        const std::function<void()> entries[] = {
+            [&] { headcast::AvatarConfig::FromJson(manifest.at("config")); },
+            [&] { headcast::CameraFromJson(manifest.at("subject").at("intrinsics")); },
+            [&] { headcast::CameraContract::FromJson(manifest.at("camera")); },
+            [&] { headcast::AnchorReference::FromJson(manifest.at("tracking_anchor")); }};
+        for (const auto& read : entries) {
+          try {
+            read();
+          } catch (const std::exception&) {
+            // refused
+          }
+        }
         break;
       }
       case 5: {

@@ -3,7 +3,7 @@
 #   tests/fuzz/run_fuzz.sh SECONDS [OUT_DIR] [TARGET...]
 # Targets: frame_decoder (a Frames payload's packets), session_messages
 # (Uplink messages: Hello and its layout, Frames; the bytes as a datagram), files (npy, npz/zip,
-# .hcrec, token files, avatar manifests, config files). Default: all, each for
+# .hcrec, token files, avatar manifests with their tracking anchor, config files). Default: all, each for
 # SECONDS. Prints each target's executions, and fails if any crashed.
 set -euo pipefail
 seconds=${1:-60}
@@ -26,7 +26,7 @@ sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${p
 libs[session_messages]="-lprotobuf -lcrypto"
 sources[files]="tests/fuzz/files_fuzzer.cc ${codec[*]} ${proto[*]} proto/recording.cc proto/protocol.cc
   common/core/npy.cc common/core/zip_archive.cc common/core/check.cc common/core/log.cc
-  common/avatar/avatar_config.cc common/avatar/matte.cc"
+  common/avatar/avatar_config.cc common/avatar/matte.cc common/tracking/anchor_reference.cc"
 libs[files]="-lprotobuf -lzip -lz -lspdlog -lfmt -lopencv_core -lopencv_imgproc"
 failed=0
 for t in "${targets[@]}"; do
@@ -41,6 +41,8 @@ for t in "${targets[@]}"; do
       ${sources[$t]} ${libs[$t]:-} -o "$bin"
   fi
   mkdir -p "$out/corpus_$t"
+  # Seeds (well-formed inputs the mutations start from), where the target has them.
+  [ -d "tests/fuzz/seeds/$t" ] && cp -n tests/fuzz/seeds/"$t"/* "$out/corpus_$t/"
   echo "== $t ($seconds s)"
   # -rss_limit_mb: what a file merely claims must not be allocated.
   if ! "$bin" -max_total_time="$seconds" -max_len=4096 -rss_limit_mb=1024 -timeout=10 -print_final_stats=1 \
