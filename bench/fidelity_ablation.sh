@@ -19,7 +19,8 @@ while [ $# -gt 0 ]; do
     --dataset) dataset=$2; shift 2 ;;
     --variant) variants+=("$2"); shift 2 ;;
     --reuse) reuse=1; shift ;;
-    *) person+=("$1" "$2"); shift 2 ;;
+    *) [ $# -ge 2 ] || { echo "$name: unknown option or one without its value: $1" >&2; exit 2; }
+       person+=("$1" "$2"); shift 2 ;;
   esac
 done
 source "$root/bench/person_args.sh"
