@@ -78,6 +78,16 @@ std::optional<Eigen::Vector2d> FaceUp(const Landmarks2d& lm) {
   return up.normalized();
 }
 
+// The half-plane above the brow line (landmarks 17..26, the face's up
+// direction), or nothing when the landmarks are degenerate.
+std::optional<cv::Mat> AboveBrows(cv::Size size, const Landmarks2d& lm) {
+  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
+  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
+  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
+  if (!up || !brows.allFinite()) return std::nullopt;
+  return HalfPlane(size, brows, *up);
+}
+
 }  // namespace
 
 cv::Mat DilateEllipse(const cv::Mat& mask, int radius) {
@@ -139,11 +149,9 @@ cv::Mat DilateEllipse(const cv::Mat& mask, int radius) {
 }
 
 void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
-  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
-  if (!up) return;
-  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
-  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
-  const cv::Mat above = HalfPlane(mask->size(), brows, *up);
+  const std::optional<cv::Mat> above_brows = AboveBrows(mask->size(), lm);
+  if (!above_brows) return;
+  const cv::Mat& above = *above_brows;
   cv::Mat top;
   cv::bitwise_and(*mask, above, top);
   std::vector<cv::Point> points;
@@ -158,17 +166,15 @@ void FillHairNotches(const Landmarks2d& lm, cv::Mat* mask) {
 }
 
 void FillSkull(const cv::Mat& silhouette, const Landmarks2d& lm, cv::Mat* mask) {
-  const std::optional<Eigen::Vector2d> up = FaceUp(lm);
-  Eigen::Vector2d brows = Eigen::Vector2d::Zero();
-  for (int l = 17; l <= 26; ++l) brows += lm[l] / 10.0;
-  if (!up || !brows.allFinite() || silhouette.size() != mask->size()) return;
+  const std::optional<cv::Mat> above = AboveBrows(mask->size(), lm);
+  if (!above || silhouette.size() != mask->size()) return;
   const int radius = static_cast<int>(std::lround(kSkullInset * (0.5 * (lm[19] + lm[24]) - lm[8]).norm()));
   cv::Mat skull;
   if (radius > 0)
     cv::erode(silhouette, skull, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * radius + 1, 2 * radius + 1}));
   else
     skull = silhouette.clone();
-  cv::bitwise_and(skull, HalfPlane(mask->size(), brows, *up), skull);
+  cv::bitwise_and(skull, *above, skull);
   cv::bitwise_or(*mask, skull, *mask);
 }
 
