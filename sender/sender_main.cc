@@ -172,6 +172,11 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   if (!f.identity_from.empty()) {
     f.live.identity = ReadTrackingIdentity(f.identity_from, model);
     f.live.contract = ReadAvatarCameraContract(f.identity_from);
+    // The avatar learnt the codes of its training fits: the live fit makes them the same way.
+    if (const std::optional<ExpressionFitSettings> fit = ReadAvatarExpressionFit(f.identity_from)) {
+      fit->ApplyTo(&f.live.tracker.fit);
+      spdlog::info("expression fit as the avatar's training frames: {}", fit->ToJson().dump());
+    }
     if (f.photometric_anchor) f.live.anchor = ReadAvatarAnchorReference(f.identity_from);
     if (f.live.anchor)
       spdlog::info("photometric anchor: {} reference points from {}", f.live.anchor->referenced(), f.identity_from);
@@ -266,6 +271,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"landmark_filter", f.live.tracker.face.filter ? "causal" : "off"},
           {"landmark_filter_hz", f.live.tracker.face.filter_min_cutoff},  // when causal
           {"landmark_filter_beta", f.live.tracker.face.filter_beta},
+          {"expression_fit", ExpressionFitSettings::Of(f.live.tracker.fit).ToJson()},
           {"frames_read", read},
           {"frames_fitted", fitted},
           {"frames_unreadable", skipped},

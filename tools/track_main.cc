@@ -2,6 +2,7 @@
 // RGB-D folder, side-by-side stereo or a camera — writing the parameter
 // recording, head masks, an overlay video and a JSON report.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -25,6 +26,7 @@ struct TrackFlags {
   std::string head_model = "builtin", out, report, masks_dir, log_level, identity_from, intrinsics;
   std::string camera_size = "640x480";
   bool avatar_anchor = false;
+  std::vector<CLI::Option*> expression_fit_flags;  // given: they win over an avatar's ExpressionFitSettings
 };
 
 void AddFlags(CLI::App& app, TrackFlags& f) {
@@ -109,21 +111,27 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
   app.add_option("--landmark-filter-beta", t.tracker.face.filter_beta,
                  "the One-Euro filter's cutoff rise per pixel a second of landmark speed")
       ->capture_default_str();
-  app.add_option("--expression-prior", t.tracker.fit.expression_prior,
-                 "weight of the expression's squared coefficients against squared landmark pixels")
-      ->capture_default_str();
-  app.add_option("--expression-range-weight", t.tracker.fit.expression_range_weight,
-                 "weight of each expression coefficient's squared distance outside the model's range (ICT: 0..1), "
-                 "against squared landmark pixels")
-      ->capture_default_str();
-  app.add_option("--eye-look-prior", t.tracker.fit.eye_look_prior,
-                 "extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark pixels: "
-                 "lids close with the blink shapes")
-      ->capture_default_str();
-  app.add_option("--eye-look-prior-shapes", t.tracker.fit.eye_look_prior_shapes,
-                 "which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep their lids)")
-      ->check(CLI::IsMember(kEyeLookPriorShapes))
-      ->capture_default_str();
+  f.expression_fit_flags.push_back(
+      app.add_option("--expression-prior", t.tracker.fit.expression_prior,
+                     "weight of the expression's squared coefficients against squared landmark pixels (default: "
+                     "with --identity-from AVATAR, as its training frames were fitted)")
+          ->capture_default_str());
+  f.expression_fit_flags.push_back(
+      app.add_option("--expression-range-weight", t.tracker.fit.expression_range_weight,
+                     "weight of each expression coefficient's squared distance outside the model's range (ICT: 0..1), "
+                     "against squared landmark pixels")
+          ->capture_default_str());
+  f.expression_fit_flags.push_back(
+      app.add_option("--eye-look-prior", t.tracker.fit.eye_look_prior,
+                     "extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark pixels: "
+                     "lids close with the blink shapes")
+          ->capture_default_str());
+  f.expression_fit_flags.push_back(
+      app.add_option(
+             "--eye-look-prior-shapes", t.tracker.fit.eye_look_prior_shapes,
+             "which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep their lids)")
+          ->check(CLI::IsMember(kEyeLookPriorShapes))
+          ->capture_default_str());
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
                  "pixels): what every key frame shows goes into the shape")
@@ -146,6 +154,11 @@ int Run(TrackFlags& f) {
   if (!f.identity_from.empty()) {
     t.identity = ReadTrackingIdentity(f.identity_from, model);
     t.identity_source = f.identity_from;
+    // As the sender fits for this avatar, unless the command line says otherwise.
+    const bool given = std::any_of(f.expression_fit_flags.begin(), f.expression_fit_flags.end(),
+                                   [](const CLI::Option* o) { return o->count() > 0; });
+    if (const std::optional<ExpressionFitSettings> fit = ReadAvatarExpressionFit(f.identity_from); fit && !given)
+      fit->ApplyTo(&t.tracker.fit);
   }
   if (f.avatar_anchor) {
     if (f.identity_from.empty()) throw std::invalid_argument("--avatar-anchor needs --identity-from AVATAR");

@@ -221,6 +221,9 @@ int main(int argc, char** argv) {
                    "tracking: weight of each rigid head point (forehead, hairline) followed by optical flow, against a "
                    "landmark (0: off)")
       ->capture_default_str();
+  prep->add_option("--expression-prior", p.expression_prior,
+                   "tracking: weight of the expression's squared coefficients against squared landmark pixels")
+      ->capture_default_str();
   prep->add_option("--expression-range-weight", p.expression_range_weight,
                    "tracking: weight of each expression coefficient's squared distance outside the model's range "
                    "(ICT: 0..1), against squared landmark pixels")

@@ -42,6 +42,7 @@ void PrepOptions::Check() const {
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
       .NonNegative("expression_range_weight", expression_range_weight)
+      .NonNegative("expression_prior", expression_prior)
       .NonNegative("eye_look_prior", eye_look_prior)
       .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
                 kEyeLookPriorShapes.end(),
@@ -133,9 +134,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.shape_prior = o.shape_prior;
   track.tracker.fit.calibration_mean_expression = o.calibration_mean_expression;
   track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
-  track.tracker.fit.expression_range_weight = o.expression_range_weight;
-  track.tracker.fit.eye_look_prior = o.eye_look_prior;
-  track.tracker.fit.eye_look_prior_shapes = o.eye_look_prior_shapes;
+  o.expression_fit().ApplyTo(&track.tracker.fit);
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.predictor_views = o.predictor_views;
@@ -341,6 +340,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"predictor_views", o.predictor_views},
         {"predictor_views_points", o.predictor_views_points},
         {"gaze", o.gaze},
+        {"expression_prior", o.expression_prior},
         {"eye_look_prior", o.eye_look_prior},
         {"eye_look_prior_shapes", o.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
@@ -351,6 +351,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   const nlohmann::json anchor = track_report.value("photometric_anchor", nlohmann::json::object());
   if (anchor.is_object() && anchor.contains("reference") && !anchor.at("reference").is_null())
     manifest["tracking_anchor"] = anchor.at("reference");
+  manifest["tracking_fit"] = o.expression_fit().ToJson();
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }
@@ -436,6 +437,19 @@ std::optional<AnchorReference> PreparedDataset::anchor_reference() const {
     return AnchorReference::FromJson(manifest_.at("tracking_anchor"));
   } catch (const std::exception& e) {
     throw std::runtime_error(dir_ + "/dataset.json: tracking_anchor: " + e.what());
+  }
+}
+
+ExpressionFitSettings PreparedDataset::expression_fit() const {
+  try {
+    if (manifest_.contains("tracking_fit")) return ExpressionFitSettings::FromJson(manifest_.at("tracking_fit"));
+    ExpressionFitSettings legacy = ExpressionFitSettings::Legacy();
+    const nlohmann::json tracking = manifest_.value("tracking", nlohmann::json::object());
+    legacy.eye_look_prior = tracking.value("eye_look_prior", legacy.eye_look_prior);
+    legacy.eye_look_prior_shapes = tracking.value("eye_look_prior_shapes", legacy.eye_look_prior_shapes);
+    return ExpressionFitSettings::FromJson(legacy.ToJson());  // checks what the record held
+  } catch (const std::exception& e) {
+    throw std::runtime_error(dir_ + "/dataset.json: " + e.what());
   }
 }
 

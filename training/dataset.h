@@ -27,6 +27,7 @@
 #include "common/capture/frame_source.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/expression_fit.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/head_mask.h"
@@ -51,6 +52,7 @@ struct PrepOptions {
   // calibration: weight of the key frames' mean expression (HeadFitterOptions::calibration_mean_expression)
   double calibration_mean_expression = HeadFitterOptions{}.calibration_mean_expression;
   double rigid_flow_weight = HeadFitterOptions{}.rigid_flow_weight;  // HeadFitterOptions::rigid_flow_weight
+  double expression_prior = HeadFitterOptions{}.expression_prior;    // HeadFitterOptions::expression_prior
   // HeadFitterOptions::expression_range_weight: how hard a coefficient is held in the model's range
   double expression_range_weight = HeadFitterOptions{}.expression_range_weight;
   double eye_look_prior = HeadFitterOptions{}.eye_look_prior;                     // HeadFitterOptions::eye_look_prior
@@ -76,6 +78,9 @@ struct PrepOptions {
   // The fitted skull above the brows is head in every mask (FillSkull).
   bool fill_skull = true;
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck, fill_skull}; }
+  ExpressionFitSettings expression_fit() const {
+    return {expression_prior, expression_range_weight, eye_look_prior, eye_look_prior_shapes};
+  }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   int predictor_views = FaceTrackerOptions{}.predictor_views;  // the shape predictor's views of each face, median
@@ -140,6 +145,10 @@ class PreparedDataset {
   // The photometric anchor's references its frames were fitted to (none when
   // prepared without the anchor, or before they were recorded).
   std::optional<AnchorReference> anchor_reference() const;
+  // How its frames' expressions were fitted (datasets from before it was
+  // recorded: ExpressionFitSettings::Legacy() with the eyeLook prior they
+  // recorded). Throws naming the file when the entry is malformed.
+  ExpressionFitSettings expression_fit() const;
   // The rules its masks were cut with (datasets from before they were
   // recorded: the defaults, which they were made with unless prepped otherwise).
   MatteRules matte_rules() const;

@@ -263,6 +263,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   if (const std::optional<CameraContract> contract = data.camera_contract()) avatar.set_camera_contract(*contract);
   if (const std::optional<AnchorReference> anchor = data.anchor_reference())
     avatar.set_tracking_anchor(anchor->ToJson());
+  avatar.set_tracking_fit(data.expression_fit().ToJson());
   // The subject's own renders, decaying to none (METHOD §6): beta and tau stay the subject's.
   SyntheticDataOptions synthetic_options;
   synthetic_options.image_size = o.resolution;

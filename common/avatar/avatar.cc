@@ -17,6 +17,7 @@ struct Avatar::Impl {
   std::string fingerprint;
   std::optional<CameraContract> camera_contract;
   nlohmann::json tracking_anchor;  // null: none
+  nlohmann::json tracking_fit;     // null: none
   nlohmann::json training_summary = nlohmann::json::object();
   AvatarModules modules;
 };
@@ -33,6 +34,8 @@ const std::optional<CameraContract>& Avatar::camera_contract() const { return im
 void Avatar::set_camera_contract(const CameraContract& contract) { impl_->camera_contract = contract; }
 const nlohmann::json& Avatar::tracking_anchor() const { return impl_->tracking_anchor; }
 void Avatar::set_tracking_anchor(const nlohmann::json& reference) { impl_->tracking_anchor = reference; }
+const nlohmann::json& Avatar::tracking_fit() const { return impl_->tracking_fit; }
+void Avatar::set_tracking_fit(const nlohmann::json& settings) { impl_->tracking_fit = settings; }
 nlohmann::json& Avatar::training_summary() { return impl_->training_summary; }
 const nlohmann::json& Avatar::training_summary() const { return impl_->training_summary; }
 AvatarModules& Avatar::modules() { return impl_->modules; }
@@ -120,6 +123,7 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
   a.impl_->fingerprint = impl_->fingerprint;
   a.impl_->camera_contract = impl_->camera_contract;
   a.impl_->tracking_anchor = impl_->tracking_anchor;
+  a.impl_->tracking_fit = impl_->tracking_fit;
   a.impl_->training_summary = impl_->training_summary;
   torch::NoGradGuard no_grad;
   // Every tensor of the source; parts it lacks (an added surface texture and
@@ -155,6 +159,7 @@ void Avatar::Save(const std::string& path, const cv::Mat& preview) const {
                                {"intrinsics", CameraToJson(s.intrinsics)}}}};
   if (m.camera_contract) manifest["camera"] = m.camera_contract->ToJson();
   if (!m.tracking_anchor.is_null()) manifest["tracking_anchor"] = m.tracking_anchor;
+  if (!m.tracking_fit.is_null()) manifest["tracking_fit"] = m.tracking_fit;
   torch::serialize::OutputArchive root, cnerf, renderer, surface;
   m.modules.cnerf->save(cnerf);
   m.modules.renderer->save(renderer);
@@ -221,6 +226,7 @@ Avatar Avatar::Load(const std::string& path, const HeadModel& model) {
     a.impl_->fingerprint = fingerprint;
     if (manifest.contains("camera")) a.impl_->camera_contract = CameraContract::FromJson(manifest.at("camera"));
     a.impl_->tracking_anchor = manifest.value("tracking_anchor", nlohmann::json());
+    a.impl_->tracking_fit = manifest.value("tracking_fit", nlohmann::json());
     a.impl_->training_summary = manifest.value("training_summary", nlohmann::json::object());
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": bad manifest: " + e.what());

@@ -66,6 +66,11 @@ class Avatar {
   // the rule the avatar was trained with (ReadAvatarAnchorReference).
   const nlohmann::json& tracking_anchor() const;
   void set_tracking_anchor(const nlohmann::json& reference);
+  // How the training frames' expressions were fitted (tracking's
+  // ExpressionFitSettings as JSON; null: none, a file from before). Carried
+  // for the sender, which fits live frames the same way (ReadAvatarExpressionFit).
+  const nlohmann::json& tracking_fit() const;
+  void set_tracking_fit(const nlohmann::json& settings);
   nlohmann::json& training_summary();
   const nlohmann::json& training_summary() const;
   AvatarModules& modules();

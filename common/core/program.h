@@ -59,7 +59,8 @@ T ParseNumber(const std::string& text, const std::string& what) {
 // typed flags (--tls-ca). In `message`, every field that is the long name of
 // a flag of `app` or of its subcommands becomes that flag: names with an
 // underscore wherever they stand, one-word names where a check states a bound
-// ("iterations must be > 0"), so that ordinary words stay words.
+// ("iterations must be > 0"), so that ordinary words stay words; a name after
+// a dot is a file's key and stays.
 inline std::string InFlagNames(const CLI::App& app, std::string message) {
   std::vector<const CLI::App*> apps = {&app};
   for (size_t i = 0; i < apps.size(); ++i)
@@ -73,7 +74,10 @@ inline std::string InFlagNames(const CLI::App& app, std::string message) {
         const bool compound = field.find('_') != std::string::npos;
         for (size_t at = message.find(field); at != std::string::npos; at = message.find(field, at + 1)) {
           const size_t end = at + field.size();
-          if ((at > 0 && is_word(message[at - 1])) || (end < message.size() && is_word(message[end]))) continue;
+          // After a dot the name is a key in a file's entry (tracking_fit.expression_prior), not a flag.
+          if ((at > 0 && (is_word(message[at - 1]) || message[at - 1] == '.')) ||
+              (end < message.size() && is_word(message[end])))
+            continue;
           if (!compound && message.compare(end, 6, " must ") != 0) continue;
           message.replace(at, field.size(), "--" + name);
           at += 1;

@@ -63,6 +63,12 @@ std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path
   return ReadAvatarEntry(path, "tracking_anchor", &AnchorReference::FromJson);
 }
 
+std::optional<ExpressionFitSettings> ReadAvatarExpressionFit(const std::string& path) {
+  if (!IsAvatarFile(path)) return std::nullopt;
+  return ReadAvatarEntry(path, "tracking_fit", &ExpressionFitSettings::FromJson)
+      .value_or(ExpressionFitSettings::Legacy());
+}
+
 Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& model) {
   if (!IsAvatarFile(path)) return ReadIdentityFromMeshFit(path, model);
   const nlohmann::json manifest = ReadAvatarManifest(path);

@@ -16,6 +16,7 @@
 #include "common/core/camera.h"
 #include "common/headmodel/params.h"
 #include "common/tracking/background_identity.h"
+#include "common/tracking/expression_fit.h"
 #include "common/tracking/face_tracker.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/photometric_anchor.h"
@@ -163,6 +164,12 @@ std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path);
 // training frames were fitted to them), if any; nothing for other files.
 // Throws naming the file when it is unreadable or the references malformed.
 std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path);
+
+// How an avatar file's (.hcavatar) training frames were fitted, to fit live
+// frames the same way: the settings it carries, or ExpressionFitSettings::Legacy()
+// for a file from before they travelled; nothing for other files. Throws naming
+// the file when it is unreadable or the settings malformed.
+std::optional<ExpressionFitSettings> ReadAvatarExpressionFit(const std::string& path);
 
 // Where the RGB-D fit reads depth around these landmarks: their span with a
 // margin and the forehead above (more than the fit's own cloud box takes).

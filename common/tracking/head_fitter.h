@@ -32,8 +32,12 @@ struct RigidObservations {
 inline const std::vector<std::string> kEyeLookPriorShapes = {"all", "vertical"};
 
 struct HeadFitterOptions {
-  int num_expression = 0;          // expression components fitted (0: all the model has)
-  double expression_prior = 2e-3;  // weight of sum(psi^2) against squared pixels
+  int num_expression = 0;  // expression components fitted (0: all the model has)
+  // Weight of sum(psi^2) against squared pixels. Strong enough that a
+  // coefficient moves only for what the landmarks show: weaker, a frame's
+  // landmark noise is spread over dozens of shapes at their bounds (a shut eye
+  // fitted as a "wide" one looking down), and the avatar learns those codes.
+  double expression_prior = 5;
   // Each fitted expression coefficient is clamped to +-this, inside the
   // stream's limit (FrameParams::IsValid refuses |psi| > 5): beyond it a fit is
   // chasing landmark noise. (Tighter clamps cost landmark accuracy on talking_d9.)

@@ -13,6 +13,7 @@
 #include "common/core/rotation.h"
 #include "common/core/timer.h"
 #include "common/tracking/appearance_fit.h"
+#include "common/tracking/expression_fit.h"
 
 namespace headcast {
 bool IsLiveCameraSource(const std::string& input) {
@@ -502,6 +503,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
     report["what_rgbd_accuracy_means"] = "sqrt of the mean squared point-to-mesh distance after the fit (METHOD §3)";
   }
   if (calibration) report["calibration"] = calibration->report;
+  report["expression_fit"] = ExpressionFitSettings::Of(o.tracker.fit).ToJson();
   if (!anchored.is_null()) report["photometric_anchor"] = anchored;
   if (o.anchor_reference)
     report["photometric_anchor"] = {

@@ -235,6 +235,8 @@ TEST(Flags, CheckErrorsNameTheFlags) {
             "sender: cannot read --tls-ca; --iterations must be > 0 (got 0)");
   // One-word names stay words except where a bound is stated; longer names are not cut.
   EXPECT_EQ(InFlagNames(app, "the out folder; my_tls_ca_file"), "the out folder; my_tls_ca_file");
+  // A key of a file's entry is not a flag.
+  EXPECT_EQ(InFlagNames(app, "a.hcavatar: server.tls_ca wants a string"), "a.hcavatar: server.tls_ca wants a string");
 }
 
 // One name per concept: --json, --pacing, --max-frames; old names are hidden aliases.

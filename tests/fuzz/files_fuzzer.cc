@@ -20,6 +20,7 @@
 #include "common/core/npy.h"
 #include "common/headmodel/params.h"
 #include "common/tracking/anchor_reference.h"
+#include "common/tracking/expression_fit.h"
 #include "proto/protocol.h"
 #include "proto/recording.h"
 
@@ -70,7 +71,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             [&] { headcast::AvatarConfig::FromJson(manifest.at("config")); },
             [&] { headcast::CameraFromJson(manifest.at("subject").at("intrinsics")); },
             [&] { headcast::CameraContract::FromJson(manifest.at("camera")); },
-            [&] { headcast::AnchorReference::FromJson(manifest.at("tracking_anchor")); }};
+            [&] { headcast::AnchorReference::FromJson(manifest.at("tracking_anchor")); },
+            [&] { headcast::ExpressionFitSettings::FromJson(manifest.at("tracking_fit")); }};
         for (const auto& read : entries) {
           try {
             read();

@@ -26,7 +26,8 @@ sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${p
 libs[session_messages]="-lprotobuf -lcrypto"
 sources[files]="tests/fuzz/files_fuzzer.cc ${codec[*]} ${proto[*]} proto/recording.cc proto/protocol.cc
   common/core/npy.cc common/core/zip_archive.cc common/core/check.cc common/core/log.cc
-  common/avatar/avatar_config.cc common/avatar/matte.cc common/tracking/anchor_reference.cc"
+  common/avatar/avatar_config.cc common/avatar/matte.cc common/tracking/anchor_reference.cc
+  common/tracking/expression_fit.cc"
 libs[files]="-lprotobuf -lzip -lz -lspdlog -lfmt -lopencv_core -lopencv_imgproc"
 failed=0
 for t in "${targets[@]}"; do

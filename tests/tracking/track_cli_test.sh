@@ -51,7 +51,30 @@ with zipfile.ZipFile(tmp + '/anchored.hcavatar', 'w') as z:
 reference['grey'][0] = 'grey'
 with zipfile.ZipFile(tmp + '/broken.hcavatar', 'w') as z:
     z.writestr('manifest.json', json.dumps(manifest))
+del manifest['tracking_anchor']
+manifest['tracking_fit'] = {'expression_prior': 50, 'expression_range_weight': 100, 'eye_look_prior': 0,
+                            'eye_look_prior_shapes': 'vertical'}
+with zipfile.ZipFile(tmp + '/fitted.hcavatar', 'w') as z:
+    z.writestr('manifest.json', json.dumps(manifest))
+manifest['tracking_fit']['expression_prior'] = 'much'
+with zipfile.ZipFile(tmp + '/badfit.hcavatar', 'w') as z:
+    z.writestr('manifest.json', json.dumps(manifest))
 EOF
+# An avatar's expression fit is how frames are fitted for it, unless the
+# command line says otherwise; a file from before carries none (the settings of then).
+fit_of() {
+  "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 2 \
+    --identity-from "$tmp/$1.hcavatar" --out "$tmp/f.hcrec" --json "$tmp/f.json" "${@:2}" > /dev/null 2>&1 &&
+    "$python" -c "import json; f = json.load(open('$tmp/f.json'))['expression_fit']; print(f['expression_prior'], f['eye_look_prior_shapes'])"
+}
+[ "$(fit_of fitted)" = "50.0 vertical" ] && [ "$(fit_of fitted --expression-prior 3)" = "3.0 all" ] &&
+  [ "$(fit_of plain)" = "0.002 all" ] &&
+  ok "the avatar's expression fit used for its frames; a flag given wins; an older avatar fits as then" ||
+  bad "expression fit from the avatar: '$(fit_of fitted)' '$(fit_of fitted --expression-prior 3)' '$(fit_of plain)'"
+out=$("$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 2 \
+  --identity-from "$tmp/badfit.hcavatar" --out "$tmp/b.hcrec" 2>&1); rc=$?
+[ $rc -ne 0 ] && grep -q "badfit.hcavatar" <<<"$out" && grep -q "tracking_fit.expression_prior wants a number" <<<"$out" &&
+  ok "a malformed expression fit refused, naming the file" || bad "broken fit: rc=$rc $out"
 "$bin/headcast-track" --input "$data/video/talking_d14.mp4" --head-model "$tmp/ict.npz" --max-frames 60 \
   --identity-from "$tmp/anchored.hcavatar" --avatar-anchor --out "$tmp/l14.hcrec" --json "$tmp/l.json" > /dev/null 2>&1
 for r in a14 l14 d14; do "$bin/headcast-rec" export "$tmp/$r.hcrec" --out "$tmp/$r.npz" > /dev/null 2>&1; done

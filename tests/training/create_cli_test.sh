@@ -63,6 +63,12 @@ kill -TERM "$rx"; wait "$rx"; rx=
   [ "$(json "$tmp/tx.json" "j['tracking']['photometric_anchor'] and j['tracking']['frames_anchored'] > 0.8 * j['tracking']['frames_fitted'] and j['tracking']['landmark_filter'] == 'off'")" = True ] &&
   ok "the photometric anchor from prep to avatar to sender: $(json "$tmp/tx.json" "j['tracking']['frames_anchored']") of $(json "$tmp/tx.json" "j['tracking']['frames_fitted']") sent frames anchored" ||
   bad "anchor to the sender: $(json "$tmp/tx.json" "j['tracking']") $(grep -i anchor "$tmp/tx.log" | head -3)"
+# The expression fit travels the same way: prep records it, the avatar carries
+# it, the sender fits with it.
+[ "$(json "$tmp/me.create/dataset/dataset.json" "j['tracking_fit']")" = "$(json "$tmp/tx.json" "j['tracking']['expression_fit']")" ] &&
+  [ "$(json "$tmp/tx.json" "j['tracking']['expression_fit']['expression_prior']")" != "0.002" ] &&
+  ok "the expression fit from prep to avatar to sender: $(json "$tmp/tx.json" "j['tracking']['expression_fit']")" ||
+  bad "expression fit to the sender: $(json "$tmp/me.create/dataset/dataset.json" "j.get('tracking_fit')") against $(json "$tmp/tx.json" "j['tracking'].get('expression_fit')")"
 
 # What the receiver showed against the frames the sender tracked (the demo's comparison).
 received=$(json "$tmp/rx.json" "j['frames_received']")

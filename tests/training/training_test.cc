@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <opencv2/imgproc.hpp>
 #include <thread>
 
@@ -463,6 +464,42 @@ TEST(Dataset, LoadsAndRefusesWhatItCannotUse) {
   m["head_model"]["fingerprint"] = "0123456789abcdef";
   std::ofstream(dir + "/dataset.json") << m.dump();
   refused(dir, 128, "prepared for head model");
+}
+
+// How a dataset's expressions were fitted, for the avatar to carry to the
+// sender: as recorded, or (older datasets) the settings of then with the
+// eyeLook prior they recorded; a malformed record is refused naming the file.
+TEST(Dataset, TellsHowItsExpressionsWereFitted) {
+  const std::string dir = WriteRenderedDataset("dataset_fit", 4, 1);
+  const auto load = [&](const std::function<void(nlohmann::json&)>& edit) {
+    nlohmann::json m = nlohmann::json::parse(std::ifstream(dir + "/dataset.json"));
+    m.erase("tracking_fit");
+    edit(m);
+    std::ofstream(dir + "/dataset.json") << m.dump();
+    return PreparedDataset::Load(dir, Model(), 128).expression_fit();
+  };
+  EXPECT_EQ(load([](nlohmann::json&) {}), ExpressionFitSettings::Legacy());
+  ExpressionFitSettings legacy_prior = ExpressionFitSettings::Legacy();
+  legacy_prior.eye_look_prior = 100;
+  legacy_prior.eye_look_prior_shapes = "vertical";
+  EXPECT_EQ(load([](nlohmann::json& m) {
+              m["tracking"]["eye_look_prior"] = 100;
+              m["tracking"]["eye_look_prior_shapes"] = "vertical";
+            }),
+            legacy_prior);
+  const ExpressionFitSettings recorded{5, 100, 0, "all"};
+  EXPECT_EQ(load([&](nlohmann::json& m) { m["tracking_fit"] = recorded.ToJson(); }), recorded);
+  try {
+    load([&](nlohmann::json& m) {
+      m["tracking_fit"] = recorded.ToJson();
+      m["tracking_fit"]["expression_prior"] = -1;
+    });
+    ADD_FAILURE() << "a negative prior accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("dataset.json: tracking_fit.expression_prior wants a finite"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // METHOD §6 on real frames: beta/tau frozen (no offsets there), the first
