@@ -222,7 +222,8 @@ int main(int argc, char** argv) {
                    "landmark (0: off)")
       ->capture_default_str();
   prep->add_option("--expression-prior", p.expression_prior,
-                   "tracking: weight of the expression's squared coefficients against squared landmark pixels")
+                   "tracking: weight of the expression's squared coefficients against squared landmark pixels (the "
+                   "avatar carries it to the sender, which fits with it)")
       ->capture_default_str();
   prep->add_option("--expression-range-weight", p.expression_range_weight,
                    "tracking: weight of each expression coefficient's squared distance outside the model's range "

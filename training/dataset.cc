@@ -340,7 +340,6 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"predictor_views", o.predictor_views},
         {"predictor_views_points", o.predictor_views_points},
         {"gaze", o.gaze},
-        {"expression_prior", o.expression_prior},
         {"eye_look_prior", o.eye_look_prior},
         {"eye_look_prior_shapes", o.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
