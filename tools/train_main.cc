@@ -221,19 +221,19 @@ int main(int argc, char** argv) {
                    "tracking: weight of each rigid head point (forehead, hairline) followed by optical flow, against a "
                    "landmark (0: off)")
       ->capture_default_str();
-  prep->add_option("--expression-prior", p.expression_prior,
+  prep->add_option("--expression-prior", p.expression_fit.expression_prior,
                    "tracking: weight of the expression's squared coefficients against squared landmark pixels (the "
                    "avatar carries it to the sender, which fits with it)")
       ->capture_default_str();
-  prep->add_option("--expression-range-weight", p.expression_range_weight,
+  prep->add_option("--expression-range-weight", p.expression_fit.expression_range_weight,
                    "tracking: weight of each expression coefficient's squared distance outside the model's range "
                    "(ICT: 0..1), against squared landmark pixels")
       ->capture_default_str();
-  prep->add_option("--eye-look-prior", p.eye_look_prior,
+  prep->add_option("--eye-look-prior", p.expression_fit.eye_look_prior,
                    "tracking: extra weight of the eyeLook coefficients (lid motion with gaze) against squared landmark "
                    "pixels: lids close with the blink shapes")
       ->capture_default_str();
-  prep->add_option("--eye-look-prior-shapes", p.eye_look_prior_shapes,
+  prep->add_option("--eye-look-prior-shapes", p.expression_fit.eye_look_prior_shapes,
                    "tracking: which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep "
                    "their lids)")
       ->check(CLI::IsMember(kEyeLookPriorShapes))

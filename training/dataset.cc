@@ -41,10 +41,10 @@ void PrepOptions::Check() const {
       .NonNegative("shape_prior", shape_prior)
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
-      .NonNegative("expression_range_weight", expression_range_weight)
-      .NonNegative("expression_prior", expression_prior)
-      .NonNegative("eye_look_prior", eye_look_prior)
-      .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
+      .NonNegative("expression_range_weight", expression_fit.expression_range_weight)
+      .NonNegative("expression_prior", expression_fit.expression_prior)
+      .NonNegative("eye_look_prior", expression_fit.eye_look_prior)
+      .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), expression_fit.eye_look_prior_shapes) !=
                 kEyeLookPriorShapes.end(),
             "eye_look_prior_shapes must be all or vertical")
       .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
@@ -134,7 +134,7 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
   track.tracker.fit.shape_prior = o.shape_prior;
   track.tracker.fit.calibration_mean_expression = o.calibration_mean_expression;
   track.tracker.fit.rigid_flow_weight = o.rigid_flow_weight;
-  o.expression_fit().ApplyTo(&track.tracker.fit);
+  o.expression_fit.ApplyTo(&track.tracker.fit);
   track.tracker.face.locate_irises = o.gaze;
   track.tracker.face.repair.repair = o.landmark_repair;
   track.tracker.face.predictor_views = o.predictor_views;
@@ -340,8 +340,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"predictor_views", o.predictor_views},
         {"predictor_views_points", o.predictor_views_points},
         {"gaze", o.gaze},
-        {"eye_look_prior", o.eye_look_prior},
-        {"eye_look_prior_shapes", o.eye_look_prior_shapes},
+        {"eye_look_prior", o.expression_fit.eye_look_prior},
+        {"eye_look_prior_shapes", o.expression_fit.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
         {"landmark_filter", o.landmark_filter},
         {"pose_smoothing", o.pose_smoothing},
@@ -350,7 +350,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   const nlohmann::json anchor = track_report.value("photometric_anchor", nlohmann::json::object());
   if (anchor.is_object() && anchor.contains("reference") && !anchor.at("reference").is_null())
     manifest["tracking_anchor"] = anchor.at("reference");
-  manifest["tracking_fit"] = o.expression_fit().ToJson();
+  manifest["tracking_fit"] = o.expression_fit.ToJson();
   std::ofstream(dir / "dataset.json") << manifest.dump(2) << "\n";
   return manifest;
 }

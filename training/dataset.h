@@ -52,11 +52,9 @@ struct PrepOptions {
   // calibration: weight of the key frames' mean expression (HeadFitterOptions::calibration_mean_expression)
   double calibration_mean_expression = HeadFitterOptions{}.calibration_mean_expression;
   double rigid_flow_weight = HeadFitterOptions{}.rigid_flow_weight;  // HeadFitterOptions::rigid_flow_weight
-  double expression_prior = HeadFitterOptions{}.expression_prior;    // HeadFitterOptions::expression_prior
-  // HeadFitterOptions::expression_range_weight: how hard a coefficient is held in the model's range
-  double expression_range_weight = HeadFitterOptions{}.expression_range_weight;
-  double eye_look_prior = HeadFitterOptions{}.eye_look_prior;                     // HeadFitterOptions::eye_look_prior
-  std::string eye_look_prior_shapes = HeadFitterOptions{}.eye_look_prior_shapes;  // all or vertical
+  // How the expression is fitted (prior, range weight, eyeLook prior); recorded
+  // in dataset.json for the avatar to carry to the sender.
+  ExpressionFitSettings expression_fit;
   double crop_scale = 2.2;  // crop edge over the landmarks' extent (room for hair, ears, neck)
   // The training mask is the tracker's head mask (GrabCut) within the fitted
   // head model's silhouette dilated by this fraction of the crop edge: pixels
@@ -78,9 +76,6 @@ struct PrepOptions {
   // The fitted skull above the brows is head in every mask (FillSkull).
   bool fill_skull = true;
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck, fill_skull}; }
-  ExpressionFitSettings expression_fit() const {
-    return {expression_prior, expression_range_weight, eye_look_prior, eye_look_prior_shapes};
-  }
   bool gaze = true;             // locate the irises and fit the eye joints (off: the eyes look ahead, as before)
   bool landmark_repair = true;  // carry disputed brow and mouth landmarks by flow (LandmarkRepairOptions::repair)
   int predictor_views = FaceTrackerOptions{}.predictor_views;  // the shape predictor's views of each face, median
