@@ -149,6 +149,9 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
                   "metres: the texture also covers the pixels just beyond the mesh, looked up on the mesh inflated "
                   "by this much (hair, the outline; 0: the mesh only)")
       ->capture_default_str();
+  app->add_flag("--surface-rigid,!--no-surface-rigid", config->surface_rigid,
+                "a second texture looked up at the posed surface point in the head frame, beside the canonical one "
+                "(what moves with the head but not with the skin under it: glasses, hair over the face)");
   app->add_flag("--surface-conditioned,!--no-surface-conditioned", config->surface_conditioned,
                 "the texture's branch is scaled and shifted per frame by the pose and expression (detail that comes "
                 "and goes with the expression: wrinkles, creases)");

@@ -79,6 +79,9 @@ void AvatarConfig::Check() const {
   c.InRange("surface_extent", surface_extent, 0.01, 2.0);
   c.InRange("surface_shell", surface_shell, 0.0, 0.2);
   c.That(surface_shell == 0 || has_surface(), "surface_shell needs surface_features > 0");
+  c.That(!surface_rigid || has_surface(), "surface_rigid needs surface_features > 0");
+  c.That(!surface_rigid || surface_shell == 0,
+         "surface_rigid takes no surface_shell (a shell pixel has no posed point)");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
   c.InRange("surface_hidden", surface_hidden, 0, 256)
       .InRange("surface_levels", surface_levels, 1, std::max(1, renderer_levels()));
@@ -115,6 +118,7 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"surface_resolution", surface_resolution},
           {"surface_extent", surface_extent},
           {"surface_shell", surface_shell},
+          {"surface_rigid", surface_rigid},
           {"surface_conditioned", surface_conditioned},
           {"surface_hidden", surface_hidden},
           {"surface_levels", surface_levels},
@@ -155,6 +159,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
     c.surface_extent = j.value("surface_extent", c.surface_extent);
     c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
+    c.surface_rigid = j.value("surface_rigid", false);
     c.surface_conditioned = j.value("surface_conditioned", false);
     c.surface_hidden = j.value("surface_hidden", 0);
     c.surface_levels = j.value("surface_levels", 1);

@@ -90,6 +90,13 @@ struct AvatarConfig : AvatarCommonConfig {
   // canonical mesh inflated alike. The hair's outline then moves with the
   // head and can be drawn as sharply as the face (0: off, the mesh only).
   double surface_shell = 0;
+  // A second texture looked up at the posed surface point in the head frame
+  // (the rasterised point before the canonical mapping), summed with the
+  // first. What sits off the skin but moves with the head (glasses, hair
+  // over the cheeks and brow, earrings) is drawn by the skin under it; in
+  // the canonical texture that skin moves with every blink, cheek and jaw,
+  // and with it what the texture painted there. false: the canonical texture only.
+  bool surface_rigid = false;
   // The surface branch's hidden layer is scaled and shifted per frame by the
   // pose and expression (FiLM), so that the texture can hold detail that comes
   // and goes with the expression (forehead wrinkles, creases, the mouth's

@@ -214,21 +214,31 @@ SurfaceTextureImpl::SurfaceTextureImpl(const AvatarConfig& config) : extent_(con
   config.Check();
   const int64_t r = config.surface_resolution;
   planes_ = register_parameter("planes", torch::zeros({3, config.surface_features, r, r}));
+  if (config.surface_rigid)
+    rigid_planes_ = register_parameter("rigid_planes", torch::zeros({3, config.surface_features, r, r}));
 }
 
 void SurfaceTextureImpl::UseChannelsLast() {
   torch::NoGradGuard no_grad;
   planes_.set_data(planes_.contiguous(torch::MemoryFormat::ChannelsLast));
+  if (rigid()) rigid_planes_.set_data(rigid_planes_.contiguous(torch::MemoryFormat::ChannelsLast));
   channels_last_ = true;
 }
 
-torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical) {
-  const int64_t p = canonical.size(0);
-  const torch::Tensor u = (canonical / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
-  if (channels_last_ && !torch::GradMode::is_enabled() && planes_.is_contiguous(torch::MemoryFormat::ChannelsLast)) {
-    const torch::Tensor points = u.to(torch::kFloat).contiguous();
-    torch::Tensor features = torch::empty({p, planes_.size(1)}, points.options());
-    LookUpTriplanes({planes_.data_ptr<float>(), planes_.size(2), planes_.size(1)}, points.data_ptr<float>(), p,
+torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const torch::Tensor& posed) {
+  if (!rigid()) return LookUp(planes_, canonical);
+  if (!posed.defined() || posed.sizes() != canonical.sizes())
+    throw std::invalid_argument("SurfaceTexture: a rigid texture needs the posed points of the canonical ones");
+  return LookUp(planes_, canonical) + LookUp(rigid_planes_, posed);
+}
+
+torch::Tensor SurfaceTextureImpl::LookUp(const torch::Tensor& planes, const torch::Tensor& points) const {
+  const int64_t p = points.size(0);
+  const torch::Tensor u = (points / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
+  if (channels_last_ && !torch::GradMode::is_enabled() && planes.is_contiguous(torch::MemoryFormat::ChannelsLast)) {
+    const torch::Tensor at = u.to(torch::kFloat).contiguous();
+    torch::Tensor features = torch::empty({p, planes.size(1)}, at.options());
+    LookUpTriplanes({planes.data_ptr<float>(), planes.size(2), planes.size(1)}, at.data_ptr<float>(), p,
                     features.data_ptr<float>());
     return features;
   }
@@ -237,7 +247,7 @@ torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical) {
   const torch::Tensor grid =
       torch::stack({torch::stack({x, y}, 1), torch::stack({x, z}, 1), torch::stack({y, z}, 1)}, 0).unsqueeze(1);
   const torch::Tensor sampled = F::grid_sample(
-      planes_, grid,
+      planes, grid,
       F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(false));
   return sampled.sum(0).view({-1, p}).t();  // (3, C, 1, P) -> (P, C)
 }

@@ -90,11 +90,14 @@ TORCH_MODULE(UpsamplingBlock);
 // A learned feature texture on the canonical (neutral) head surface: three
 // axis-aligned planes (xy, xz, yz) over +-surface_extent, bilinearly sampled and
 // summed. Starts at zero, so a renderer given it first draws what it drew without.
+// With surface_rigid, a second set of planes looked up at the posed points.
 class SurfaceTextureImpl : public torch::nn::Module {
  public:
   explicit SurfaceTextureImpl(const AvatarConfig& config);
-  // canonical points (P, 3), model frame, metres -> features (P, C).
-  torch::Tensor forward(const torch::Tensor& canonical);
+  // canonical points (P, 3), model frame, metres [, posed points (P, 3), the
+  // same pixels' posed surface points: needed with surface_rigid] -> features (P, C).
+  torch::Tensor forward(const torch::Tensor& canonical, const torch::Tensor& posed = torch::Tensor());
+  bool rigid() const { return rigid_planes_.defined(); }
   // Inference: keeps the planes texel after texel (channels-last), so that a
   // lookup without gradients reads a texel's channels side by side
   // (LookUpTriplanes) instead of grid_sample's walk channel after channel.
@@ -104,7 +107,9 @@ class SurfaceTextureImpl : public torch::nn::Module {
  private:
   double extent_;
   bool channels_last_ = false;
-  torch::Tensor planes_;  // (3, C, R, R)
+  torch::Tensor planes_;        // (3, C, R, R)
+  torch::Tensor rigid_planes_;  // the same, with surface_rigid (else undefined)
+  torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& points) const;
 };
 TORCH_MODULE(SurfaceTexture);
 

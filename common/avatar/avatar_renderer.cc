@@ -147,8 +147,14 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
         torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
     const torch::Tensor pixels =
         torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
-    const torch::Tensor features =
-        n > 0 ? modules.surface->forward(canonical) : torch::zeros({0, modules.cnerf->config().surface_features});
+    torch::Tensor posed;
+    if (modules.surface->rigid()) {
+      if (surface.posed.size() != surface.canonical.size())
+        throw std::invalid_argument("RunAvatarUpsampling: the rigid texture needs the surface's posed points");
+      posed = torch::from_blob(const_cast<float*>(surface.posed.data()), {n, 3}, torch::kFloat);
+    }
+    const torch::Tensor features = n > 0 ? modules.surface->forward(canonical, posed)
+                                         : torch::zeros({0, modules.cnerf->config().surface_features});
     const AvatarConfig& config = modules.cnerf->config();
     const torch::Tensor motion = config.surface_conditioned
                                      ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
@@ -221,7 +227,8 @@ void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, co
   Stopwatch watch;
   // The bound needs the full-resolution silhouette the surface lookup makes.
   if (config.has_surface() || config.matte == MatteMode::kBounded)
-    sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface);
+    sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface,
+                           config.surface_rigid ? &out->posed.vertices : nullptr);
   if (config.matte == MatteMode::kBounded) {
     MakeMatteBound(config, out->surface, out->posed, out->cam_from_head, subject.intrinsics, out);
   } else {

@@ -91,6 +91,17 @@ void CheckCanonicalVertices(const char* who, const Eigen::VectorXf& canonical, E
 // The canonical point under pixel `p` of `b`: the same triangle and
 // barycentrics on `canonical` (x y z per vertex), each vertex moved by
 // `offset` along its canonical normal (none when `normals` is null).
+// The point under pixel `p` of `b` on a mesh of the same faces (`vertices`: x y z per vertex).
+void SurfacePoint(const RasterBuffers& b, int p, const RasterFaces& faces, const float* vertices, float point[3]) {
+  point[0] = point[1] = point[2] = 0;
+  const int f = b.face[p];
+  for (int corner = 0; corner < 3; ++corner) {
+    const float w = b.bary[3 * p + corner];
+    const float* v = vertices + 3 * faces(f, corner);
+    for (int k = 0; k < 3; ++k) point[k] += w * v[k];
+  }
+}
+
 void CanonicalPoint(const RasterBuffers& b, int p, const RasterFaces& faces, const Eigen::VectorXf& canonical,
                     const RowMatrixX3f* normals, float offset, float point[3]) {
   point[0] = point[1] = point[2] = 0;
@@ -105,8 +116,12 @@ void CanonicalPoint(const RasterBuffers& b, int p, const RasterFaces& faces, con
 }  // namespace
 
 void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
-                               const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, SurfaceBatch* out) {
+                               const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, SurfaceBatch* out,
+                               const RowMatrixX3f* posed_vertices) {
   CheckCanonicalVertices("SampleSurface", canonical_vertices, vertices_in_cam.rows());
+  if (posed_vertices && posed_vertices->rows() != vertices_in_cam.rows())
+    throw std::invalid_argument("SampleSurface: " + std::to_string(posed_vertices->rows()) +
+                                " posed vertices for a mesh of " + std::to_string(vertices_in_cam.rows()));
   RasterOptions raster;
   raster.cull_back_faces = true;
   Rasterize(vertices_in_cam, faces, cam, raster, &surface_buffers_);
@@ -114,6 +129,7 @@ void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const Rast
   out->height = cam.height;
   out->pixel.clear();
   out->canonical.clear();
+  out->posed.clear();
   const RasterBuffers& b = surface_buffers_;
   for (int p = 0; p < cam.width * cam.height; ++p) {
     if (b.face[p] < 0) continue;
@@ -121,6 +137,10 @@ void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const Rast
     float point[3];
     CanonicalPoint(b, p, faces, canonical_vertices, nullptr, 0.f, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
+    if (posed_vertices) {
+      SurfacePoint(b, p, faces, posed_vertices->data(), point);
+      out->posed.insert(out->posed.end(), point, point + 3);
+    }
   }
   out->mesh_pixels = out->num_pixels();
   if (config_.surface_shell > 0)

@@ -34,7 +34,10 @@ struct SurfaceBatch {
   int width = 0, height = 0;     // output image size
   std::vector<int32_t> pixel;    // covered pixel -> y * width + x; the mesh's first, then the shell's
   std::vector<float> canonical;  // 3 per covered pixel, model frame, metres
-  int mesh_pixels = 0;           // the first this many pixels are the mesh's: its silhouette
+  // With posed vertices given: 3 per mesh pixel, the posed surface point there
+  // (model frame, metres); empty otherwise.
+  std::vector<float> posed;
+  int mesh_pixels = 0;  // the first this many pixels are the mesh's: its silhouette
   int num_pixels() const { return static_cast<int>(pixel.size()); }
 };
 
@@ -60,9 +63,12 @@ class RaySampler {
 
   // Rasterises the posed mesh at `output_camera`'s size and maps every covered
   // pixel to the canonical mesh (`canonical_vertices`: 3N, x y z per vertex);
-  // with a shell, then the pixels only the inflated mesh covers.
+  // with a shell, then the pixels only the inflated mesh covers. With
+  // `posed_vertices` (the same mesh in the model frame), each mesh pixel's
+  // posed point too (SurfaceBatch::posed).
   void SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
-                     const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, SurfaceBatch* out);
+                     const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, SurfaceBatch* out,
+                     const RowMatrixX3f* posed_vertices = nullptr);
 
  private:
   void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,

@@ -112,6 +112,40 @@ TEST(SurfaceSampling, TheCanonicalPointMapsBackOntoThePixel) {
   EXPECT_GT(moved, 0.005) << "the expression and jaw moved nothing: the test frame proves little";
 }
 
+// With the posed vertices, each mesh pixel also gets the posed surface point
+// there: carried into the camera by the head's placement, it lands on the
+// pixel; on an expressive frame it is not the canonical point.
+TEST(SurfaceSampling, ThePosedPointIsTheSurfaceSeenAtThePixel) {
+  const HeadModel& m = *Builtin();
+  const FrameParams frame = Expressive();
+  const Posed p = Pose(frame, 128);
+  RaySampler sampler(TinyWithSurface());
+  SurfaceBatch plain, with;
+  sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &plain);
+  EXPECT_TRUE(plain.posed.empty()) << "no posed vertices, no posed points";
+  sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &with, &p.posed.vertices);
+  ASSERT_EQ(with.pixel, plain.pixel);
+  ASSERT_EQ(with.canonical, plain.canonical);
+  ASSERT_EQ(with.posed.size(), with.canonical.size());
+  ASSERT_GT(with.num_pixels(), 1000);
+  const RigidTransform cam_from_head = frame.CamFromHead();
+  double worst_px = 0, moved = 0;
+  for (int i = 0; i < with.num_pixels(); ++i) {
+    const Eigen::Vector3d q(with.posed[3 * i], with.posed[3 * i + 1], with.posed[3 * i + 2]);
+    const Eigen::Vector2d at = p.camera.Project(cam_from_head.rotation * q + cam_from_head.translation);
+    const int px = with.pixel[i];
+    worst_px = std::max(worst_px, std::hypot(at.x() - px % p.camera.width, at.y() - px / p.camera.width));
+    moved = std::max(
+        moved,
+        (q - Eigen::Vector3d(with.canonical[3 * i], with.canonical[3 * i + 1], with.canonical[3 * i + 2])).norm());
+  }
+  EXPECT_LT(worst_px, 0.02);
+  EXPECT_GT(moved, 0.005) << "the expression moved nothing: the test frame proves little";
+  RowMatrixX3f fewer = p.posed.vertices.topRows(10);
+  EXPECT_THROW(sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &with, &fewer),
+               std::invalid_argument);
+}
+
 // The shell leaves the mesh's pixels as they were and adds pixels beyond its
 // silhouette, each mapped to a point the shell's thickness off the canonical surface.
 TEST(SurfaceShell, AddsPixelsBeyondTheMeshOffTheCanonicalSurface) {
@@ -523,6 +557,87 @@ TEST(SurfaceTexture, TheBranchWidthIsChosenAndOldFilesKeepTwiceTheFeatures) {
   EXPECT_EQ(AvatarConfig::FromJson(old).surface_hidden_channels(), 2 * c.surface_features);
   c.surface_hidden = -1;
   EXPECT_THROW(c.Check(), std::invalid_argument);
+}
+
+// The rigid texture is a second set of planes looked up at the posed points
+// and added: it starts at zero (the picture as without it), reads what
+// grid_sample reads on the receiver's texel-major planes, is refused without
+// the posed points, needs a texture and no shell, and travels in the file.
+TEST(SurfaceTexture, ARigidTextureAddsPlanesLookedUpAtThePosedPoints) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_rigid = true;
+  SurfaceTexture texture(c);
+  ASSERT_TRUE(texture->rigid());
+  ASSERT_EQ(texture->parameters().size(), 2u);
+  const torch::Tensor canonical = (torch::rand({500, 3}) * 2 - 1) * 0.15,
+                      posed = (torch::rand({500, 3}) * 2 - 1) * 0.15;
+  EXPECT_EQ(texture->forward(canonical, posed).abs().max().item<float>(), 0.f) << "a new texture is zero";
+  EXPECT_THROW(texture->forward(canonical), std::invalid_argument);
+  {
+    torch::NoGradGuard no_grad;
+    texture->named_parameters()["rigid_planes"].uniform_(-1, 1);
+  }
+  // The canonical planes are still zero: only the posed points decide.
+  const torch::Tensor f = texture->forward(canonical, posed).detach();
+  EXPECT_LT((texture->forward(canonical * 0.5, posed) - f).abs().max().item<float>(), 1e-6);
+  EXPECT_GT((texture->forward(canonical, posed * 0.5) - f).abs().max().item<float>(), 0.1);
+  {
+    torch::NoGradGuard no_grad;
+    texture->named_parameters()["planes"].uniform_(-1, 1);
+  }
+  SurfaceTexture plain(TinyWithSurface());
+  {
+    torch::NoGradGuard no_grad;
+    plain->named_parameters()["planes"].copy_(texture->named_parameters()["planes"]);
+  }
+  const torch::Tensor both = texture->forward(canonical, posed).detach();
+  EXPECT_LT((both - plain->forward(canonical).detach() - f).abs().max().item<float>(), 1e-5) << "the sum of the two";
+  texture->UseChannelsLast();
+  {
+    torch::NoGradGuard no_grad;
+    EXPECT_LT((texture->forward(canonical, posed) - both).abs().max().item<float>(), 1e-6);
+  }
+
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).surface_rigid);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_rigid");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).surface_rigid) << "files from before it: the canonical texture only";
+  AvatarConfig bad = testing::TinyAvatarConfig();
+  bad.surface_rigid = true;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a rigid texture without a texture";
+  bad = c;
+  bad.surface_shell = 0.02;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a shell pixel has no posed point";
+
+  // Added to a general model: the same picture; saved and loaded: the same picture.
+  const HeadModel& m = *Builtin();
+  Avatar general = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 3);
+  Avatar with = general.WithRuntimeSwitches(c);
+  const FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : with.modules().surface->parameters()) t.uniform_(-1, 1);
+  }
+  const std::string dir = testing::TempDir("rigid_surface");
+  with.Save(dir + "/r.hcavatar");
+  Avatar back = Avatar::Load(dir + "/r.hcavatar", m);
+  EXPECT_TRUE(back.config().surface_rigid);
+  const cv::Mat y = Shown(back, frame);
+  EXPECT_EQ(cv::norm(Shown(with, frame), y, cv::NORM_INF), 0) << "the loaded texture draws what the saved one did";
+  EXPECT_EQ(cv::norm(y, Shown(back, frame), cv::NORM_INF), 0) << "the same frame twice, the same picture";
+  AvatarConfig canonical_only = c;
+  canonical_only.surface_rigid = false;
+  EXPECT_THROW(with.WithRuntimeSwitches(canonical_only), std::invalid_argument) << "a texture is not changed";
+  // A manifest that promises the rigid planes the weights do not hold.
+  Avatar one = Avatar::CreateRandom(TinyWithSurface(), m, DefaultSubject(m, 128), 4);
+  one.Save(dir + "/one.hcavatar");
+  ZipEntries entries = ReadZip(dir + "/one.hcavatar");
+  nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+  manifest["config"]["surface_rigid"] = true;
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/lying.hcavatar", entries);
+  EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
 }
 
 TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
