@@ -88,28 +88,17 @@ void CheckCanonicalVertices(const char* who, const Eigen::VectorXf& canonical, E
                                 " canonical vertices for a mesh of " + std::to_string(vertices));
 }
 
-// The canonical point under pixel `p` of `b`: the same triangle and
-// barycentrics on `canonical` (x y z per vertex), each vertex moved by
-// `offset` along its canonical normal (none when `normals` is null).
-// The point under pixel `p` of `b` on a mesh of the same faces (`vertices`: x y z per vertex).
-void SurfacePoint(const RasterBuffers& b, int p, const RasterFaces& faces, const float* vertices, float point[3]) {
-  point[0] = point[1] = point[2] = 0;
-  const int f = b.face[p];
-  for (int corner = 0; corner < 3; ++corner) {
-    const float w = b.bary[3 * p + corner];
-    const float* v = vertices + 3 * faces(f, corner);
-    for (int k = 0; k < 3; ++k) point[k] += w * v[k];
-  }
-}
-
-void CanonicalPoint(const RasterBuffers& b, int p, const RasterFaces& faces, const Eigen::VectorXf& canonical,
-                    const RowMatrixX3f* normals, float offset, float point[3]) {
+// The point under pixel `p` of `b` on a mesh of the same faces (`vertices`:
+// x y z per vertex, canonical or posed): the same triangle and barycentrics,
+// each vertex moved by `offset` along its normal (none when `normals` is null).
+void PointUnderPixel(const RasterBuffers& b, int p, const RasterFaces& faces, const float* vertices,
+                     const RowMatrixX3f* normals, float offset, float point[3]) {
   point[0] = point[1] = point[2] = 0;
   const int f = b.face[p];
   for (int corner = 0; corner < 3; ++corner) {
     const float w = b.bary[3 * p + corner];
     const int v = faces(f, corner);
-    for (int k = 0; k < 3; ++k) point[k] += w * (canonical[3 * v + k] + (normals ? offset * (*normals)(v, k) : 0.f));
+    for (int k = 0; k < 3; ++k) point[k] += w * (vertices[3 * v + k] + (normals ? offset * (*normals)(v, k) : 0.f));
   }
 }
 
@@ -135,10 +124,10 @@ void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const Rast
     if (b.face[p] < 0) continue;
     out->pixel.push_back(p);
     float point[3];
-    CanonicalPoint(b, p, faces, canonical_vertices, nullptr, 0.f, point);
+    PointUnderPixel(b, p, faces, canonical_vertices.data(), nullptr, 0.f, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
     if (posed_vertices) {
-      SurfacePoint(b, p, faces, posed_vertices->data(), point);
+      PointUnderPixel(b, p, faces, posed_vertices->data(), nullptr, 0.f, point);
       out->posed.insert(out->posed.end(), point, point + 3);
     }
   }
@@ -168,7 +157,7 @@ void RaySampler::AppendShell(const RasterVertices& vertices_in_cam, const Raster
     if (b.face[p] < 0 || mesh.face[p] >= 0) continue;
     out->pixel.push_back(p);
     float point[3];
-    CanonicalPoint(b, p, faces, canonical_vertices, &canonical_normals_, shell, point);
+    PointUnderPixel(b, p, faces, canonical_vertices.data(), &canonical_normals_, shell, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
   }
 }
