@@ -167,6 +167,9 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--canonical-samples,!--no-canonical-samples", config->canonical_samples,
                 "move CNeRF samples into the neutral head through the posed triangle under their ray "
                 "(the mesh carries the motion; off: rigid head frame, the thesis's avatar)");
+  app->add_flag("--rigid-margin,!--no-rigid-margin", config->rigid_margin,
+                "with canonical samples: the rays beside the silhouette (the hair beyond the head) stay rigid with "
+                "the skull instead of following the nearest triangle, which a raised brow or a moved jaw stretches");
   app->add_option_function<std::string>(
          "--motion-conditioning",
          [config](const std::string& name) { config->motion_conditioning = ParseMotionConditioning(name); },
@@ -257,6 +260,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   prep->add_option("--mask-working-size", p.mask_working_size,
                    "training masks: GrabCut segments the head region at about this many pixels across")
+      ->capture_default_str();
+  prep->add_option("--steady-masks", p.steady_masks,
+                   "training masks: GrabCut's masks of this many frames either side moved with the head and "
+                   "averaged (0: each frame's own)")
       ->capture_default_str();
   prep->add_flag("--keep-neck", p.keep_neck, "training masks keep the neck (where GrabCut finds it)");
   prep->add_flag("!--no-skull-fill", p.fill_skull,

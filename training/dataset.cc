@@ -38,6 +38,7 @@ void PrepOptions::Check() const {
       .InRange("mask_margin", mask_margin, 0.0, 0.5)
       .InRange("side_margin", side_margin, 0.0, mask_margin)
       .InRange("mask_working_size", mask_working_size, 32, 2048)
+      .InRange("steady_masks", steady_masks, 0, kMaxSteadyMasks)
       .NonNegative("shape_prior", shape_prior)
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
@@ -91,6 +92,25 @@ namespace {
 double Percentile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
   return v[static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1))];
+}
+
+// Points that move with the skull, in `camera`'s pixels (2 x P): every few
+// vertices of the subject's head under the frame's placement and neck, without
+// expression, jaw or eyes (SteadyMask's points).
+Eigen::Matrix2Xd SkullPoints(const HeadModel& model, const HeadIdentity& identity, const FrameParams& params,
+                             const PinholeCamera& camera) {
+  constexpr int kPoints = 400;
+  PoseVector pose = params.HeadPose();
+  pose.tail(kNumPoseParams - 3 * kJawJoint).setZero();  // the jaw and the eyes
+  HeadModelOutput rigid;
+  model.Forward(identity, Eigen::VectorXd::Zero(model.num_expression()), pose, &rigid);
+  RasterVertices in_camera;
+  TransformToCamera(rigid.vertices, params.CamFromHead(), &in_camera);
+  const int stride = std::max(1, static_cast<int>(in_camera.rows()) / kPoints);
+  Eigen::Matrix2Xd points(2, (in_camera.rows() + stride - 1) / stride);
+  for (int i = 0, k = 0; i < in_camera.rows(); i += stride, ++k)
+    points.col(k) = camera.Project(in_camera.row(i).transpose().cast<double>());
+  return points;
 }
 
 }  // namespace
@@ -217,38 +237,56 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
   const double x0 = std::clamp(Percentile(cx, 0.5) - side / 2, 0.0, camera.width - side);
   const double y0 = std::clamp(Percentile(cy, 0.5) - 0.3 * size - side / 2, 0.0, camera.height - side);
 
-  // 3. Crops and masks at each resolution, named by source frame number.
+  // 3. Crops and masks at each resolution, named by source frame number: the
+  //    images written as they are cut, GrabCut's masks kept with the head's
+  //    place in each crop, then steadied over time (SteadyMask) and cut by the
+  //    fit's rules.
   for (int r : o.resolutions) {
     fs::create_directories(dir / std::to_string(r) / "images");
     fs::create_directories(dir / std::to_string(r) / "masks");
   }
+  std::vector<int64_t> numbers;
+  std::map<int, std::vector<cv::Mat>> grabcut;               // per resolution, per fitted frame
+  std::map<int, std::vector<Eigen::Matrix2Xd>> head_points;  // the same
   ProgressLine progress(0, static_cast<int>(fitted.size()), 30, "frame");
   for (size_t next = 0; next < fitted.size(); ++next) {
     if (next % 20 == 0 || next + 1 == fitted.size()) progress.Show(static_cast<int>(next), "cropping");
     const FrameParams& params = fitted[next];
     const int n = static_cast<int>(params.sequence);
+    numbers.push_back(static_cast<int64_t>(params.sequence));
     const cv::Mat frame = ReadImage((full_frames / FrameFileName(n)).string());
     const cv::Mat mask = ReadImage((full_masks / FrameFileName(n)).string(), cv::IMREAD_GRAYSCALE);
     if (mask.size() != frame.size())
       throw std::runtime_error(o.input + ": frame " + std::to_string(n) + " and its mask differ in size");
-    HeadModelOutput posed;
-    model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
-    RasterVertices in_camera;
-    TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
       WriteImage((rd / "images" / FrameFileName(n)).string(), CropSquare(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = CropSquare(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
-      const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
-      const Landmarks2d crop_landmarks = fitter.Project(params, crop_camera);
-      RasterBuffers silhouette;
-      Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
-      WriteImage((rd / "masks" / FrameFileName(n)).string(),
-                 CutTrainingMask(m, silhouette.Mask(), crop_landmarks, o.matte_rules()));
+      grabcut[r].push_back(m);
+      head_points[r].push_back(SkullPoints(model, identity, params, CropIntrinsics(camera, x0, y0, side, r)));
     }
   }
   progress.Finish();
+  ProgressLine cutting(0, static_cast<int>(fitted.size()), 30, "frame");
+  for (size_t next = 0; next < fitted.size(); ++next) {
+    if (next % 20 == 0 || next + 1 == fitted.size()) cutting.Show(static_cast<int>(next), "masks");
+    const FrameParams& params = fitted[next];
+    HeadModelOutput posed;
+    model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
+    RasterVertices in_camera;
+    TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
+    for (int r : o.resolutions) {
+      const PinholeCamera crop_camera = CropIntrinsics(camera, x0, y0, side, r);
+      RasterBuffers silhouette;
+      Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
+      const cv::Mat steady = SteadyMask(grabcut[r], head_points[r], numbers, next, o.steady_masks);
+      WriteImage((dir / std::to_string(r) / "masks" / FrameFileName(static_cast<int>(params.sequence))).string(),
+                 CutTrainingMask(steady, silhouette.Mask(), fitter.Project(params, crop_camera), o.matte_rules()));
+    }
+  }
+  cutting.Finish();
+  grabcut.clear();
 
   const int n = static_cast<int>(fitted.size());
   // 4. Short videos: frames between consecutive training frames.
@@ -329,7 +367,10 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
                     "dilated by " +
                     std::to_string(o.mask_margin) + " of the crop edge above the eye line, " +
                     std::to_string(o.side_margin) + " below it" +
-                    (o.keep_neck ? std::string() : ", nothing below the fitted jaw line")},
+                    (o.keep_neck ? std::string() : ", nothing below the fitted jaw line") +
+                    (o.steady_masks > 0 ? ", GrabCut's masks steadied over " + std::to_string(o.steady_masks) +
+                                              " frames either side (moved with the head, averaged, cut at half)"
+                                        : std::string())},
       {"mask_rules", o.matte_rules().ToJson()},
       {"tracking",
        {{"fitted_frames", track_report.value("fitted_frames", 0)},
@@ -343,6 +384,7 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"eye_look_prior", o.expression_fit.eye_look_prior},
         {"eye_look_prior_shapes", o.expression_fit.eye_look_prior_shapes},
         {"mask_working_size", o.mask_working_size},
+        {"steady_masks", o.steady_masks},
         {"landmark_filter", o.landmark_filter},
         {"pose_smoothing", o.pose_smoothing},
         {"photometric_anchor", o.photometric_anchor}}}};

@@ -36,6 +36,7 @@
 namespace headcast {
 
 constexpr int kDatasetFormatVersion = 1;
+constexpr int kMaxSteadyMasks = 8;  // PrepOptions::steady_masks
 
 struct PrepOptions {
   std::string input;  // anything the offline tracker reads: video, image or RGB-D folder, zed:SOURCE
@@ -73,6 +74,9 @@ struct PrepOptions {
   // crop of a 512-pixel video, and the mask's outline is then drawn on that
   // coarser grid.
   int mask_working_size = HeadMaskOptions{}.working_size;
+  // GrabCut's masks steadied over this many frames either side before the
+  // rules cut them (SteadyMask); 0: each frame's own.
+  int steady_masks = 0;
   // The fitted skull above the brows is head in every mask (FillSkull).
   bool fill_skull = true;
   MatteRules matte_rules() const { return {mask_margin, side_margin, keep_neck, fill_skull}; }

@@ -150,6 +150,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     AvatarConfig c = init.config();
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;
+    c.rigid_margin = o.config.rigid_margin;
     c.motion_conditioning = o.config.motion_conditioning;
     return init.WithRuntimeSwitches(c);
   }();
@@ -251,6 +252,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;  // the subject's choice, whatever the general model's
+    c.rigid_margin = o.config.rigid_margin;
     c.motion_conditioning = o.config.motion_conditioning;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);

@@ -88,6 +88,7 @@ void AvatarConfig::Check() const {
   c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
+  c.That(!rigid_margin || canonical_samples, "rigid_margin needs canonical_samples");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
   c.ThrowIfErrors();
   matte_rules.Check();
@@ -114,6 +115,7 @@ nlohmann::json AvatarConfig::ToJson() const {
           {"precompute_conditioning", precompute_conditioning},
           {"renderer_channels", renderer_channels},
           {"canonical_samples", canonical_samples},
+          {"rigid_margin", rigid_margin},
           {"surface_features", surface_features},
           {"surface_resolution", surface_resolution},
           {"surface_extent", surface_extent},
@@ -155,6 +157,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.renderer_channels = j.at("renderer_channels").get<std::vector<int>>();
     // Files from before surface features have none.
     c.canonical_samples = j.value("canonical_samples", false);
+    c.rigid_margin = j.value("rigid_margin", false);
     c.surface_features = j.value("surface_features", 0);
     c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
     c.surface_extent = j.value("surface_extent", c.surface_extent);

@@ -58,6 +58,12 @@ struct AvatarConfig : AvatarCommonConfig {
   // only), so geometry the head model explains is not the network's to learn.
   // false: rigidly into the head frame, the thesis's configuration.
   bool canonical_samples = false;
+  // With canonical samples: the rays beside the silhouette (hair_margin_px,
+  // no triangle under them: the hair beyond the head) stay in the head frame,
+  // rigid with the skull, instead of following the local frame of the nearest
+  // triangle in front — a forehead or cheek that a raised brow or a moved jaw
+  // stretches, which would move the hair with it (false in files from before).
+  bool rigid_margin = false;
   // Sampling.
   SamplingMode sampling = SamplingMode::kMeshGuided;
   int samples_per_ray = 8;

@@ -1,7 +1,9 @@
 // Mask geometry shared by the dataset and the avatar's matte.
 #include "common/avatar/matte.h"
 
+#include <Eigen/LU>
 #include <cmath>
+#include <cstdlib>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <stdexcept>
@@ -217,6 +219,57 @@ cv::Mat MatteCore(const cv::Mat& silhouette, const cv::Mat& bound, double erosio
     core = silhouette.clone();
   cv::bitwise_and(core, bound, core);
   return core;
+}
+
+namespace {
+
+// The least-squares affine map carrying `from` onto `to` (2 x P each); none
+// when the points do not fix one (fewer than three, all on a line, not finite).
+std::optional<cv::Matx23d> FitAffine(const Eigen::Matrix2Xd& from, const Eigen::Matrix2Xd& to) {
+  if (from.cols() < 3 || from.cols() != to.cols() || !from.allFinite() || !to.allFinite()) return std::nullopt;
+  Eigen::Matrix3Xd x(3, from.cols());
+  x << from, Eigen::RowVectorXd::Ones(from.cols());
+  const Eigen::Matrix3d normal = x * x.transpose();
+  const Eigen::FullPivLU<Eigen::Matrix3d> lu(normal);
+  if (!lu.isInvertible()) return std::nullopt;
+  const Eigen::Matrix<double, 2, 3> a = (to * x.transpose()) * lu.inverse();
+  if (!a.allFinite()) return std::nullopt;
+  return cv::Matx23d(a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2));
+}
+
+}  // namespace
+
+cv::Mat SteadyMask(const std::vector<cv::Mat>& masks, const std::vector<Eigen::Matrix2Xd>& points,
+                   const std::vector<int64_t>& frame_numbers, size_t centre, int radius) {
+  if (masks.size() != points.size() || masks.size() != frame_numbers.size() || centre >= masks.size())
+    throw std::invalid_argument("SteadyMask: " + std::to_string(masks.size()) + " masks, " +
+                                std::to_string(points.size()) + " point sets, " + std::to_string(frame_numbers.size()) +
+                                " frame numbers, centre " + std::to_string(centre));
+  const cv::Mat& own = masks[centre];
+  if (radius <= 0) return own.clone();
+  cv::Mat sum, moved;
+  own.convertTo(sum, CV_32F, static_cast<double>(radius + 1) / 255.0);
+  double weights = radius + 1;
+  const size_t lo = centre >= static_cast<size_t>(radius) ? centre - radius : 0;
+  const size_t hi = std::min(masks.size() - 1, centre + radius);
+  for (size_t i = lo; i <= hi; ++i) {
+    const int64_t d = std::abs(frame_numbers[i] - frame_numbers[centre]);
+    if (i == centre || d > radius) continue;
+    if (masks[i].size() != own.size() || masks[i].type() != own.type())
+      throw std::invalid_argument("SteadyMask: the masks differ in size or type");
+    const std::optional<cv::Matx23d> affine = FitAffine(points[i], points[centre]);
+    if (!affine) continue;
+    cv::Mat source;
+    masks[i].convertTo(source, CV_32F, 1.0 / 255.0);
+    cv::warpAffine(source, moved, *affine, own.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    const double w = radius + 1 - static_cast<double>(d);
+    cv::scaleAdd(moved, w, sum, sum);
+    weights += w;
+  }
+  cv::Mat steady;
+  cv::threshold(sum, steady, 0.5 * weights, 255, cv::THRESH_BINARY);
+  steady.convertTo(steady, CV_8U);
+  return steady;
 }
 
 }  // namespace headcast

@@ -8,8 +8,10 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "common/headmodel/head_model.h"
 
@@ -59,6 +61,20 @@ void KeepHeadPiece(const Landmarks2d& landmarks, cv::Mat* mask);
 // small element's walk).
 inline constexpr int kDilateEllipseOwnRadius = 8;
 cv::Mat DilateEllipse(const cv::Mat& mask, int radius);
+
+// The head mask of frame `centre` steadied over time: each mask of the frames
+// within `radius` frame numbers of it is moved onto it by the affine map that
+// carries that frame's head points onto this frame's, the moved masks are
+// averaged with weights falling linearly with the distance in frames
+// (radius + 1 - |d|), and the average is cut at half. GrabCut draws the
+// outline anew on every frame, a pixel or so either way where hair meets a
+// wall of its highlights' colour; an avatar can learn where the head's
+// outline is, not where one frame's segmentation happened to draw it.
+// masks: CV_8U (0 or 255), one size; points[i]: 2 x P, the same P points
+// that move with the skull, projected into frame i; frame_numbers ascending.
+// radius 0, or no neighbour, returns the mask itself. Throws on mismatched sizes.
+cv::Mat SteadyMask(const std::vector<cv::Mat>& masks, const std::vector<Eigen::Matrix2Xd>& points,
+                   const std::vector<int64_t>& frame_numbers, size_t centre, int radius);
 
 // Where a training mask may reach: `silhouette` (CV_8U, the fitted model
 // rasterised) grown by `hair_px` above the eye line (landmarks 36..47; the

@@ -75,7 +75,9 @@ void RaySampler::Sample(const RasterVertices& vertices_in_cam, const RasterFaces
       const size_t p = static_cast<size_t>(y) * w + x;
       const float d = surface_depth_[p];
       if (d == inf) continue;  // misses the head: background, no samples
-      AddRay(cam, x, y, std::max(0.01f, d - front), d + back, surface_face_[p], rng, out);
+      const bool margin = buffers_.face[p] < 0;
+      AddRay(cam, x, y, std::max(0.01f, d - front), d + back, margin && config_.rigid_margin ? -1 : surface_face_[p],
+             rng, out);
     }
 }
 

@@ -21,7 +21,9 @@ struct RayBatch {
   std::vector<int32_t> pixel;     // ray -> y * width + x
   std::vector<float> directions;  // 3 per ray, camera frame, z = 1
   std::vector<float> depths;      // samples_per_ray per ray: camera z, increasing
-  std::vector<int32_t> face;      // mesh-guided: the triangle under the ray (or the nearest in the margin), else -1
+  // mesh-guided: the triangle under the ray, or in the margin the nearest in
+  // front (-1 there with AvatarConfig::rigid_margin); uniform: -1
+  std::vector<int32_t> face;
   int num_rays() const { return static_cast<int>(pixel.size()); }
 };
 

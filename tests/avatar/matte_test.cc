@@ -162,6 +162,70 @@ TEST(CutTrainingMask, TheSkullAboveTheBrowsIsHead) {
 
 // The bound holds the silhouette above the jaw, grows it by the margins
 // (more above the eyes), and nothing below the jaw line unless the neck is kept.
+// A disc of radius `r` at (cx, cy) on a 96 x 96 mask, and the square's corners
+// around it as the points that move with it.
+cv::Mat Disc(double cx, double cy, double r) {
+  cv::Mat m = cv::Mat::zeros(96, 96, CV_8U);
+  cv::circle(m, cv::Point(static_cast<int>(std::lround(cx * 16)), static_cast<int>(std::lround(cy * 16))),
+             static_cast<int>(std::lround(r * 16)), cv::Scalar(255), cv::FILLED, cv::LINE_8, 4);
+  return m;
+}
+Eigen::Matrix2Xd Corners(double cx, double cy, double r) {
+  Eigen::Matrix2Xd p(2, 4);
+  p << cx - r, cx + r, cx + r, cx - r, cy - r, cy - r, cy + r, cy + r;
+  return p;
+}
+int Differing(const cv::Mat& a, const cv::Mat& b) {
+  cv::Mat d;
+  cv::compare(a, b, d, cv::CMP_NE);
+  return cv::countNonZero(d);
+}
+
+TEST(SteadyMask, TakesANotchOutOfTheOutlineAndFollowsTheMotion) {
+  // A head moving right 2 px and growing 0.5 px a frame; the centre frame's
+  // segmentation cut a notch into its edge and added a tuft outside it.
+  std::vector<cv::Mat> masks;
+  std::vector<Eigen::Matrix2Xd> points;
+  const std::vector<int64_t> numbers = {10, 11, 12, 13, 14};
+  for (int i = 0; i < 5; ++i) {
+    masks.push_back(Disc(40 + 2 * i, 48, 20 + 0.5 * i));
+    points.push_back(Corners(40 + 2 * i, 48, 20 + 0.5 * i));
+  }
+  const cv::Mat clean = masks[2].clone();
+  cv::rectangle(masks[2], cv::Rect(63, 44, 3, 8), cv::Scalar(0), cv::FILLED);    // notch at the right edge
+  cv::rectangle(masks[2], cv::Rect(42, 24, 4, 2), cv::Scalar(255), cv::FILLED);  // tuft above the top
+  ASSERT_GT(Differing(masks[2], clean), 25);
+
+  const cv::Mat steady = SteadyMask(masks, points, numbers, 2, 2);
+  EXPECT_EQ(steady.type(), CV_8U);
+  // Within a few pixels: a rasterised disc's edge and a moved one's differ by some ties.
+  EXPECT_LE(Differing(steady, clean), 10) << "the notch and tuft stay, or the outline lags the motion";
+  // Unchanged by a radius of 0, and the first frame has neighbours on one side only.
+  EXPECT_EQ(Differing(SteadyMask(masks, points, numbers, 2, 0), masks[2]), 0);
+  EXPECT_LE(Differing(SteadyMask(masks, points, numbers, 0, 2), masks[0]), 10);
+}
+
+TEST(SteadyMask, LeavesFramesAcrossAGapAndUnplaceableOnesOut) {
+  // Two empty neighbours outweigh the centre (3 against 2 + 2): the mask is
+  // gone when they count, and kept whole when they may not.
+  const cv::Mat empty = cv::Mat::zeros(96, 96, CV_8U);
+  const std::vector<cv::Mat> masks = {empty, Disc(48, 48, 20), empty};
+  const std::vector<Eigen::Matrix2Xd> points = {Corners(30, 48, 20), Corners(48, 48, 20), Corners(66, 48, 20)};
+  EXPECT_EQ(cv::countNonZero(SteadyMask(masks, points, {0, 1, 2}, 1, 2)), 0);
+  EXPECT_EQ(Differing(SteadyMask(masks, points, {0, 40, 80}, 1, 3), masks[1]), 0);  // beyond the radius
+  // Points that do not fix an affine map (all on a line, or not finite).
+  std::vector<Eigen::Matrix2Xd> bad = points;
+  bad[0].row(1).setConstant(48);
+  bad[2](0, 0) = std::nan("");
+  EXPECT_EQ(Differing(SteadyMask(masks, bad, {0, 1, 2}, 1, 2), masks[1]), 0);
+  // Mismatched inputs are refused.
+  EXPECT_THROW(SteadyMask(masks, points, {0, 1}, 1, 2), std::invalid_argument);
+  EXPECT_THROW(SteadyMask(masks, points, {0, 1, 2}, 3, 2), std::invalid_argument);
+  std::vector<cv::Mat> sizes = masks;
+  sizes[0] = cv::Mat::zeros(50, 50, CV_8U);
+  EXPECT_THROW(SteadyMask(sizes, points, {0, 1, 2}, 1, 2), std::invalid_argument);
+}
+
 TEST(MatteBound, ReachesTheMarginsAndStopsAtTheJawLine) {
   const int size = 128;
   const PosedView v = View(Turned(), size);

@@ -290,6 +290,52 @@ TEST(CanonicalSamples, NeedMeshGuidedSamplingAndTravelInTheFile) {
   EXPECT_THROW(c.Check(), std::invalid_argument);
 }
 
+// With a rigid margin, the rays beside the silhouette carry no triangle (their
+// samples stay in the head frame: the identity map), and the rays over the
+// mesh keep theirs; depths and pixels are those of the plain sampler.
+TEST(CanonicalSamples, ARigidMarginKeepsTheRaysBesideTheHeadInTheHeadFrame) {
+  const HeadModel& m = *Builtin();
+  const FrameParams frame = Expressive();
+  const Posed p = Pose(frame, 128);
+  const RasterFaces& faces = m.data().faces;
+  const PinholeCamera feature_camera = p.camera.Resized(32, 32);
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.canonical_samples = true;
+  RayBatch plain, rigid;
+  RaySampler(c).Sample(p.v_cam, faces, feature_camera, frame.CamFromHead(), nullptr, &plain);
+  c.rigid_margin = true;
+  RaySampler(c).Sample(p.v_cam, faces, feature_camera, frame.CamFromHead(), nullptr, &rigid);
+  ASSERT_EQ(plain.pixel, rigid.pixel);
+  ASSERT_EQ(plain.depths, rigid.depths);
+  RasterOptions culled;
+  culled.cull_back_faces = true;
+  RasterBuffers under;
+  Rasterize(p.v_cam, faces, feature_camera, culled, &under);
+  int margin = 0;
+  std::vector<float> to;
+  CanonicalTransforms(rigid, p.posed.vertices, faces, p.identity.v_shaped, &to);
+  for (int r = 0; r < rigid.num_rays(); ++r) {
+    ASSERT_GE(plain.face[r], 0);
+    if (under.face[rigid.pixel[r]] >= 0) {
+      EXPECT_EQ(rigid.face[r], plain.face[r]) << "a ray over the mesh lost its triangle";
+      continue;
+    }
+    ++margin;
+    EXPECT_EQ(rigid.face[r], -1) << "a margin ray kept the nearest triangle";
+    const Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>> a(to.data() + 12 * r);
+    const Eigen::Map<const Eigen::Vector3f> o(to.data() + 12 * r + 9);
+    EXPECT_TRUE(a.isIdentity(0) && o.isZero(0));
+  }
+  EXPECT_GT(margin, 20) << "no rays beside the silhouette: the test proves little";
+  // It travels in the file, files from before have none, and it needs canonical samples.
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).rigid_margin);
+  nlohmann::json old = c.ToJson();
+  old.erase("rigid_margin");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).rigid_margin);
+  c.canonical_samples = false;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+}
+
 // What a mode leaves out of the conditioning is zero whatever the frame says;
 // what it keeps is the frame's. The mode travels in the file; a foreign name
 // is refused.

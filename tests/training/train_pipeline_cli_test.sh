@@ -24,6 +24,24 @@ masks=$(ls "$tmp/ds/128/masks" 2>/dev/null | wc -l)
   [ "$(json "$tmp/ds/dataset.json" "j['frames_fitted']")" = "$fitted" ] &&
   ok "prep --resume reuses the finished tracking pass" || bad "prep resume: $(tail -2 "$tmp/prep2.err")"
 
+# The same tracking pass with GrabCut's masks steadied over two frames either side.
+cp -r "$tmp/ds" "$tmp/ds_steady"
+"$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/ds_steady" --resolutions 128 --test-frames 8 \
+  --no-calibrate --resume --steady-masks 2 > /dev/null 2> "$tmp/prep3.err" &&
+  [ "$(json "$tmp/ds_steady/dataset.json" "j['tracking']['steady_masks']")" = 2 ] &&
+  steady_iou=$("$python" - "$tmp/ds/128/masks" "$tmp/ds_steady/128/masks" <<'EOF'
+import os, sys
+from matplotlib.image import imread
+own, steady = sys.argv[1], sys.argv[2]
+ious = [((imread(os.path.join(own, n)) > 0.5) & (imread(os.path.join(steady, n)) > 0.5)).sum() /
+        max(1, ((imread(os.path.join(own, n)) > 0.5) | (imread(os.path.join(steady, n)) > 0.5)).sum())
+        for n in sorted(os.listdir(own))]
+print(f"{min(ious):.3f}" if ious and len(ious) == len(os.listdir(steady)) else "none")
+EOF
+) && "$python" -c "import sys; sys.exit(0 if float('$steady_iou') > 0.95 else 1)" 2>/dev/null &&
+  ok "prep --steady-masks 2: recorded, every mask within IoU $steady_iou of its own" ||
+  bad "prep --steady-masks: iou=${steady_iou:-?} $(tail -2 "$tmp/prep3.err")"
+
 "$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
   > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
 # Continued on real frames: the general model's own sizes, the dataset's training split.
@@ -171,6 +189,8 @@ for i in (1, 2, 3):
     open(f"{sys.argv[1]}/{i}.png", "wb").write(png(64, 64))
 EOF
 refused "video with no face" "no face" "$bin/headcast-train" prep --input "$tmp/black" --out "$tmp/x2" --no-calibrate
+refused "steady masks beyond the limit" "steady_masks" \
+  "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x4" --no-calibrate --steady-masks 9
 refused "too few frames for the split" "test frames" \
   "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x3" --no-calibrate --max-frames 10 --test-frames 8
 echo garbage > "$tmp/ckpt/$(cat "$tmp/ckpt/LATEST")/state.json"
