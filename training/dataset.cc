@@ -42,12 +42,6 @@ void PrepOptions::Check() const {
       .NonNegative("shape_prior", shape_prior)
       .NonNegative("calibration_mean_expression", calibration_mean_expression)
       .NonNegative("rigid_flow_weight", rigid_flow_weight)
-      .NonNegative("expression_range_weight", expression_fit.expression_range_weight)
-      .NonNegative("expression_prior", expression_fit.expression_prior)
-      .NonNegative("eye_look_prior", expression_fit.eye_look_prior)
-      .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), expression_fit.eye_look_prior_shapes) !=
-                kEyeLookPriorShapes.end(),
-            "eye_look_prior_shapes must be all or vertical")
       .InRange("predictor_views", predictor_views, 1, kMaxPredictorViews)
       .That(std::find(kPredictorViewsPoints.begin(), kPredictorViewsPoints.end(), predictor_views_points) !=
                 kPredictorViewsPoints.end(),
@@ -59,6 +53,7 @@ void PrepOptions::Check() const {
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
                 kLandmarkFilterModes.end(),
             "landmark_filter is causal, off or two-sided");
+  expression_fit.CheckInto(&c);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
   c.ThrowIfErrors();
 }

@@ -17,6 +17,15 @@ void ExpressionFitSettings::ApplyTo(HeadFitterOptions* o) const {
   o->eye_look_prior_shapes = eye_look_prior_shapes;
 }
 
+void ExpressionFitSettings::CheckInto(OptionsCheck* c) const {
+  c->NonNegative("expression_prior", expression_prior)
+      .NonNegative("expression_range_weight", expression_range_weight)
+      .NonNegative("eye_look_prior", eye_look_prior)
+      .That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
+                kEyeLookPriorShapes.end(),
+            "eye_look_prior_shapes must be all or vertical, not \"" + eye_look_prior_shapes + "\"");
+}
+
 nlohmann::json ExpressionFitSettings::ToJson() const {
   return {{"expression_prior", expression_prior},
           {"expression_range_weight", expression_range_weight},

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "common/core/options.h"
 #include "common/tracking/head_fitter.h"
 
 namespace headcast {
@@ -22,6 +23,10 @@ struct ExpressionFitSettings {
   static ExpressionFitSettings Of(const HeadFitterOptions& o);
   void ApplyTo(HeadFitterOptions* o) const;
   nlohmann::json ToJson() const;
+  // Adds to `c` what is wrong with the settings: a negative or non-finite
+  // weight, shapes other than kEyeLookPriorShapes (the options structs that
+  // hold them check them this way).
+  void CheckInto(OptionsCheck* c) const;
   // Throws std::invalid_argument on a missing or mistyped key, a negative or
   // non-finite weight, or shapes other than kEyeLookPriorShapes.
   static ExpressionFitSettings FromJson(const nlohmann::json& j);

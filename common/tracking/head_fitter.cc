@@ -9,6 +9,7 @@
 
 #include "common/core/options.h"
 #include "common/core/rotation.h"
+#include "common/tracking/expression_fit.h"
 #include "common/tracking/iris_locator.h"
 #include "common/tracking/landmark_costs.h"
 
@@ -16,14 +17,10 @@ namespace headcast {
 
 void HeadFitterOptions::Check() const {
   OptionsCheck c("HeadFitterOptions");
-  c.InRange("num_expression", num_expression, 0, 1000).NonNegative("expression_prior", expression_prior);
+  c.InRange("num_expression", num_expression, 0, 1000);
+  ExpressionFitSettings::Of(*this).CheckInto(&c);
   c.NonNegative("jaw_prior", jaw_prior).NonNegative("contour_weight", contour_weight);
-  c.NonNegative("eye_look_prior", eye_look_prior);
-  c.That(std::find(kEyeLookPriorShapes.begin(), kEyeLookPriorShapes.end(), eye_look_prior_shapes) !=
-             kEyeLookPriorShapes.end(),
-         "eye_look_prior_shapes must be all or vertical, not \"" + eye_look_prior_shapes + "\"");
-  c.InRange("expression_limit", expression_limit, 0.1, 5.0)
-      .NonNegative("expression_range_weight", expression_range_weight);
+  c.InRange("expression_limit", expression_limit, 0.1, 5.0);
   c.InRange("max_iterations", max_iterations, 1, 1000).Positive("huber_px", huber_px);
   c.NonNegative("iris_weight", iris_weight).NonNegative("gaze_prior", gaze_prior);
   c.NonNegative("vergence_weight", vergence_weight).NonNegative("eye_roll_weight", eye_roll_weight);

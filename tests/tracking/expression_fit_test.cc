@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 
 namespace headcast {
@@ -59,6 +60,31 @@ TEST(ExpressionFitSettings, RefuseWhatIsMalformedByName) {
   bad["eye_look_prior_shapes"] = 2;
   refused(bad, "tracking_fit.eye_look_prior_shapes wants a string");
   refused(nlohmann::json::array(), "tracking_fit.expression_prior wants a number");
+}
+
+// The options structs that hold the settings (the fitter's, prep's) check
+// them one way: each bad field named.
+TEST(ExpressionFitSettings, TheOptionsHoldingThemRefuseBadOnesByName) {
+  auto says = [](const ExpressionFitSettings& s) {
+    OptionsCheck c("Holder");
+    s.CheckInto(&c);
+    try {
+      c.ThrowIfErrors();
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(says(ExpressionFitSettings{}), "");
+  ExpressionFitSettings bad;
+  bad.expression_prior = std::nan("");
+  bad.eye_look_prior_shapes = "sideways";
+  const std::string message = says(bad);
+  EXPECT_NE(message.find("expression_prior"), std::string::npos) << message;
+  EXPECT_NE(message.find("must be all or vertical, not \"sideways\""), std::string::npos) << message;
+  HeadFitterOptions fitter;
+  fitter.expression_range_weight = -1;
+  EXPECT_THROW(fitter.Check(), std::invalid_argument);
 }
 
 }  // namespace

@@ -189,7 +189,7 @@ for i in (1, 2, 3):
     open(f"{sys.argv[1]}/{i}.png", "wb").write(png(64, 64))
 EOF
 refused "video with no face" "no face" "$bin/headcast-train" prep --input "$tmp/black" --out "$tmp/x2" --no-calibrate
-refused "steady masks beyond the limit" "steady_masks" \
+refused "steady masks beyond the limit" "steady-masks must be in" \
   "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x4" --no-calibrate --steady-masks 9
 refused "too few frames for the split" "test frames" \
   "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x3" --no-calibrate --max-frames 10 --test-frames 8
