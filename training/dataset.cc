@@ -89,11 +89,10 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(std::clamp(q, 0.0, 1.0) * (v.size() - 1))];
 }
 
-// Points that move with the skull, in `camera`'s pixels (2 x P): every few
-// vertices of the subject's head under the frame's placement and neck, without
-// expression, jaw or eyes (SteadyMask's points).
-Eigen::Matrix2Xd SkullPoints(const HeadModel& model, const HeadIdentity& identity, const FrameParams& params,
-                             const PinholeCamera& camera) {
+// Points that move with the skull (SteadyMask's), in the camera frame: every
+// few vertices of the subject's head under the frame's placement and neck,
+// without expression, jaw or eyes.
+RasterVertices SkullPoints(const HeadModel& model, const HeadIdentity& identity, const FrameParams& params) {
   constexpr int kPoints = 400;
   PoseVector pose = params.HeadPose();
   pose.tail(kNumPoseParams - 3 * kJawJoint).setZero();  // the jaw and the eyes
@@ -102,10 +101,16 @@ Eigen::Matrix2Xd SkullPoints(const HeadModel& model, const HeadIdentity& identit
   RasterVertices in_camera;
   TransformToCamera(rigid.vertices, params.CamFromHead(), &in_camera);
   const int stride = std::max(1, static_cast<int>(in_camera.rows()) / kPoints);
-  Eigen::Matrix2Xd points(2, (in_camera.rows() + stride - 1) / stride);
-  for (int i = 0, k = 0; i < in_camera.rows(); i += stride, ++k)
-    points.col(k) = camera.Project(in_camera.row(i).transpose().cast<double>());
-  return points;
+  RasterVertices every(static_cast<int>((in_camera.rows() + stride - 1) / stride), 3);
+  for (int i = 0, k = 0; i < in_camera.rows(); i += stride, ++k) every.row(k) = in_camera.row(i);
+  return every;
+}
+
+// `points` (camera frame) in `camera`'s pixels, 2 x P.
+Eigen::Matrix2Xd ProjectPoints(const RasterVertices& points, const PinholeCamera& camera) {
+  Eigen::Matrix2Xd pixels(2, points.rows());
+  for (int i = 0; i < points.rows(); ++i) pixels.col(i) = camera.Project(points.row(i).transpose().cast<double>());
+  return pixels;
 }
 
 }  // namespace
@@ -253,13 +258,14 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
     const cv::Mat mask = ReadImage((full_masks / FrameFileName(n)).string(), cv::IMREAD_GRAYSCALE);
     if (mask.size() != frame.size())
       throw std::runtime_error(o.input + ": frame " + std::to_string(n) + " and its mask differ in size");
+    const RasterVertices skull = o.steady_masks > 0 ? SkullPoints(model, identity, params) : RasterVertices();
     for (int r : o.resolutions) {
       const fs::path rd = dir / std::to_string(r);
       WriteImage((rd / "images" / FrameFileName(n)).string(), CropSquare(frame, x0, y0, side, r, cv::INTER_AREA));
       cv::Mat m = CropSquare(mask, x0, y0, side, r, cv::INTER_LINEAR);
       cv::threshold(m, m, 127, 255, cv::THRESH_BINARY);
       grabcut[r].push_back(m);
-      head_points[r].push_back(SkullPoints(model, identity, params, CropIntrinsics(camera, x0, y0, side, r)));
+      head_points[r].push_back(ProjectPoints(skull, CropIntrinsics(camera, x0, y0, side, r)));
     }
   }
   progress.Finish();

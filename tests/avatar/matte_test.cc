@@ -160,8 +160,6 @@ TEST(CutTrainingMask, TheSkullAboveTheBrowsIsHead) {
   EXPECT_EQ(cv::countNonZero(as_before != expected), 0) << "without the fill: notches filled, then bounded";
 }
 
-// The bound holds the silhouette above the jaw, grows it by the margins
-// (more above the eyes), and nothing below the jaw line unless the neck is kept.
 // A disc of radius `r` at (cx, cy) on a 96 x 96 mask, and the square's corners
 // around it as the points that move with it.
 cv::Mat Disc(double cx, double cy, double r) {
@@ -226,6 +224,8 @@ TEST(SteadyMask, LeavesFramesAcrossAGapAndUnplaceableOnesOut) {
   EXPECT_THROW(SteadyMask(sizes, points, {0, 1, 2}, 1, 2), std::invalid_argument);
 }
 
+// The bound holds the silhouette above the jaw, grows it by the margins
+// (more above the eyes), and nothing below the jaw line unless the neck is kept.
 TEST(MatteBound, ReachesTheMarginsAndStopsAtTheJawLine) {
   const int size = 128;
   const PosedView v = View(Turned(), size);
