@@ -356,6 +356,11 @@ int main(int argc, char** argv) {
   subject->add_flag("!--no-interpolated", s.use_interpolated, "leave out the dataset's interpolated frames");
   subject->add_option("--freeze-layers", s.freeze_layers, "CNeRF layers kept from the general model")
       ->capture_default_str();
+  subject->add_flag("!--no-expression-span", s.expression_span,
+                    "tell the networks the frames' expressions as they are, not held within the training frames' span "
+                    "(the mesh takes them as they are either way)");
+  subject->add_flag("--expression-span-in-training", s.expression_span_in_training,
+                    "hold the synthetic renders' expressions within the span in training too, as the receiver will");
   AddTrainingFlags(subject, &s.fit, &s.outputs, &processes);
 
   auto* eval = app.add_subcommand("eval", "evaluate an avatar on a dataset's test split; videos");
@@ -378,6 +383,12 @@ int main(int argc, char** argv) {
   eval->add_flag("!--no-landmarks", e.landmarks,
                  "skip the expression-fidelity figures (dlib landmarks on avatar and true frames)");
   eval->add_option("--predictor", e.landmark_predictor, "dlib's 68-point shape predictor")->capture_default_str();
+  eval->add_option("--expression-span", e.expression_span,
+                   "the expressions the networks are told: within the span the avatar carries (avatar), as the "
+                   "frames say (none), or within the dataset's training frames' span (dataset: avatars made "
+                   "before spans were kept)")
+      ->check(CLI::IsMember({"avatar", "none", "dataset"}))
+      ->capture_default_str();
 
   auto* compare = app.add_subcommand(
       "compare",

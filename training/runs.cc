@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
@@ -152,6 +153,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     c.canonical_samples = o.config.canonical_samples;
     c.rigid_margin = o.config.rigid_margin;
     c.motion_conditioning = o.config.motion_conditioning;
+    c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
     return init.WithRuntimeSwitches(c);
   }();
   o.synthetic.image_size = o.resolution;
@@ -204,6 +206,28 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
   to->surface_levels = from.surface_levels;
 }
 
+// The avatar with AvatarConfig::expression_low/high set to each coefficient's
+// smallest and largest value over the dataset's training frames (a
+// coefficient the frames lack is 0 in all of them, as the conditioning takes
+// it); without a dataset, with no span.
+Avatar WithExpressionSpan(const Avatar& avatar, const PreparedDataset* data) {
+  AvatarConfig c = avatar.config();
+  c.ClearExpressionSpan();
+  if (data) {
+    c.expression_low.assign(c.num_expression, std::numeric_limits<float>::infinity());
+    c.expression_high.assign(c.num_expression, -std::numeric_limits<float>::infinity());
+    for (int i : data->train()) {
+      const Eigen::VectorXf& e = data->params(i).expression;
+      for (int k = 0; k < c.num_expression; ++k) {
+        const float v = k < e.size() ? e[k] : 0.f;
+        c.expression_low[k] = std::min(c.expression_low[k], v);
+        c.expression_high[k] = std::max(c.expression_high[k], v);
+      }
+    }
+  }
+  return avatar.WithRuntimeSwitches(c);
+}
+
 }  // namespace
 
 FitOptions SubjectFitDefaults() {
@@ -219,6 +243,8 @@ void SubjectOptions::Check() const {
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
   c.That(!dataset.empty(), "dataset is required");
   c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
+  c.That(!expression_span_in_training || expression_span,
+         "expression_span_in_training needs the span kept (not with --no-expression-span)");
   CheckRun(resolution, outputs, &c);
   c.ThrowIfErrors();
   fit.Check();
@@ -260,8 +286,10 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.matte = o.config.matte;
     c.matte_rules = o.config.matte_rules;
     c.matte_core = o.config.matte_core;
+    c.ClearExpressionSpan();  // another subject's, if the start is an avatar
     return general.WithRuntimeSwitches(c);
   }();
+  if (o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
   avatar.mutable_subject() = subject;
   if (const std::optional<CameraContract> contract = data.camera_contract()) avatar.set_camera_contract(*contract);
   if (const std::optional<AnchorReference> anchor = data.anchor_reference())
@@ -290,6 +318,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
   const TrainResult fitted = TrainWithReports(avatar, model, training, fit, o.outputs,
                                               [&](Avatar& a) { return EvaluateOnDataset(a, model, data, periodic); });
   if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
+  // Set after training by default: what the networks learnt is unchanged by it.
+  if (o.expression_span && !o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
   for (int k = 0; k < 4; ++k) {
@@ -312,6 +342,10 @@ nlohmann::json RunSubject(SubjectOptions o) {
         {"end", 0},
         {"decay", "linear over the iterations"},
         {"face_regions", fit.loss.blind_synthetic_face ? "not learned from them" : "learned from them"}}},
+      {"expression_span", !o.expression_span ? "none"
+                          : o.expression_span_in_training
+                              ? "the training frames', from the first step (the synthetic renders' held within it)"
+                              : "the training frames' (the networks told no expression beyond it)"},
       {"train_frames", data.train().size() - data.interpolated()},
       {"interpolated_frames", data.interpolated()},
       {"fit", FitJson(fit, fitted, true)},
@@ -339,6 +373,8 @@ void EvalOptions::Check() const {
   c.That(!out_dir.empty(), "out_dir is required").NonNegative("max_frames", max_frames);
   c.InRange("orbit_frames", orbit_frames, 0, 10000).InRange("orbit_deg", orbit_deg, 0.0, 90.0);
   c.That(split == "test" || split == "train", "split must be test or train, not '" + split + "'");
+  c.That(expression_span == "avatar" || expression_span == "none" || expression_span == "dataset",
+         "expression_span must be avatar, none or dataset, not '" + expression_span + "'");
   c.ThrowIfErrors();
 }
 
@@ -348,6 +384,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
   Avatar avatar = Avatar::Load(o.avatar, model);
   const PreparedDataset data =
       PreparedDataset::Load(o.dataset, model, avatar.config().output_size, /*interpolated=*/false);
+  if (o.expression_span != "avatar")
+    avatar = WithExpressionSpan(avatar, o.expression_span == "dataset" ? &data : nullptr);
   const bool on_test = o.split == "test" && !data.test().empty();
   std::vector<int> positions = on_test ? data.test() : data.train();
   if (o.max_frames > 0 && static_cast<int>(positions.size()) > o.max_frames) {
@@ -415,6 +453,10 @@ nlohmann::json RunEval(const EvalOptions& o) {
         {"eval", EvalJson(e, on_test ? "test split" : "training frames")},
         {"ground_truth", "frames with their background replaced by the renders' colour (head mask)"},
         {"skin_colour", SkinColourUse(data, positions, o.skin_colour)},
+        {"expression_span", !avatar.config().has_expression_span() ? "none: the networks told each frame's expression"
+                            : o.expression_span == "dataset"
+                                ? "the dataset's training frames' (the networks told no expression beyond it)"
+                                : "the avatar's (the networks told no expression beyond it)"},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",

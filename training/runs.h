@@ -61,7 +61,15 @@ struct SubjectOptions {
   double synthetic_start = 0.25;  // probability of a synthetic sample at step 0, falling to 0
   bool use_interpolated = true;   // train on the dataset's interpolated frames too, if it has them
   int freeze_layers = 0;          // CNeRF layers kept from the general model (METHOD §6: 4)
-  AvatarConfig config;            // architecture when from_scratch
+  // The trained avatar tells its networks expressions within its training
+  // frames' span only (AvatarConfig::expression_low/high); false: none.
+  bool expression_span = true;
+  // The span set before training instead of after it: the synthetic renders'
+  // expressions beyond it are then told as the receiver will tell them (held
+  // within it) while their mesh takes them as they are (the real frames lie
+  // within it). Off: training unchanged by the span.
+  bool expression_span_in_training = false;
+  AvatarConfig config;  // architecture when from_scratch
   FitOptions fit = SubjectFitDefaults();
   RunOutputs outputs;
   void Check() const;
@@ -86,6 +94,11 @@ struct EvalOptions {
   // The frames' skin colours, when the dataset has them, matched as the
   // receiver matches them; false: the avatar's own colours.
   bool skin_colour = true;
+  // The expressions the networks are told: "avatar" within the span the
+  // avatar carries (if any), "none" as the frames say, "dataset" within the
+  // span of the dataset's training frames (what a fine-tune on it records;
+  // for avatars made before spans were kept).
+  std::string expression_span = "avatar";
   // Expression fidelity: dlib's landmarks on the avatar's frames against the
   // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
   bool landmarks = true;

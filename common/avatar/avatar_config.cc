@@ -2,6 +2,7 @@
 #include "common/avatar/avatar_config.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "common/core/options.h"
@@ -90,44 +91,59 @@ void AvatarConfig::Check() const {
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.That(!rigid_margin || canonical_samples, "rigid_margin needs canonical_samples");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
+  c.That(expression_low.size() == expression_high.size(),
+         "expression_low and expression_high must have as many values");
+  c.That(expression_low.empty() || static_cast<int>(expression_low.size()) == num_expression,
+         "expression span has " + std::to_string(expression_low.size()) + " values, the avatar " +
+             std::to_string(num_expression) + " expression coefficients");
+  for (size_t i = 0; i < std::min(expression_low.size(), expression_high.size()); ++i)
+    c.That(std::isfinite(expression_low[i]) && std::isfinite(expression_high[i]) &&
+               expression_low[i] <= expression_high[i],
+           "expression span " + std::to_string(i) + " must be finite with low <= high");
   c.ThrowIfErrors();
   matte_rules.Check();
 }
 
+float AvatarConfig::ToldExpression(int i, float value) const {
+  return has_expression_span() ? std::clamp(value, expression_low[i], expression_high[i]) : value;
+}
+
 nlohmann::json AvatarConfig::ToJson() const {
-  return {{"output_size", output_size},
-          {"feature_channels", feature_channels},
-          {"num_shape", num_shape},
-          {"num_expression", num_expression},
-          {"num_texture", num_texture},
-          {"pe_frequencies", pe_frequencies},
-          {"pe_scale", pe_scale},
-          {"mlp_width", mlp_width},
-          {"mlp_layers", mlp_layers},
-          {"skip_layer", skip_layer},
-          {"sampling", sampling == SamplingMode::kMeshGuided ? "mesh_guided" : "uniform"},
-          {"samples_per_ray", samples_per_ray},
-          {"shell_front", shell_front},
-          {"shell_back", shell_back},
-          {"hair_margin_px", hair_margin_px},
-          {"uniform_near", uniform_near},
-          {"uniform_far", uniform_far},
-          {"precompute_conditioning", precompute_conditioning},
-          {"renderer_channels", renderer_channels},
-          {"canonical_samples", canonical_samples},
-          {"rigid_margin", rigid_margin},
-          {"surface_features", surface_features},
-          {"surface_resolution", surface_resolution},
-          {"surface_extent", surface_extent},
-          {"surface_shell", surface_shell},
-          {"surface_rigid", surface_rigid},
-          {"surface_conditioned", surface_conditioned},
-          {"surface_hidden", surface_hidden},
-          {"surface_levels", surface_levels},
-          {"matte", MatteModeName(matte)},
-          {"matte_rules", matte_rules.ToJson()},
-          {"matte_core", matte_core},
-          {"motion_conditioning", MotionConditioningName(motion_conditioning)}};
+  nlohmann::json j = {{"output_size", output_size},
+                      {"feature_channels", feature_channels},
+                      {"num_shape", num_shape},
+                      {"num_expression", num_expression},
+                      {"num_texture", num_texture},
+                      {"pe_frequencies", pe_frequencies},
+                      {"pe_scale", pe_scale},
+                      {"mlp_width", mlp_width},
+                      {"mlp_layers", mlp_layers},
+                      {"skip_layer", skip_layer},
+                      {"sampling", sampling == SamplingMode::kMeshGuided ? "mesh_guided" : "uniform"},
+                      {"samples_per_ray", samples_per_ray},
+                      {"shell_front", shell_front},
+                      {"shell_back", shell_back},
+                      {"hair_margin_px", hair_margin_px},
+                      {"uniform_near", uniform_near},
+                      {"uniform_far", uniform_far},
+                      {"precompute_conditioning", precompute_conditioning},
+                      {"renderer_channels", renderer_channels},
+                      {"canonical_samples", canonical_samples},
+                      {"rigid_margin", rigid_margin},
+                      {"surface_features", surface_features},
+                      {"surface_resolution", surface_resolution},
+                      {"surface_extent", surface_extent},
+                      {"surface_shell", surface_shell},
+                      {"surface_rigid", surface_rigid},
+                      {"surface_conditioned", surface_conditioned},
+                      {"surface_hidden", surface_hidden},
+                      {"surface_levels", surface_levels},
+                      {"matte", MatteModeName(matte)},
+                      {"matte_rules", matte_rules.ToJson()},
+                      {"matte_core", matte_core},
+                      {"motion_conditioning", MotionConditioningName(motion_conditioning)}};
+  if (has_expression_span()) j["expression_span"] = {{"low", expression_low}, {"high", expression_high}};
+  return j;
 }
 
 AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
@@ -170,6 +186,10 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
+    if (j.contains("expression_span")) {
+      c.expression_low = j.at("expression_span").at("low").get<std::vector<float>>();
+      c.expression_high = j.at("expression_span").at("high").get<std::vector<float>>();
+    }
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());
   }

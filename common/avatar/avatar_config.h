@@ -131,10 +131,26 @@ struct AvatarConfig : AvatarCommonConfig {
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;
+  // The expression coefficients the networks are told, each held between the
+  // smallest and largest value it took on the subject's training frames; the
+  // posed mesh (canonical samples, the surface texture, the matte's bound)
+  // still takes the frame's own. Beyond that span the networks would answer
+  // inputs they were never trained on (a jaw opened wider than in any
+  // training frame drew colour blotches on a cheek); within it the mesh
+  // moves what they learnt. Empty: none (general models, files from before
+  // it); otherwise num_expression values each, low <= high. A run-time switch.
+  std::vector<float> expression_low, expression_high;
 
   bool has_surface() const { return surface_features > 0; }
   int surface_hidden_channels() const { return surface_hidden > 0 ? surface_hidden : 2 * surface_features; }
   bool has_matte() const { return matte != MatteMode::kNone; }
+  bool has_expression_span() const { return !expression_low.empty(); }
+  void ClearExpressionSpan() {
+    expression_low.clear();
+    expression_high.clear();
+  }
+  // Coefficient i as the networks are told it (within the span, if any).
+  float ToldExpression(int i, float value) const;
 
   int renderer_levels() const { return static_cast<int>(renderer_channels.size()) - 1; }
   int feature_stride() const { return 1 << renderer_levels(); }  // output pixels per feature-map pixel

@@ -21,7 +21,7 @@ AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& 
   for (int j = 0; j < 4; ++j)
     for (int k = 0; k < 3; ++k) g[c.pose_offset() + 3 * j + k] = (*pose[j])[k];
   for (int i = 0; i < std::min<int>(c.num_expression, frame.expression.size()); ++i)
-    g[c.expression_offset() + i] = frame.expression[i];
+    g[c.expression_offset() + i] = c.ToldExpression(i, frame.expression[i]);
   for (int i = c.num_shape; i < c.conditioning_dim(); ++i)
     if (!c.Conditions(i)) g[i] = 0;
   for (int i = 0; i < 27; ++i) a[i] = subject.light[i];

@@ -336,6 +336,68 @@ TEST(CanonicalSamples, ARigidMarginKeepsTheRaysBesideTheHeadInTheHeadFrame) {
   EXPECT_THROW(c.Check(), std::invalid_argument);
 }
 
+// With a span, the networks are told each expression coefficient held between
+// its training frames' extremes and the posed mesh the frame's own: the
+// picture of a frame beyond the span is the one the same networks draw from
+// the frame's mesh with the held coefficients. The span travels in the file;
+// files from before have none; one of the wrong size, reversed or not finite
+// is refused.
+TEST(ExpressionSpan, TheNetworksAreToldExpressionsWithinItTheMeshTheFramesOwn) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.num_expression = m.num_expression();
+  Avatar free = Avatar::CreateRandom(c, m, DefaultSubject(m, c.output_size), 3);
+  AvatarConfig spanned = free.config();
+  spanned.expression_low.assign(spanned.num_expression, -0.1f);
+  spanned.expression_high.assign(spanned.num_expression, 0.2f);
+  spanned.expression_high[0] = 2.f;  // the smile (1.5) lies within, the parted lips (1.0) beyond
+  Avatar held = free.WithRuntimeSwitches(spanned);
+  const FrameParams frame = Expressive();
+  FrameParams within = frame;
+  within.expression[8] = 0.2f;
+
+  const int psi = spanned.expression_offset();
+  const torch::Tensor told = MakeConditioning(spanned, held.subject(), frame).geometry;
+  EXPECT_FLOAT_EQ(told[0][psi + 0].item<float>(), 1.5f);
+  EXPECT_FLOAT_EQ(told[0][psi + 8].item<float>(), 0.2f);
+  EXPECT_FLOAT_EQ(told[0][psi + 1].item<float>(), 0.f);
+  EXPECT_TRUE(torch::equal(told, MakeConditioning(free.config(), free.subject(), within).geometry));
+  EXPECT_FLOAT_EQ(MakeConditioning(free.config(), free.subject(), frame).geometry[0][psi + 8].item<float>(), 1.f)
+      << "no span: the frame's own";
+
+  const HeadIdentity identity = m.MakeIdentity(held.subject().shape.cast<double>());
+  RaySampler sampler(spanned);
+  AvatarFrameInputs with_span, without;
+  PrepareAvatarFrame(spanned, m, identity, held.subject(), frame, &sampler, nullptr, &with_span);
+  PrepareAvatarFrame(free.config(), m, identity, free.subject(), frame, &sampler, nullptr, &without);
+  EXPECT_TRUE(with_span.posed.vertices == without.posed.vertices) << "the mesh takes the frame's expression";
+  EXPECT_EQ(with_span.rays.num_rays(), without.rays.num_rays());
+  without.conditioning = MakeConditioning(free.config(), free.subject(), within);
+  {
+    torch::InferenceMode inference;
+    held.modules().eval();
+    free.modules().eval();
+    EXPECT_TRUE(torch::allclose(RunAvatar(held.modules(), with_span).image, RunAvatar(free.modules(), without).image));
+  }
+
+  const AvatarConfig back = AvatarConfig::FromJson(spanned.ToJson());
+  EXPECT_EQ(back.expression_low, spanned.expression_low);
+  EXPECT_EQ(back.expression_high, spanned.expression_high);
+  EXPECT_FALSE(AvatarConfig::FromJson(free.config().ToJson()).has_expression_span()) << "files from before it";
+  AvatarConfig bad = spanned;
+  bad.expression_low.pop_back();
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad = spanned;
+  bad.expression_low[3] = 0.5f;  // above its high
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  nlohmann::json j = spanned.ToJson();
+  j["expression_span"]["high"][2] = nullptr;  // a NaN written by a JSON library
+  EXPECT_THROW(AvatarConfig::FromJson(j), std::invalid_argument);
+  j = spanned.ToJson();
+  j["expression_span"]["high"] = nlohmann::json::array({1, 2});
+  EXPECT_THROW(AvatarConfig::FromJson(j), std::invalid_argument);
+}
+
 // What a mode leaves out of the conditioning is zero whatever the frame says;
 // what it keeps is the frame's. The mode travels in the file; a foreign name
 // is refused.

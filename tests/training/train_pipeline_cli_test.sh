@@ -151,6 +151,43 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
 [ "$(config "$tmp/l.hcavatar" "['surface_levels']")" = 2 ] && [ "$(config "$tmp/i.hcavatar" "['surface_levels']")" = 1 ] &&
   [ "$(json "$tmp/l.json" "0 < j['fit']['final_loss'] < 10")" = True ] &&
   ok "subject --surface-levels 2: trained and kept" || bad "surface levels: $(tail -3 "$tmp/l.err")"
+# The expression span: a subject records each coefficient's extremes over its training frames (all but the last 8),
+# --no-expression-span none; eval tells the networks within the avatar's span, none, or the dataset's.
+"$bin/headcast-rec" export "$tmp/dsi/params.hcrec" --out "$tmp/dsi_params.json" > /dev/null 2>&1
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --no-expression-span --out "$tmp/ns.hcavatar" --json "$tmp/ns.json" > /dev/null 2> "$tmp/ns.err"
+span_ok=$("$python" - "$tmp/i.hcavatar" "$tmp/dsi_params.json" <<'PY' 2>&1
+import json, sys, zipfile
+span = json.loads(zipfile.ZipFile(sys.argv[1]).read('manifest.json'))['config']['expression_span']
+frames = json.load(open(sys.argv[2]))['frames'][:-8]
+e = [f['expression'] for f in frames]
+low = [min(x[k] for x in e) for k in range(len(e[0]))]
+high = [max(x[k] for x in e) for k in range(len(e[0]))]
+ok = len(span['low']) == len(low) and all(abs(a - b) < 1e-6 for a, b in zip(span['low'] + span['high'], low + high))
+print(ok and any(h > l for l, h in zip(low, high)))
+PY
+)
+[ "$span_ok" = True ] && [ "$(config "$tmp/ns.hcavatar" ".get('expression_span')")" = None ] &&
+  json "$tmp/ns.json" "j['expression_span']" | grep -q "^none" &&
+  ok "subject: the training frames' expression span kept in the avatar; --no-expression-span none" ||
+  bad "expression span: $span_ok $(tail -2 "$tmp/ns.err")"
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --expression-span-in-training --out "$tmp/st.hcavatar" --json "$tmp/st.json" > /dev/null 2> "$tmp/st.err"
+out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
+  --iterations 2 --expression-span-in-training --no-expression-span --out "$tmp/st2.hcavatar" 2>&1)
+[ $? -ne 0 ] && grep -q "expression-span-in-training needs the span kept" <<<"$out" &&
+  [ "$(config "$tmp/st.hcavatar" "['expression_span'] == json.loads(zipfile.ZipFile('$tmp/i.hcavatar').read('manifest.json'))['config']['expression_span']")" = True ] &&
+  json "$tmp/st.json" "j['expression_span']" | grep -q "from the first step" &&
+  ok "subject --expression-span-in-training: the same span, from the first step; without a span refused" ||
+  bad "span in training: $out $(tail -2 "$tmp/st.err")"
+said() {  # said AVATAR HOW: the first words of eval.json's expression_span
+  "$bin/headcast-train" eval --avatar "$tmp/$1.hcavatar" --data "$tmp/dsi" --out "$tmp/es_$1_$2" --orbit-frames 0 \
+    --no-landmarks --expression-span "$2" > /dev/null 2>&1
+  json "$tmp/es_$1_$2/eval.json" "' '.join(j['expression_span'].split()[:2])"
+}
+spans="$(said i avatar) | $(said i none) | $(said ns dataset)"
+[ "$spans" = "the avatar's | none: the | the dataset's" ] &&
+  ok "eval --expression-span avatar|none|dataset: said in eval.json" || bad "eval spans: '$spans'"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-levels 4 --out "$tmp/l4.hcavatar" 2>&1)
 [ $? -ne 0 ] && grep -q "surface-levels" <<<"$out" && ok "--surface-levels 4 refused" || bad "surface levels 4: $out"
