@@ -207,23 +207,22 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
 }
 
 // The avatar with AvatarConfig::expression_low/high set to each coefficient's
-// smallest and largest value over the dataset's training frames (a
-// coefficient the frames lack is 0 in all of them, as the conditioning takes
-// it); without a dataset, with no span.
+// smallest and largest value over the dataset's training frames (resized to
+// the avatar's count as the conditioning takes them); without a dataset, with
+// no span.
 Avatar WithExpressionSpan(const Avatar& avatar, const PreparedDataset* data) {
   AvatarConfig c = avatar.config();
   c.ClearExpressionSpan();
   if (data) {
-    c.expression_low.assign(c.num_expression, std::numeric_limits<float>::infinity());
-    c.expression_high.assign(c.num_expression, -std::numeric_limits<float>::infinity());
+    const float inf = std::numeric_limits<float>::infinity();
+    Eigen::VectorXf low = Eigen::VectorXf::Constant(c.num_expression, inf), high = -low;
     for (int i : data->train()) {
-      const Eigen::VectorXf& e = data->params(i).expression;
-      for (int k = 0; k < c.num_expression; ++k) {
-        const float v = k < e.size() ? e[k] : 0.f;
-        c.expression_low[k] = std::min(c.expression_low[k], v);
-        c.expression_high[k] = std::max(c.expression_high[k], v);
-      }
+      const Eigen::VectorXf e = Resized(data->params(i).expression, c.num_expression);
+      low = low.cwiseMin(e);
+      high = high.cwiseMax(e);
     }
+    c.expression_low.assign(low.data(), low.data() + low.size());
+    c.expression_high.assign(high.data(), high.data() + high.size());
   }
   return avatar.WithRuntimeSwitches(c);
 }
