@@ -1,6 +1,7 @@
 // NumPy .npy/.npz reading and writing (npz through libzip).
 #include "common/core/npy.h"
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -39,10 +40,14 @@ const DTypeInfo& Info(DType dtype) {
 // Bytes of an array of `shape`, or -1 when a dimension is negative or the
 // product passes `limit` (checked before multiplying, so it cannot wrap).
 int64_t ArrayBytes(const std::vector<int64_t>& shape, int element_size, int64_t limit) {
+  for (int64_t d : shape)
+    if (d < 0) return -1;
+  // An empty array needs no bytes whatever its other dimensions (the
+  // running product would otherwise outgrow a small limit first).
+  if (std::find(shape.begin(), shape.end(), 0) != shape.end()) return 0;
   int64_t n = element_size;
   for (int64_t d : shape) {
-    if (d < 0) return -1;
-    if (d > 0 && n > limit / d) return -1;
+    if (n > limit / d) return -1;
     n *= d;
   }
   return n <= limit ? n : -1;

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -116,8 +117,10 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
 // be turned by the application. Skinning each eyeball to its eye joint, pivoting
 // at its centre, makes gaze the FLAME way: the eye joints' rotations, which the
 // stream and the avatar conditioning already carry. The subject's left eye is +x.
+constexpr int kEyeballsPart = 6;  // in IctParts()
+
 void RigIctEyeballs(const std::vector<int>& remap, HeadModelData* d) {
-  const IctPart& eyeballs = IctParts()[6];
+  const IctPart& eyeballs = IctParts()[kEyeballsPart];
   for (int side = 0; side < 2; ++side) {
     const int joint = side == 0 ? kLeftEyeJoint : kRightEyeJoint;
     std::vector<int> ids;
@@ -145,7 +148,78 @@ void RigIctEyeballs(const std::vector<int>& remap, HeadModelData* d) {
   }
 }
 
+// A painted conversion's texture: a swatch of each part's plain colour (its
+// triangles all sample the swatch's middle), then the eyeball's colour along
+// the angle from its front pole, a ramp its vertices sample by their angle.
+constexpr int kSwatch = 8, kRamp = 64, kTextureRows = 4;
+
+// Replaces upstream's texture coordinates (no image comes with them) by the
+// painted texture's. `face_part`: each kept face's index in IctParts(). Runs
+// after RigIctEyeballs: an eyeball's front pole is +z from its joint's pivot.
+void PaintIctParts(const std::vector<int>& face_part, HeadModelData* d) {
+  const int parts = static_cast<int>(IctParts().size());
+  const int width = parts * kSwatch + kRamp;
+  d->texture_height = kTextureRows;
+  d->texture_width = width;
+  d->texture_mean.assign(static_cast<size_t>(width) * kTextureRows * 3, 0.f);
+  auto paint = [&](int x, const Eigen::Vector3f& rgb) {
+    for (int y = 0; y < kTextureRows; ++y)
+      for (int c = 0; c < 3; ++c) d->texture_mean[(static_cast<size_t>(y) * width + x) * 3 + c] = rgb[c];
+  };
+  for (int k = 0; k < parts; ++k)
+    for (int x = 0; x < kSwatch; ++x) paint(k * kSwatch + x, IctPartAlbedo(IctParts()[k].name));
+  for (int j = 0; j < kRamp; ++j) paint(parts * kSwatch + j, IctEyeballAlbedo(M_PI * (j + 0.5) / kRamp));
+
+  // Texture coordinates: one a swatch, then one an eyeball vertex.
+  std::vector<int> uv_of_vertex(d->v_template.rows(), -1);
+  std::vector<std::array<float, 2>> uvs;
+  for (int k = 0; k < parts; ++k) uvs.push_back({(k * kSwatch + 0.5f * kSwatch) / width, 0.5f});
+  d->uv_faces.resize(d->faces.rows(), 3);
+  for (Eigen::Index f = 0; f < d->faces.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      const int v = d->faces(f, c);
+      if (face_part[f] != kEyeballsPart) {
+        d->uv_faces(f, c) = face_part[f];
+        continue;
+      }
+      if (uv_of_vertex[v] < 0) {
+        const int joint = d->weights(v, kLeftEyeJoint) > 0.5f ? kLeftEyeJoint : kRightEyeJoint;
+        const Eigen::Vector3f pivot = d->j_regressor.row(joint) * d->v_template;
+        const Eigen::Vector3f r = d->v_template.row(v).transpose() - pivot;
+        const double angle = std::acos(std::clamp(r.z() / std::max(r.norm(), 1e-9f), -1.f, 1.f));
+        // Within the ramp's texel centres, so a lookup never reaches the swatches.
+        const double texel = std::clamp(angle / M_PI * kRamp - 0.5, 0.0, kRamp - 1.0);
+        uv_of_vertex[v] = static_cast<int>(uvs.size());
+        uvs.push_back({static_cast<float>((parts * kSwatch + texel + 0.5) / width), 0.5f});
+      }
+      d->uv_faces(f, c) = uv_of_vertex[v];
+    }
+  d->uvs.resize(static_cast<Eigen::Index>(uvs.size()), 2);
+  for (size_t i = 0; i < uvs.size(); ++i) d->uvs.row(static_cast<Eigen::Index>(i)) << uvs[i][0], uvs[i][1];
+}
+
 }  // namespace
+
+Eigen::Vector3f IctPartAlbedo(const std::string& part) {
+  // The renders have no shadows: the mouth's lining and tongue are painted
+  // about as dark as the inside of an open mouth photographs.
+  if (part == "mouth") return {0.20f, 0.07f, 0.07f};
+  if (part == "gums_tongue") return {0.36f, 0.13f, 0.13f};
+  if (part == "teeth") return {0.80f, 0.76f, 0.68f};
+  if (part == "eyes") return {0.72f, 0.50f, 0.46f};  // the sockets' pink lining around the eyeballs
+  if (part == "eyeballs") return IctEyeballAlbedo(M_PI / 2);
+  return {0.80f, 0.62f, 0.52f};  // skin: the colour every part had unpainted
+}
+
+Eigen::Vector3f IctEyeballAlbedo(double angle) {
+  // A brown iris about 11.5 mm across on a real eye's 12 mm radius reaches
+  // some 26 degrees from the pole, its dark rim included; the pupil a third.
+  const double degrees = angle * 180 / M_PI;
+  if (degrees < 8) return {0.04f, 0.03f, 0.03f};
+  if (degrees < 21) return {0.32f, 0.21f, 0.14f};
+  if (degrees < 26) return {0.16f, 0.11f, 0.08f};
+  return {0.82f, 0.78f, 0.76f};
+}
 
 HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   options.Check();
@@ -231,6 +305,7 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
 
   // Faces: keep those whose three vertices all survive.
   std::vector<std::array<int, 3>> faces, uv_faces;
+  std::vector<int> face_part;  // index in IctParts(), by the face's first vertex
   for (size_t f = 0; f < neutral.f.size(); ++f) {
     const auto& t = neutral.f[f];
     if (t[0] < 0 || t[1] < 0 || t[2] < 0 || t[0] >= n_all || t[1] >= n_all || t[2] >= n_all)
@@ -239,6 +314,9 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
     if (remap[t[0]] < 0 || remap[t[1]] < 0 || remap[t[2]] < 0) continue;
     faces.push_back({remap[t[0]], remap[t[1]], remap[t[2]]});
     uv_faces.push_back(neutral.ft[f]);
+    int part = 0;
+    while (t[0] > IctParts()[part].last) ++part;
+    face_part.push_back(part);
   }
   d.faces.resize(static_cast<Eigen::Index>(faces.size()), 3);
   for (size_t f = 0; f < faces.size(); ++f) d.faces.row(f) << faces[f][0], faces[f][1], faces[f][2];
@@ -246,7 +324,7 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   bool uv_ok = n_uv > 0;
   for (const auto& t : uv_faces)
     for (int k : t) uv_ok &= k >= 0 && k < n_uv;
-  if (uv_ok) {
+  if (uv_ok && !options.paint_parts) {
     d.uvs.resize(n_uv, 2);
     for (int i = 0; i < n_uv; ++i) d.uvs.row(i) << neutral.vt[2 * i], 1.f - neutral.vt[2 * i + 1];  // OBJ v is up
     d.uv_faces.resize(d.faces.rows(), 3);
@@ -264,6 +342,7 @@ HeadModel ConvertIctFaceKit(const IctConvertOptions& options) {
   for (int i = face.first; i <= face.last; ++i)
     if (remap[i] >= 0) d.j_regressor.col(remap[i]).setConstant(1.0f / face_count);
   RigIctEyeballs(remap, &d);
+  if (options.paint_parts) PaintIctParts(face_part, &d);
   d.posedirs.resize(0, 0);
 
   // Landmarks: the fixed vertex ids, each as a corner of a face that uses it.

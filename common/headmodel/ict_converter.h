@@ -26,8 +26,22 @@ struct IctConvertOptions {
   std::string folder;                                  // the FaceXModel folder (or its parent)
   int max_identity = 100;                              // identity components to read (identity000.obj ...)
   std::vector<std::string> parts = IctDefaultParts();  // names from IctParts(); empty: every part
+  // Upstream has no albedo, so every render of the model (a general model's
+  // synthetic training pictures, the fit panel) is one skin colour: skin-lit
+  // mouth cavities and blank eyeballs. Painted, each part has a plain colour
+  // of its own (IctPartAlbedo) and the eyeballs a sclera, iris and pupil about
+  // their front pole. Off: a general model pretrained on painted renders drew
+  // open mouths darker but was not better over the clips (bench/results).
+  bool paint_parts = false;
   void Check() const;
 };
+
+// The plain colour (linear RGB in [0, 1]) a painted conversion gives a part;
+// the eyeballs' is their sclera.
+Eigen::Vector3f IctPartAlbedo(const std::string& part);
+// An eyeball's colour at an angle (radians) from its front pole: pupil, iris,
+// a darker limbal ring, sclera.
+Eigen::Vector3f IctEyeballAlbedo(double angle);
 
 // Reads generic_neutral_mesh.obj, the expression OBJs listed in
 // vertex_indices.json and identityNNN.obj; converts centimetres to metres;

@@ -6,6 +6,8 @@
 #include <algorithm>
 
 #include "common/headmodel/head_model_io.h"
+#include "common/headmodel/head_render.h"
+#include "common/raster/shading.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -125,6 +127,83 @@ TEST(IctConverter, KeepsTheEyeAccessoriesOnlyWhenAsked) {
   ASSERT_EQ(without.vertices.rows(), 24591);
   EXPECT_LT((with.vertices.topRows(24591) - without.vertices).cwiseAbs().maxCoeff(), 1e-6);
   EXPECT_LT((with.landmarks - without.landmarks).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+// What the renders of the model are painted with: every pixel of a part takes
+// its part's colour, an eyeball's the colour of its angle from the pole, and an
+// open mouth shows its dark lining; unpainted, the model has no albedo at all.
+TEST(IctConverter, PaintsEachPartAndTheEyesAboutTheirPoles) {
+  HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
+  IctConvertOptions painted;
+  painted.folder = testing::DataDir() + "/head-models/ict-facekit";
+  painted.max_identity = 0;
+  painted.paint_parts = true;
+  const HeadModel m = ConvertIctFaceKit(painted);
+  ASSERT_TRUE(m.has_texture());
+  EXPECT_EQ(m.num_texture(), 0);
+  HeadModelParams p;
+  p.expression = Eigen::VectorXd::Zero(m.num_expression());
+  p.expression[m.ExpressionIndex("jawOpen")] = 1;
+  const HeadModelOutput open = m.Forward(p);
+  const PinholeCamera camera = PinholeCamera::FromFovY(512, 512, 12);
+  RasterBuffers buffers;
+  RenderHead(m, open.vertices, FrontalCamFromHead(0.9), camera, AlbedoTexture(m), {}, &buffers);
+  const cv::Mat albedo = SampleTexture(buffers, m.data().uv_faces, m.data().uvs, AlbedoTexture(m));
+  const auto& parts = IctParts();
+  std::vector<int> pixels(parts.size(), 0);
+  int eyeball_checked = 0, pupil = 0;
+  for (int y = 0; y < buffers.height; ++y)
+    for (int x = 0; x < buffers.width; ++x) {
+      const int f = buffers.face[static_cast<size_t>(y) * buffers.width + x];
+      if (f < 0) continue;
+      size_t part = 0;
+      while (m.data().faces(f, 0) > parts[part].last) ++part;
+      ++pixels[part];
+      const cv::Vec3f a = albedo.at<cv::Vec3f>(y, x);
+      Eigen::Vector3f expected = IctPartAlbedo(parts[part].name);
+      if (std::string(parts[part].name) == "eyeballs") {
+        // The pixel's point on the ball, from the pivot of its eye's joint.
+        const float* b = &buffers.bary[3 * (static_cast<size_t>(y) * buffers.width + x)];
+        Eigen::Vector3f point = Eigen::Vector3f::Zero();
+        for (int c = 0; c < 3; ++c) point += b[c] * open.vertices.row(m.data().faces(f, c)).transpose();
+        const int joint = point.x() > 0 ? kLeftEyeJoint : kRightEyeJoint;
+        const Eigen::Vector3f r = point - open.joints.row(joint).transpose();
+        const double degrees = std::acos(r.z() / r.norm()) * 180 / M_PI;
+        // Away from the rings' edges, where the ramp's texels (2.8 degrees) blend.
+        if (std::min({std::abs(degrees - 8), std::abs(degrees - 21), std::abs(degrees - 26)}) < 4) continue;
+        expected = IctEyeballAlbedo(degrees * M_PI / 180);
+        ++eyeball_checked;
+        pupil += degrees < 6;
+      }
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(a[c], expected[c], 2e-3) << parts[part].name << " at " << x << "," << y;
+    }
+  for (const char* seen : {"face", "gums_tongue", "teeth", "eyeballs"})  // the mouth's lining lies behind the tongue
+    EXPECT_GT(
+        pixels[std::find_if(parts.begin(), parts.end(), [&](const IctPart& q) { return q.name == std::string(seen); }) -
+               parts.begin()],
+        20)
+        << seen;
+  EXPECT_GT(eyeball_checked, 100);
+  EXPECT_GT(pupil, 4);
+  // The mouth's lining and tongue are darker than skin, the sclera lighter than the iris.
+  EXPECT_LT(IctPartAlbedo("mouth").sum(), IctPartAlbedo("face").sum() / 3);
+  EXPECT_LT(IctPartAlbedo("gums_tongue").sum(), IctPartAlbedo("face").sum() / 2);
+  EXPECT_GT(IctEyeballAlbedo(M_PI / 3).sum(), 3 * IctEyeballAlbedo(0.25).sum());
+
+  IctConvertOptions unpainted = painted;
+  unpainted.paint_parts = false;
+  const HeadModel plain = ConvertIctFaceKit(unpainted);
+  EXPECT_FALSE(plain.has_texture());
+  EXPECT_FALSE(Ict().has_texture());  // the default
+  // The same geometry: avatars and datasets of either fit both.
+  EXPECT_EQ(plain.fingerprint(), m.fingerprint());
+  // The painting travels in the file.
+  const std::string path = testing::TempDir("ict_painted") + "/ict.npz";
+  SaveHeadModel(m, path);
+  const HeadModel back = LoadHeadModel(path);
+  ASSERT_TRUE(back.has_texture());
+  EXPECT_EQ(back.data().texture_mean, m.data().texture_mean);
+  EXPECT_EQ(back.data().uv_faces, m.data().uv_faces);
 }
 
 TEST(IctConverter, RefusesBadFolders) {
