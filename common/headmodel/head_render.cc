@@ -31,7 +31,10 @@ void TransformToCamera(const RowMatrixX3f& vertices, const RigidTransform& cam_f
 
 cv::Mat AlbedoTexture(const HeadModel& model, const Eigen::VectorXd& tau) {
   const auto& d = model.data();
-  if (!model.has_texture()) return cv::Mat(4, 4, CV_32FC3, cv::Scalar(0.80, 0.62, 0.52));
+  if (!model.has_texture()) {
+    const Eigen::Vector3f skin = FlatSkinAlbedo();
+    return cv::Mat(4, 4, CV_32FC3, cv::Scalar(skin.x(), skin.y(), skin.z()));
+  }
   cv::Mat tex(d.texture_height, d.texture_width, CV_32FC3);
   Eigen::Map<Eigen::VectorXf> out(tex.ptr<float>(), static_cast<Eigen::Index>(d.texture_mean.size()));
   out = Eigen::Map<const Eigen::VectorXf>(d.texture_mean.data(), static_cast<Eigen::Index>(d.texture_mean.size()));

@@ -21,6 +21,9 @@ RigidTransform FrontalCamFromHead(double distance, double yaw_deg = 0, double pi
 // Vertices (head frame) to the camera frame; `out` is reused across frames.
 void TransformToCamera(const RowMatrixX3f& vertices, const RigidTransform& cam_from_head, RasterVertices* out);
 
+// The flat skin colour (linear RGB) a model without an albedo is rendered in.
+inline Eigen::Vector3f FlatSkinAlbedo() { return {0.80f, 0.62f, 0.52f}; }
+
 // Albedo texture (CV_32FC3, RGB) for texture coefficients tau; flat skin if the model has none.
 cv::Mat AlbedoTexture(const HeadModel& model, const Eigen::VectorXd& tau = {});
 

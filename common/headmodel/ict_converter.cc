@@ -11,6 +11,7 @@
 #include <stdexcept>
 
 #include "common/core/options.h"
+#include "common/headmodel/head_render.h"
 
 namespace headcast {
 namespace fs = std::filesystem;
@@ -113,11 +114,12 @@ ObjMesh ReadObj(const fs::path& path, bool faces) {
   return m;
 }
 
+constexpr int kEyeballsPart = 6;  // in IctParts()
+
 // Upstream's eyeLook blendshapes move the lids only; the eyeballs are meant to
 // be turned by the application. Skinning each eyeball to its eye joint, pivoting
 // at its centre, makes gaze the FLAME way: the eye joints' rotations, which the
 // stream and the avatar conditioning already carry. The subject's left eye is +x.
-constexpr int kEyeballsPart = 6;  // in IctParts()
 
 void RigIctEyeballs(const std::vector<int>& remap, HeadModelData* d) {
   const IctPart& eyeballs = IctParts()[kEyeballsPart];
@@ -171,6 +173,8 @@ void PaintIctParts(const std::vector<int>& face_part, HeadModelData* d) {
   for (int j = 0; j < kRamp; ++j) paint(parts * kSwatch + j, IctEyeballAlbedo(M_PI * (j + 0.5) / kRamp));
 
   // Texture coordinates: one a swatch, then one an eyeball vertex.
+  const Eigen::Vector3f left_pivot = d->j_regressor.row(kLeftEyeJoint) * d->v_template,
+                        right_pivot = d->j_regressor.row(kRightEyeJoint) * d->v_template;
   std::vector<int> uv_of_vertex(d->v_template.rows(), -1);
   std::vector<std::array<float, 2>> uvs;
   for (int k = 0; k < parts; ++k) uvs.push_back({(k * kSwatch + 0.5f * kSwatch) / width, 0.5f});
@@ -183,9 +187,8 @@ void PaintIctParts(const std::vector<int>& face_part, HeadModelData* d) {
         continue;
       }
       if (uv_of_vertex[v] < 0) {
-        const int joint = d->weights(v, kLeftEyeJoint) > 0.5f ? kLeftEyeJoint : kRightEyeJoint;
-        const Eigen::Vector3f pivot = d->j_regressor.row(joint) * d->v_template;
-        const Eigen::Vector3f r = d->v_template.row(v).transpose() - pivot;
+        const bool left = d->weights(v, kLeftEyeJoint) > 0.5f;
+        const Eigen::Vector3f r = d->v_template.row(v).transpose() - (left ? left_pivot : right_pivot);
         const double angle = std::acos(std::clamp(r.z() / std::max(r.norm(), 1e-9f), -1.f, 1.f));
         // Within the ramp's texel centres, so a lookup never reaches the swatches.
         const double texel = std::clamp(angle / M_PI * kRamp - 0.5, 0.0, kRamp - 1.0);
@@ -208,7 +211,7 @@ Eigen::Vector3f IctPartAlbedo(const std::string& part) {
   if (part == "teeth") return {0.80f, 0.76f, 0.68f};
   if (part == "eyes") return {0.72f, 0.50f, 0.46f};  // the sockets' pink lining around the eyeballs
   if (part == "eyeballs") return IctEyeballAlbedo(M_PI / 2);
-  return {0.80f, 0.62f, 0.52f};  // skin: the colour every part had unpainted
+  return FlatSkinAlbedo();  // skin: the colour every part had unpainted
 }
 
 Eigen::Vector3f IctEyeballAlbedo(double angle) {
