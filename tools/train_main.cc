@@ -152,6 +152,10 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--surface-rigid,!--no-surface-rigid", config->surface_rigid,
                 "a second texture looked up at the posed surface point in the head frame, beside the canonical one "
                 "(what moves with the head but not with the skin under it: glasses, hair over the face)");
+  app->add_option("--surface-blend", config->surface_blend,
+                  "texels along an edge of the texture's expression blendshapes: planes per expression coefficient, "
+                  "weighted by the frame's (detail at its place on the face that grows with the expression; 0: none)")
+      ->capture_default_str();
   app->add_flag("--surface-conditioned,!--no-surface-conditioned", config->surface_conditioned,
                 "the texture's branch is scaled and shifted per frame by the pose and expression (detail that comes "
                 "and goes with the expression: wrinkles, creases)");

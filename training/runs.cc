@@ -201,6 +201,7 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
   to->surface_extent = from.surface_extent;
   to->surface_shell = from.surface_shell;
   to->surface_rigid = from.surface_rigid;
+  to->surface_blend = from.surface_blend;
   to->surface_conditioned = from.surface_conditioned;
   to->surface_hidden = from.surface_hidden;
   to->surface_levels = from.surface_levels;

@@ -84,6 +84,9 @@ void AvatarConfig::Check() const {
   c.That(!surface_rigid || surface_shell == 0,
          "surface_rigid takes no surface_shell (a shell pixel has no posed point)");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
+  c.That(surface_blend == 0 || (surface_blend >= 4 && surface_blend <= 256), "surface_blend must be 0 or in [4, 256]");
+  c.That(surface_blend == 0 || has_surface(), "surface_blend needs surface_features > 0");
+  c.That(surface_blend == 0 || num_expression > 0, "surface_blend needs expression coefficients");
   c.InRange("surface_hidden", surface_hidden, 0, 256)
       .InRange("surface_levels", surface_levels, 1, std::max(1, renderer_levels()));
   c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
@@ -135,6 +138,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"surface_extent", surface_extent},
                       {"surface_shell", surface_shell},
                       {"surface_rigid", surface_rigid},
+                      {"surface_blend", surface_blend},
                       {"surface_conditioned", surface_conditioned},
                       {"surface_hidden", surface_hidden},
                       {"surface_levels", surface_levels},
@@ -179,6 +183,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_extent = j.value("surface_extent", c.surface_extent);
     c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
     c.surface_rigid = j.value("surface_rigid", false);
+    c.surface_blend = j.value("surface_blend", 0);
     c.surface_conditioned = j.value("surface_conditioned", false);
     c.surface_hidden = j.value("surface_hidden", 0);
     c.surface_levels = j.value("surface_levels", 1);

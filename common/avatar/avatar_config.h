@@ -103,6 +103,14 @@ struct AvatarConfig : AvatarCommonConfig {
   // the canonical texture that skin moves with every blink, cheek and jaw,
   // and with it what the texture painted there. false: the canonical texture only.
   bool surface_rigid = false;
+  // Expression blendshapes of the canonical texture: one set of planes per
+  // expression coefficient, of this many texels along an edge, summed with
+  // the frame's (told) coefficients as weights and looked up beside the
+  // texture. Detail that comes with an expression (a crease, the mouth's
+  // inside darkening as it opens) then lives at its own place on the face and
+  // grows with the coefficient, where the conditioned branch's per-frame
+  // scale and shift act on every pixel alike. 0: none.
+  int surface_blend = 0;
   // The surface branch's hidden layer is scaled and shifted per frame by the
   // pose and expression (FiLM), so that the texture can hold detail that comes
   // and goes with the expression (forehead wrinkles, creases, the mouth's

@@ -216,6 +216,12 @@ SurfaceTextureImpl::SurfaceTextureImpl(const AvatarConfig& config) : extent_(con
   planes_ = register_parameter("planes", torch::zeros({3, config.surface_features, r, r}));
   if (config.surface_rigid)
     rigid_planes_ = register_parameter("rigid_planes", torch::zeros({3, config.surface_features, r, r}));
+  if (config.surface_blend > 0) {
+    blend_resolution_ = config.surface_blend;
+    blend_ = register_parameter(
+        "blend",
+        torch::zeros({config.num_expression, 3 * blend_resolution_ * blend_resolution_ * config.surface_features}));
+  }
 }
 
 void SurfaceTextureImpl::UseChannelsLast() {
@@ -225,11 +231,25 @@ void SurfaceTextureImpl::UseChannelsLast() {
   channels_last_ = true;
 }
 
-torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const torch::Tensor& posed) {
-  if (!rigid()) return LookUp(planes_, canonical);
-  if (!posed.defined() || posed.sizes() != canonical.sizes())
-    throw std::invalid_argument("SurfaceTexture: a rigid texture needs the posed points of the canonical ones");
-  return LookUp(planes_, canonical) + LookUp(rigid_planes_, posed);
+torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const torch::Tensor& posed,
+                                          const torch::Tensor& expression) {
+  torch::Tensor features = LookUp(planes_, canonical);
+  if (rigid()) {
+    if (!posed.defined() || posed.sizes() != canonical.sizes())
+      throw std::invalid_argument("SurfaceTexture: a rigid texture needs the posed points of the canonical ones");
+    features = features + LookUp(rigid_planes_, posed);
+  }
+  if (blended()) features = features + LookUp(BlendedPlanes(expression), canonical);
+  return features;
+}
+
+torch::Tensor SurfaceTextureImpl::BlendedPlanes(const torch::Tensor& expression) const {
+  if (!expression.defined() || expression.dim() != 2 || expression.size(0) != 1 || expression.size(1) != blend_.size(0))
+    throw std::invalid_argument("SurfaceTexture: a blended texture needs the frame's " +
+                                std::to_string(blend_.size(0)) + " expression coefficients (1, E)");
+  const int64_t b = blend_resolution_, c = planes_.size(1);
+  // (1, E) x (E, 3BBC): texel-major planes; viewed as (3, C, B, B) with channels-last strides.
+  return torch::mm(expression.to(blend_.dtype()), blend_).view({3, b, b, c}).permute({0, 3, 1, 2});
 }
 
 torch::Tensor SurfaceTextureImpl::LookUp(const torch::Tensor& planes, const torch::Tensor& points) const {

@@ -95,9 +95,12 @@ class SurfaceTextureImpl : public torch::nn::Module {
  public:
   explicit SurfaceTextureImpl(const AvatarConfig& config);
   // canonical points (P, 3), model frame, metres [, posed points (P, 3), the
-  // same pixels' posed surface points: needed with surface_rigid] -> features (P, C).
-  torch::Tensor forward(const torch::Tensor& canonical, const torch::Tensor& posed = torch::Tensor());
+  // same pixels' posed surface points: needed with surface_rigid] [, the
+  // frame's expression coefficients (1, E): needed with surface_blend] -> features (P, C).
+  torch::Tensor forward(const torch::Tensor& canonical, const torch::Tensor& posed = torch::Tensor(),
+                        const torch::Tensor& expression = torch::Tensor());
   bool rigid() const { return rigid_planes_.defined(); }
+  bool blended() const { return blend_.defined(); }
   // Inference: keeps the planes texel after texel (channels-last), so that a
   // lookup without gradients reads a texel's channels side by side
   // (LookUpTriplanes) instead of grid_sample's walk channel after channel.
@@ -109,6 +112,11 @@ class SurfaceTextureImpl : public torch::nn::Module {
   bool channels_last_ = false;
   torch::Tensor planes_;        // (3, C, R, R)
   torch::Tensor rigid_planes_;  // the same, with surface_rigid (else undefined)
+  // With surface_blend: (E, 3 * B * B * C), each coefficient's planes texel
+  // after texel, so that their weighted sum is already in the receiver's layout.
+  torch::Tensor blend_;
+  int64_t blend_resolution_ = 0;
+  torch::Tensor BlendedPlanes(const torch::Tensor& expression) const;  // -> (3, C, B, B), channels-last strides
   torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& points) const;
 };
 TORCH_MODULE(SurfaceTexture);

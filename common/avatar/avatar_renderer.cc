@@ -153,9 +153,13 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
         throw std::invalid_argument("RunAvatarUpsampling: the rigid texture needs the surface's posed points");
       posed = torch::from_blob(const_cast<float*>(surface.posed.data()), {n, 3}, torch::kFloat);
     }
-    const torch::Tensor features = n > 0 ? modules.surface->forward(canonical, posed)
-                                         : torch::zeros({0, modules.cnerf->config().surface_features});
     const AvatarConfig& config = modules.cnerf->config();
+    // The blendshapes weighted by what the networks are told (within the avatar's span).
+    const torch::Tensor expression =
+        modules.surface->blended() ? conditioning.geometry.narrow(1, config.expression_offset(), config.num_expression)
+                                   : torch::Tensor();
+    const torch::Tensor features =
+        n > 0 ? modules.surface->forward(canonical, posed, expression) : torch::zeros({0, config.surface_features});
     const torch::Tensor motion = config.surface_conditioned
                                      ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
                                      : torch::Tensor();

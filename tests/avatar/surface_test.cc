@@ -748,6 +748,116 @@ TEST(SurfaceTexture, ARigidTextureAddsPlanesLookedUpAtThePosedPoints) {
   EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
 }
 
+// The expression blendshapes: planes per coefficient, summed with the
+// frame's coefficients as weights and looked up at the canonical points. Zero
+// at first (the picture as without them); a neutral frame reads the texture
+// alone; the lookup is linear in the coefficients; the receiver's texel-major
+// lookup reads what grid_sample reads; refused without the coefficients;
+// checked, kept in the file, and drawn the same after loading.
+TEST(SurfaceTexture, ExpressionBlendshapesAddPlanesWeightedByTheFrame) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_blend = 8;
+  c.Check();
+  SurfaceTexture texture(c);
+  ASSERT_TRUE(texture->blended());
+  ASSERT_EQ(texture->parameters().size(), 2u);
+  const int e = c.num_expression;
+  const torch::Tensor canonical = (torch::rand({400, 3}) * 2 - 1) * 0.15;
+  const torch::Tensor psi = torch::rand({1, e}) * 2 - 1;
+  EXPECT_EQ(texture->forward(canonical, {}, psi).abs().max().item<float>(), 0.f) << "new blendshapes are zero";
+  EXPECT_THROW(texture->forward(canonical), std::invalid_argument) << "no coefficients";
+  EXPECT_THROW(texture->forward(canonical, {}, torch::zeros({1, e + 1})), std::invalid_argument);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : texture->parameters()) t.uniform_(-1, 1);
+  }
+  SurfaceTexture plain(TinyWithSurface());
+  {
+    torch::NoGradGuard no_grad;
+    plain->named_parameters()["planes"].copy_(texture->named_parameters()["planes"]);
+  }
+  const torch::Tensor base = plain->forward(canonical).detach();
+  EXPECT_LT((texture->forward(canonical, {}, torch::zeros({1, e})) - base).abs().max().item<float>(), 1e-6)
+      << "a neutral frame reads the texture alone";
+  const torch::Tensor once = texture->forward(canonical, {}, psi).detach() - base;
+  EXPECT_GT(once.abs().max().item<float>(), 0.1) << "an expression changes the features";
+  const torch::Tensor two = texture->forward(canonical, {}, 2 * psi).detach() - base;
+  EXPECT_LT((two - 2 * once).abs().max().item<float>(), 1e-4) << "linear in the coefficients";
+  // One coefficient alone reads its own planes: (3, C, B, B) from its row, texel after texel.
+  const int64_t b = c.surface_blend, ch = c.surface_features;
+  torch::Tensor unit = torch::zeros({1, e});
+  unit[0][3] = 1;
+  const torch::Tensor alone = texture->forward(canonical, {}, unit).detach() - base;
+  const torch::Tensor row_at_b = [&] {
+    AvatarConfig cb = TinyWithSurface();
+    cb.surface_resolution = static_cast<int>(b);
+    SurfaceTexture t(cb);
+    torch::NoGradGuard no_grad;
+    t->named_parameters()["planes"].copy_(
+        texture->named_parameters()["blend"][3].view({3, b, b, ch}).permute({0, 3, 1, 2}));
+    return t->forward(canonical).detach();
+  }();
+  EXPECT_LT((alone - row_at_b).abs().max().item<float>(), 1e-5) << "one coefficient: its own planes";
+  const torch::Tensor both = texture->forward(canonical, {}, psi).detach();
+  texture->UseChannelsLast();
+  {
+    torch::NoGradGuard no_grad;
+    EXPECT_LT((texture->forward(canonical, {}, psi) - both).abs().max().item<float>(), 1e-5)
+        << "the receiver's lookup reads the same";
+  }
+  // Gradients reach each coefficient's planes in proportion to its weight.
+  SurfaceTexture learning(c);
+  torch::Tensor w = torch::zeros({1, e});
+  w[0][1] = 0.5;
+  learning->forward(canonical, {}, w).sum().backward();
+  const torch::Tensor g = learning->named_parameters()["blend"].grad();
+  EXPECT_GT(g[1].abs().sum().item<float>(), 0.f);
+  EXPECT_EQ(g[2].abs().sum().item<float>(), 0.f) << "a coefficient of zero learns nothing";
+
+  EXPECT_EQ(AvatarConfig::FromJson(c.ToJson()).surface_blend, 8);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_blend");
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_blend, 0) << "files from before them: none";
+  AvatarConfig bad = testing::TinyAvatarConfig();
+  bad.surface_blend = 8;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "blendshapes without a texture";
+  bad = c;
+  bad.surface_blend = 2;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+
+  // Added to a general model: the same picture; then saved, loaded, drawn alike; an expression changes it.
+  const HeadModel& m = *Builtin();
+  Avatar general = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 3);
+  Avatar with = general.WithRuntimeSwitches(c);
+  const FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : with.modules().surface->parameters()) t.uniform_(-1, 1);
+  }
+  const std::string dir = testing::TempDir("blend_surface");
+  with.Save(dir + "/b.hcavatar");
+  Avatar back = Avatar::Load(dir + "/b.hcavatar", m);
+  EXPECT_EQ(back.config().surface_blend, 8);
+  const cv::Mat y = Shown(back, frame);
+  EXPECT_EQ(cv::norm(Shown(with, frame), y, cv::NORM_INF), 0) << "the loaded blendshapes draw what the saved did";
+  FrameParams other = frame;
+  other.expression[0] = 0.5f;
+  EXPECT_GT(cv::norm(Shown(back, other), y, cv::NORM_INF), 0) << "the expression reaches the texture";
+  AvatarConfig without = c;
+  without.surface_blend = 0;
+  EXPECT_THROW(with.WithRuntimeSwitches(without), std::invalid_argument) << "a texture is not changed";
+  // A manifest that promises blendshapes the weights do not hold.
+  Avatar one = Avatar::CreateRandom(TinyWithSurface(), m, DefaultSubject(m, 128), 4);
+  one.Save(dir + "/one.hcavatar");
+  ZipEntries entries = ReadZip(dir + "/one.hcavatar");
+  nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+  manifest["config"]["surface_blend"] = 8;
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/lying.hcavatar", entries);
+  EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
+}
+
 TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
   const HeadModel& m = *Builtin();
   const std::string dir = testing::TempDir("surface");
