@@ -52,6 +52,7 @@ void FitOptions::Check() const {
       .InRange("final_lr_fraction", final_lr_fraction, 1e-4, 1.0)
       .InRange("warmup_steps", warmup_steps, 0, 100000000)
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
+      .InRange("blend_lr_scale", blend_lr_scale, 0.0, 1000.0)
       .That(weight_average == 0 || (weight_average > 0 && weight_average < 1),
             "weight_average is 0 (off) or a decay in (0, 1)")
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
@@ -361,13 +362,17 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
-  // Two groups: the networks and offsets, and the surface texture, whose
-  // texels each see a small part of every picture (its own learning rate).
-  std::vector<torch::Tensor> params, surface_params;
-  if (modules.surface) surface_params = modules.surface->parameters();
+  // Groups: the networks and offsets; the surface texture, whose texels each
+  // see a small part of every picture (its own learning rate); its expression
+  // blendshapes, when it has them (theirs).
+  std::vector<torch::Tensor> params, surface_params, blend_params;
+  if (modules.surface)
+    for (const auto& p : modules.surface->named_parameters())
+      (p.key() == "blend" ? blend_params : surface_params).push_back(p.value());
   for (auto& p : modules.parameters())
     if (p.requires_grad() &&
-        std::none_of(surface_params.begin(), surface_params.end(), [&](const auto& q) { return q.is_same(p); }))
+        std::none_of(surface_params.begin(), surface_params.end(), [&](const auto& q) { return q.is_same(p); }) &&
+        std::none_of(blend_params.begin(), blend_params.end(), [&](const auto& q) { return q.is_same(p); }))
       params.push_back(p);
   // The weights training started from (before a resume loads a checkpoint's:
   // the anchor is the general model's, not the interrupted run's).
@@ -382,8 +387,12 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   }
   std::vector<torch::optim::OptimizerParamGroup> groups = {torch::optim::OptimizerParamGroup(params)};
   if (!surface_params.empty()) groups.emplace_back(surface_params);
+  if (!blend_params.empty()) groups.emplace_back(blend_params);
+  const double group_scale[] = {1.0, options.surface_lr_scale, options.blend_lr_scale};
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
-  params.insert(params.end(), surface_params.begin(), surface_params.end());  // all of them, for the all-reduce
+  // All of them, for the all-reduce.
+  params.insert(params.end(), surface_params.begin(), surface_params.end());
+  params.insert(params.end(), blend_params.begin(), blend_params.end());
   std::unique_ptr<PerceptualLoss> vgg;
   TrainResult result;
   result.perceptual = "ssim";
@@ -425,7 +434,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     const double p_synthetic = real.empty() ? 1.0 : !data.synthetic ? 0.0 : options.mix.SyntheticProbability(step);
     for (size_t g = 0; g < adam.param_groups().size(); ++g)
       static_cast<torch::optim::AdamOptions&>(adam.param_groups()[g].options())
-          .lr(options.LearningRateAt(step) * (g == 1 ? options.surface_lr_scale : 1.0));
+          .lr(options.LearningRateAt(step) * group_scale[g]);
     adam.zero_grad();
     StepInfo info;
     info.step = step;

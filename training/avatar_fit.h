@@ -73,6 +73,11 @@ struct FitOptions {
   // The surface texture's rate over the networks' (its texels each see a
   // small part of every picture; bench/DEFAULTS.md has the measurement).
   double surface_lr_scale = 20;
+  // The texture's expression blendshapes' rate over the networks' (AvatarConfig::
+  // surface_blend): lower than the texture's, since each blendshape is fitted
+  // to what differs between frames, noise included, and a combination of
+  // coefficients no training frame had adds up what each learnt.
+  double blend_lr_scale = 1;
   // Polyak averaging: with a decay d in (0, 1) the run keeps an exponential
   // moving average of the weights (decay min(d, (1 + n) / (10 + n)) at step n,
   // so the start weights fade out early); the avatar holds the average in the

@@ -94,6 +94,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"final_lr_fraction", f.final_lr_fraction},
       {"warmup_steps", f.warmup_steps},
       {"surface_lr_scale", f.surface_lr_scale},
+      {"blend_lr_scale", f.blend_lr_scale},
       {"weight_average", f.weight_average},
       {"region_weight", f.loss.regions.weight},
       {"seconds", r.seconds},

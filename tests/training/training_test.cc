@@ -711,6 +711,45 @@ TEST(TrainAvatar, TheAnchorPullsTheWeightsBackTowardTheStart) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// The texture's expression blendshapes learn at their own rate: Adam's first
+// step moves each weight by the group's rate, so after one step the largest
+// change of the blendshapes is blend_lr_scale times the networks' rate (none at
+// 0), while the texture moves at its own.
+TEST(TrainAvatar, TheBlendshapesLearnAtTheirOwnRate) {
+  const std::string dir = WriteRenderedDataset("dataset_blend", 4, 1);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  AvatarConfig c = Tiny();
+  c.surface_features = 4;
+  c.surface_resolution = 32;
+  c.surface_blend = 8;
+  const auto step = [&](double scale) {
+    Avatar avatar = Avatar::CreateRandom(c, Model(), real.subject(), 4);
+    {  // the texture's branch drawn, or the zero start would pass it no gradient
+      torch::NoGradGuard no_grad;
+      for (auto& p : avatar.modules().renderer->named_parameters())
+        if (p.key().rfind("surface", 0) == 0) p.value().uniform_(-0.5, 0.5);
+    }
+    FitOptions f;
+    f.iterations = 1;
+    f.batch = 2;
+    f.learning_rate = 1e-3;
+    f.surface_lr_scale = 5;
+    f.blend_lr_scale = scale;
+    TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
+    const auto p = avatar.modules().surface->named_parameters();
+    return std::make_pair(p["planes"].abs().max().item<double>(), p["blend"].abs().max().item<double>());
+  };
+  const auto [planes0, blend0] = step(0);
+  EXPECT_NEAR(planes0, 5e-3, 5e-5) << "the texture at its own rate";
+  EXPECT_EQ(blend0, 0) << "a rate of zero leaves the blendshapes";
+  const auto [planes3, blend3] = step(3);
+  EXPECT_NEAR(planes3, 5e-3, 5e-5);
+  EXPECT_NEAR(blend3, 3e-3, 3e-5) << "the blendshapes at theirs";
+  FitOptions bad;
+  bad.blend_lr_scale = -1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 // c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
 // loopback TCP) end with the weights of one process running the whole batch.
 TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
