@@ -74,10 +74,12 @@ struct FitOptions {
   // small part of every picture; bench/DEFAULTS.md has the measurement).
   double surface_lr_scale = 20;
   // The texture's expression blendshapes' rate over the networks' (AvatarConfig::
-  // surface_blend): lower than the texture's, since each blendshape is fitted
-  // to what differs between frames, noise included, and a combination of
-  // coefficients no training frame had adds up what each learnt.
-  double blend_lr_scale = 1;
+  // surface_blend), a knob of its own: each blendshape is fitted to what differs
+  // between frames, noise included, and a combination of coefficients no
+  // training frame had adds up what each learnt, so a lower rate is the first
+  // thing to try against that (bench/results/fidelity_ablation.md: 1 was no
+  // better than the texture's 20).
+  double blend_lr_scale = 20;
   // Polyak averaging: with a decay d in (0, 1) the run keeps an exponential
   // moving average of the weights (decay min(d, (1 + n) / (10 + n)) at step n,
   // so the start weights fade out early); the avatar holds the average in the
