@@ -42,6 +42,25 @@ cv::Mat Shown(Avatar& avatar, const FrameParams& frame) {
   return image;
 }
 
+// A texture of configuration `c` added to a random general model draws the
+// general model's picture; with its weights drawn at random, saved under `dir`
+// and loaded back, it draws what it drew. Returns the added and the loaded avatar.
+std::pair<Avatar, Avatar> AddedSavedAndLoaded(const AvatarConfig& c, const std::string& dir) {
+  const HeadModel& m = *Builtin();
+  Avatar general = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 3);
+  Avatar with = general.WithRuntimeSwitches(c);
+  const FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0) << "added: the same picture";
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : with.modules().surface->parameters()) t.uniform_(-1, 1);
+  }
+  with.Save(dir + "/added.hcavatar");
+  Avatar back = Avatar::Load(dir + "/added.hcavatar", m);
+  EXPECT_EQ(cv::norm(Shown(with, frame), Shown(back, frame), cv::NORM_INF), 0) << "loaded: what the saved one drew";
+  return {std::move(with), std::move(back)};
+}
+
 // `to` takes every weight of `from` that it has by name (CNeRF, renderer,
 // texture); returns the names of those it has and `from` lacks.
 std::vector<std::string> CopySharedWeights(Avatar& from, Avatar& to) {
@@ -717,22 +736,12 @@ TEST(SurfaceTexture, ARigidTextureAddsPlanesLookedUpAtThePosedPoints) {
   bad.surface_shell = 0.02;
   EXPECT_THROW(bad.Check(), std::invalid_argument) << "a shell pixel has no posed point";
 
-  // Added to a general model: the same picture; saved and loaded: the same picture.
   const HeadModel& m = *Builtin();
-  Avatar general = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 3);
-  Avatar with = general.WithRuntimeSwitches(c);
-  const FrameParams frame = Expressive();
-  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0);
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& t : with.modules().surface->parameters()) t.uniform_(-1, 1);
-  }
   const std::string dir = testing::TempDir("rigid_surface");
-  with.Save(dir + "/r.hcavatar");
-  Avatar back = Avatar::Load(dir + "/r.hcavatar", m);
+  auto [with, back] = AddedSavedAndLoaded(c, dir);
   EXPECT_TRUE(back.config().surface_rigid);
+  const FrameParams frame = Expressive();
   const cv::Mat y = Shown(back, frame);
-  EXPECT_EQ(cv::norm(Shown(with, frame), y, cv::NORM_INF), 0) << "the loaded texture draws what the saved one did";
   EXPECT_EQ(cv::norm(y, Shown(back, frame), cv::NORM_INF), 0) << "the same frame twice, the same picture";
   AvatarConfig canonical_only = c;
   canonical_only.surface_rigid = false;
@@ -825,22 +834,13 @@ TEST(SurfaceTexture, ExpressionBlendshapesAddPlanesWeightedByTheFrame) {
   bad.surface_blend = 2;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 
-  // Added to a general model: the same picture; then saved, loaded, drawn alike; an expression changes it.
+  // An expression changes the picture.
   const HeadModel& m = *Builtin();
-  Avatar general = Avatar::CreateRandom(testing::TinyAvatarConfig(), m, DefaultSubject(m, 128), 3);
-  Avatar with = general.WithRuntimeSwitches(c);
-  const FrameParams frame = Expressive();
-  EXPECT_EQ(cv::norm(Shown(general, frame), Shown(with, frame), cv::NORM_INF), 0);
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& t : with.modules().surface->parameters()) t.uniform_(-1, 1);
-  }
   const std::string dir = testing::TempDir("blend_surface");
-  with.Save(dir + "/b.hcavatar");
-  Avatar back = Avatar::Load(dir + "/b.hcavatar", m);
+  auto [with, back] = AddedSavedAndLoaded(c, dir);
   EXPECT_EQ(back.config().surface_blend, 8);
+  const FrameParams frame = Expressive();
   const cv::Mat y = Shown(back, frame);
-  EXPECT_EQ(cv::norm(Shown(with, frame), y, cv::NORM_INF), 0) << "the loaded blendshapes draw what the saved did";
   FrameParams other = frame;
   other.expression[0] = 0.5f;
   EXPECT_GT(cv::norm(Shown(back, other), y, cv::NORM_INF), 0) << "the expression reaches the texture";
