@@ -365,14 +365,14 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   // Groups: the networks and offsets; the surface texture, whose texels each
   // see a small part of every picture (its own learning rate); its expression
   // blendshapes, when it has them (theirs).
-  std::vector<torch::Tensor> params, surface_params, blend_params;
-  if (modules.surface)
+  std::vector<torch::Tensor> params, texture, surface_params, blend_params;
+  if (modules.surface) {
+    texture = modules.surface->parameters();
     for (const auto& p : modules.surface->named_parameters())
       (p.key() == "blend" ? blend_params : surface_params).push_back(p.value());
+  }
   for (auto& p : modules.parameters())
-    if (p.requires_grad() &&
-        std::none_of(surface_params.begin(), surface_params.end(), [&](const auto& q) { return q.is_same(p); }) &&
-        std::none_of(blend_params.begin(), blend_params.end(), [&](const auto& q) { return q.is_same(p); }))
+    if (p.requires_grad() && std::none_of(texture.begin(), texture.end(), [&](const auto& q) { return q.is_same(p); }))
       params.push_back(p);
   // The weights training started from (before a resume loads a checkpoint's:
   // the anchor is the general model's, not the interrupted run's).
@@ -390,9 +390,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (!blend_params.empty()) groups.emplace_back(blend_params);
   const double group_scale[] = {1.0, options.surface_lr_scale, options.blend_lr_scale};
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
-  // All of them, for the all-reduce.
-  params.insert(params.end(), surface_params.begin(), surface_params.end());
-  params.insert(params.end(), blend_params.begin(), blend_params.end());
+  params.insert(params.end(), texture.begin(), texture.end());  // all of them, for the all-reduce
   std::unique_ptr<PerceptualLoss> vgg;
   TrainResult result;
   result.perceptual = "ssim";

@@ -120,7 +120,6 @@ constexpr int kEyeballsPart = 6;  // in IctParts()
 // be turned by the application. Skinning each eyeball to its eye joint, pivoting
 // at its centre, makes gaze the FLAME way: the eye joints' rotations, which the
 // stream and the avatar conditioning already carry. The subject's left eye is +x.
-
 void RigIctEyeballs(const std::vector<int>& remap, HeadModelData* d) {
   const IctPart& eyeballs = IctParts()[kEyeballsPart];
   for (int side = 0; side < 2; ++side) {
