@@ -171,6 +171,10 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_option("--surface-blend-lr", fit->blend_lr_scale,
                   "the texture's expression blendshapes' learning rate as a multiple of --lr")
       ->capture_default_str();
+  app->add_option("--surface-blend-decay", fit->blend_decay,
+                  "decoupled weight decay of the texture's expression blendshapes (each step shrinks them by their "
+                  "rate times this; 0: off)")
+      ->capture_default_str();
   app->add_flag("--canonical-samples,!--no-canonical-samples", config->canonical_samples,
                 "move CNeRF samples into the neutral head through the posed triangle under their ray "
                 "(the mesh carries the motion; off: rigid head frame, the thesis's avatar)");

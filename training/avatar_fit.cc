@@ -53,6 +53,9 @@ void FitOptions::Check() const {
       .InRange("warmup_steps", warmup_steps, 0, 100000000)
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .InRange("blend_lr_scale", blend_lr_scale, 0.0, 1000.0)
+      .That(blend_decay >= 0 && blend_decay * learning_rate * blend_lr_scale < 1,
+            "blend_decay is >= 0 and shrinks the blendshapes by less than all of them a step "
+            "(blend_decay * learning_rate * blend_lr_scale < 1)")
       .That(weight_average == 0 || (weight_average > 0 && weight_average < 1),
             "weight_average is 0 (off) or a decay in (0, 1)")
       .InRange("checkpoint_every", checkpoint_every, 1, 100000000)
@@ -346,6 +349,27 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
   }
 }
 
+// The texture's and its blendshapes' root-mean-square texel values, and the
+// coefficients with the largest blendshapes: what a decay of the blendshapes
+// (FitOptions::blend_decay) holds back is read here.
+void LogBlendshapeSizes(SurfaceTextureImpl& surface) {
+  torch::NoGradGuard no_grad;
+  torch::Tensor planes, blend;
+  for (const auto& p : surface.named_parameters()) {
+    if (p.key() == "planes") planes = p.value();
+    if (p.key() == "blend") blend = p.value();
+  }
+  if (!planes.defined() || !blend.defined()) return;
+  const torch::Tensor per_coefficient = blend.square().mean(1).sqrt();
+  const auto top = per_coefficient.topk(std::min<int64_t>(5, per_coefficient.size(0)));
+  std::string largest;
+  for (int64_t i = 0; i < std::get<0>(top).size(0); ++i)
+    largest += fmt::format("{}{} {:.3f}", i ? ", " : "", std::get<1>(top)[i].item<int64_t>(),
+                           std::get<0>(top)[i].item<float>());
+  spdlog::info("surface texture rms {:.3f}; its blendshapes rms {:.3f}, the largest (coefficient rms) {}",
+               planes.square().mean().sqrt().item<float>(), blend.square().mean().sqrt().item<float>(), largest);
+}
+
 }  // namespace
 
 TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
@@ -511,6 +535,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       const double pull = options.LearningRateAt(step) * options.anchor_weight;
       for (size_t i = 0; i < anchors.size(); ++i) params[i].sub_(pull * (params[i] - anchors[i]));
     }
+    if (options.blend_decay > 0) {
+      torch::NoGradGuard no_grad;
+      const double shrink = options.LearningRateAt(step) * options.blend_lr_scale * options.blend_decay;
+      for (torch::Tensor& p : blend_params) p.mul_(1 - shrink);
+    }
     if (average) average->Update(options.WeightAverageDecayAt(step));
     result.steps.push_back(info);
     if (writes && !options.checkpoint_dir.empty() &&
@@ -525,6 +554,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     }
   }
   if (average) average->Swap();  // the avatar keeps the average
+  if (writes && modules.surface && !blend_params.empty()) LogBlendshapeSizes(*modules.surface);
   result.seconds = watch.ElapsedSeconds();
   const int steps = options.iterations - result.first_step;
   result.samples_per_s = result.seconds > 0 ? steps * options.batch / result.seconds : 0;

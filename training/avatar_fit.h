@@ -80,6 +80,12 @@ struct FitOptions {
   // thing to try against that (bench/results/fidelity_ablation.md: 1 was no
   // better than the texture's 20).
   double blend_lr_scale = 20;
+  // Decoupled weight decay of the blendshapes alone (AdamW's: each step shrinks
+  // them by rate * blend_decay, rate being theirs): a blendshape the frames do
+  // not keep pushing the same way fades, so one fitted to noise or to what
+  // another coefficient cancels on the training frames does not add up on a
+  // combination no frame had. 0: off.
+  double blend_decay = 0;
   // Polyak averaging: with a decay d in (0, 1) the run keeps an exponential
   // moving average of the weights (decay min(d, (1 + n) / (10 + n)) at step n,
   // so the start weights fade out early); the avatar holds the average in the

@@ -95,6 +95,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"warmup_steps", f.warmup_steps},
       {"surface_lr_scale", f.surface_lr_scale},
       {"blend_lr_scale", f.blend_lr_scale},
+      {"blend_decay", f.blend_decay},
       {"weight_average", f.weight_average},
       {"region_weight", f.loss.regions.weight},
       {"seconds", r.seconds},

@@ -711,43 +711,66 @@ TEST(TrainAvatar, TheAnchorPullsTheWeightsBackTowardTheStart) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// One training step of a tiny avatar with a texture and blendshapes (at
+// `start` everywhere) -> the texture's planes and blendshapes after it.
+std::pair<torch::Tensor, torch::Tensor> OneBlendshapeStep(const PreparedDataset& real, double scale, double decay,
+                                                          double start = 0) {
+  AvatarConfig c = Tiny();
+  c.surface_features = 4;
+  c.surface_resolution = 32;
+  c.surface_blend = 8;
+  Avatar avatar = Avatar::CreateRandom(c, Model(), real.subject(), 4);
+  {  // the texture's branch drawn, or the zero start would pass it no gradient
+    torch::NoGradGuard no_grad;
+    for (auto& p : avatar.modules().renderer->named_parameters())
+      if (p.key().rfind("surface", 0) == 0) p.value().uniform_(-0.5, 0.5);
+    avatar.modules().surface->named_parameters()["blend"].fill_(start);
+  }
+  FitOptions f;
+  f.iterations = 1;
+  f.batch = 2;
+  f.learning_rate = 1e-3;
+  f.surface_lr_scale = 5;
+  f.blend_lr_scale = scale;
+  f.blend_decay = decay;
+  TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
+  const auto p = avatar.modules().surface->named_parameters();
+  return {p["planes"].detach().clone(), p["blend"].detach().clone()};
+}
+
 // The texture's expression blendshapes learn at their own rate: Adam's first
 // step moves each weight by the group's rate, so after one step the largest
 // change of the blendshapes is blend_lr_scale times the networks' rate (none at
 // 0), while the texture moves at its own.
 TEST(TrainAvatar, TheBlendshapesLearnAtTheirOwnRate) {
-  const std::string dir = WriteRenderedDataset("dataset_blend", 4, 1);
-  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
-  AvatarConfig c = Tiny();
-  c.surface_features = 4;
-  c.surface_resolution = 32;
-  c.surface_blend = 8;
-  const auto step = [&](double scale) {
-    Avatar avatar = Avatar::CreateRandom(c, Model(), real.subject(), 4);
-    {  // the texture's branch drawn, or the zero start would pass it no gradient
-      torch::NoGradGuard no_grad;
-      for (auto& p : avatar.modules().renderer->named_parameters())
-        if (p.key().rfind("surface", 0) == 0) p.value().uniform_(-0.5, 0.5);
-    }
-    FitOptions f;
-    f.iterations = 1;
-    f.batch = 2;
-    f.learning_rate = 1e-3;
-    f.surface_lr_scale = 5;
-    f.blend_lr_scale = scale;
-    TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
-    const auto p = avatar.modules().surface->named_parameters();
-    return std::make_pair(p["planes"].abs().max().item<double>(), p["blend"].abs().max().item<double>());
-  };
-  const auto [planes0, blend0] = step(0);
-  EXPECT_NEAR(planes0, 5e-3, 5e-5) << "the texture at its own rate";
-  EXPECT_EQ(blend0, 0) << "a rate of zero leaves the blendshapes";
-  const auto [planes3, blend3] = step(3);
-  EXPECT_NEAR(planes3, 5e-3, 5e-5);
-  EXPECT_NEAR(blend3, 3e-3, 3e-5) << "the blendshapes at theirs";
+  const PreparedDataset real = PreparedDataset::Load(WriteRenderedDataset("dataset_blend", 4, 1), Model(), 128);
+  const auto largest = [](const torch::Tensor& t) { return t.abs().max().item<double>(); };
+  const auto [planes0, blend0] = OneBlendshapeStep(real, 0, 0);
+  EXPECT_NEAR(largest(planes0), 5e-3, 5e-5) << "the texture at its own rate";
+  EXPECT_EQ(largest(blend0), 0) << "a rate of zero leaves the blendshapes";
+  const auto [planes3, blend3] = OneBlendshapeStep(real, 3, 0);
+  EXPECT_NEAR(largest(planes3), 5e-3, 5e-5);
+  EXPECT_NEAR(largest(blend3), 3e-3, 3e-5) << "the blendshapes at theirs";
   FitOptions bad;
   bad.blend_lr_scale = -1;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
+// Their decay is AdamW's, decoupled from the gradient: after Adam's step the
+// blendshapes are shrunk by their rate times the decay, and nothing else moves.
+TEST(TrainAvatar, TheBlendshapesDecayByTheirRateTimesTheDecay) {
+  const PreparedDataset real = PreparedDataset::Load(WriteRenderedDataset("dataset_blend_decay", 4, 1), Model(), 128);
+  const double rate = 3e-3, decay = 50;
+  const auto [planes, blend] = OneBlendshapeStep(real, 3, 0, 0.5);
+  const auto [planes_decayed, blend_decayed] = OneBlendshapeStep(real, 3, decay, 0.5);
+  EXPECT_GT((blend - 0.5).abs().max().item<double>(), 1e-3) << "the step itself moved them";
+  EXPECT_TRUE(torch::allclose(blend_decayed, blend * (1 - rate * decay), 1e-5, 1e-7));
+  EXPECT_TRUE(torch::allclose(planes_decayed, planes, 0, 1e-7)) << "the texture does not decay";
+  FitOptions bad;
+  bad.blend_decay = -1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad.blend_decay = 1 / (bad.learning_rate * bad.blend_lr_scale);
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a decay that would wipe them out in one step";
 }
 
 // c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
