@@ -168,6 +168,10 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
       ->capture_default_str();
   app->add_option("--surface-lr", fit->surface_lr_scale, "the texture's learning rate as a multiple of --lr")
       ->capture_default_str();
+  app->add_option("--surface-blend-components", config->surface_blend_components,
+                  "with --surface-blend: one set of planes per principal direction of the training frames' "
+                  "expressions, the first N (0: one per coefficient)")
+      ->capture_default_str();
   app->add_option("--surface-blend-lr", fit->blend_lr_scale,
                   "the texture's expression blendshapes' learning rate as a multiple of --lr")
       ->capture_default_str();

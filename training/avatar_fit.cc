@@ -385,6 +385,10 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   const RealFrames real(data.real, config.output_size);
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
+  if (config.surface_blend_components > 0 && modules.surface && !modules.surface->has_blend_basis())
+    throw std::invalid_argument(
+        "TrainAvatar: the texture's blendshapes follow principal directions of the training frames' expressions, "
+        "and none are set (SetBlendDirections)");
   if (options.freeze_cnerf_layers > 0) modules.cnerf->FreezeFirstLayers(options.freeze_cnerf_layers);
   // Groups: the networks and offsets; the surface texture, whose texels each
   // see a small part of every picture (its own learning rate); its expression
@@ -560,6 +564,21 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   result.samples_per_s = result.seconds > 0 ? steps * options.batch / result.seconds : 0;
   modules.eval();
   return result;
+}
+
+double SetBlendDirections(Avatar& avatar, const PreparedDataset& data) {
+  const AvatarConfig& c = avatar.config();
+  if (c.surface_blend_components == 0 || !avatar.modules().surface) return 0;
+  std::vector<Eigen::VectorXf> expressions;
+  for (int i : data.train()) expressions.push_back(Resized(data.params(i).expression, c.num_expression));
+  const ExpressionDirections d = PrincipalExpressions(expressions, c.surface_blend_components);
+  const auto tensor = [](const Eigen::MatrixXf& m) {
+    const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = m;
+    return torch::from_blob(const_cast<float*>(rows.data()), {rows.rows(), rows.cols()}).clone();
+  };
+  avatar.modules().surface->SetBlendBasis(tensor(d.mean).view({-1}), tensor(d.directions), tensor(d.low).view({-1}),
+                                          tensor(d.high).view({-1}));
+  return d.explained;
 }
 
 TrainResult FitOnSynthetic(Avatar& avatar, const HeadModel& model, SyntheticData& data, const FitOptions& options,

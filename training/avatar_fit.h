@@ -172,9 +172,16 @@ struct TrainResult {
   double samples_per_s = 0;
 };
 
+// With AvatarConfig::surface_blend_components: sets the texture's blendshape
+// directions to the principal directions of `data`'s training frames'
+// expressions (resized to the avatar's coefficients) and returns the fraction
+// of their variance those hold; otherwise does nothing and returns 0.
+double SetBlendDirections(Avatar& avatar, const PreparedDataset& data);
+
 // Trains `avatar` (every parameter not frozen). `progress(info)` after each
 // step, with the avatar in its state after the step. Throws naming the file
-// when a checkpoint to resume from is corrupt or made for another avatar.
+// when a checkpoint to resume from is corrupt or made for another avatar, and
+// for blendshapes over principal directions whose directions are unset.
 TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingData& data, const FitOptions& options,
                         const std::function<void(const StepInfo&)>& progress = nullptr);
 

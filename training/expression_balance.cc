@@ -1,8 +1,10 @@
 #include "training/expression_balance.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "common/core/options.h"
 
@@ -43,6 +45,38 @@ std::vector<double> RareExpressionWeights(const std::vector<Eigen::VectorXf>& ex
   }
   for (double& x : w) x *= static_cast<double>(n) / sum;
   return w;
+}
+
+ExpressionDirections PrincipalExpressions(const std::vector<Eigen::VectorXf>& expressions, int count) {
+  if (expressions.empty()) throw std::invalid_argument("PrincipalExpressions: no expressions");
+  const Eigen::Index e = expressions.front().size();
+  if (count < 1 || count > e)
+    throw std::invalid_argument("PrincipalExpressions: count must be in [1, " + std::to_string(e) + "]");
+  Eigen::MatrixXd x(static_cast<Eigen::Index>(expressions.size()), e);
+  for (size_t i = 0; i < expressions.size(); ++i) {
+    if (expressions[i].size() != e) throw std::invalid_argument("PrincipalExpressions: expressions of different sizes");
+    x.row(static_cast<Eigen::Index>(i)) = expressions[i].cast<double>().transpose();
+  }
+  const Eigen::RowVectorXd mean = x.colwise().mean();
+  x.rowwise() -= mean;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(x.transpose() * x);
+  const Eigen::VectorXd& variance = solver.eigenvalues();  // rising
+  ExpressionDirections d;
+  d.mean = mean.transpose().cast<float>();
+  d.directions.resize(count, e);
+  for (int k = 0; k < count; ++k) {
+    Eigen::VectorXd v = solver.eigenvectors().col(e - 1 - k);
+    Eigen::Index largest;
+    v.cwiseAbs().maxCoeff(&largest);
+    if (v(largest) < 0) v = -v;
+    d.directions.row(k) = v.transpose().cast<float>();
+  }
+  const Eigen::MatrixXf projections = x.cast<float>() * d.directions.transpose();  // N x count
+  d.low = projections.colwise().minCoeff().transpose();
+  d.high = projections.colwise().maxCoeff().transpose();
+  const double total = variance.sum();
+  d.explained = total > 0 ? variance.tail(count).sum() / total : 1;
+  return d;
 }
 
 }  // namespace headcast

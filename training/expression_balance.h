@@ -25,4 +25,17 @@ struct RareExpressionOptions {
 std::vector<double> RareExpressionWeights(const std::vector<Eigen::VectorXf>& expressions,
                                           const RareExpressionOptions& options);
 
+// The directions a set of expressions varies along most: their mean, the
+// first `count` principal directions (unit rows, by falling variance, each
+// signed so its largest entry is positive) and the range of the expressions'
+// projections on each. Throws for no expressions, sizes that differ, or
+// count outside [1, the coefficients].
+struct ExpressionDirections {
+  Eigen::VectorXf mean;
+  Eigen::MatrixXf directions;  // count x E
+  Eigen::VectorXf low, high;   // count
+  double explained = 0;        // the fraction of the expressions' variance along them
+};
+ExpressionDirections PrincipalExpressions(const std::vector<Eigen::VectorXf>& expressions, int count);
+
 }  // namespace headcast

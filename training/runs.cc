@@ -204,6 +204,7 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
   to->surface_shell = from.surface_shell;
   to->surface_rigid = from.surface_rigid;
   to->surface_blend = from.surface_blend;
+  to->surface_blend_components = from.surface_blend_components;
   to->surface_conditioned = from.surface_conditioned;
   to->surface_hidden = from.surface_hidden;
   to->surface_levels = from.surface_levels;
@@ -292,6 +293,11 @@ nlohmann::json RunSubject(SubjectOptions o) {
     return general.WithRuntimeSwitches(c);
   }();
   if (o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
+  if (const double explained = SetBlendDirections(avatar, data); explained > 0)
+    spdlog::info(
+        "the texture's blendshapes follow the training frames' first {} expression directions ({:.1f} % of "
+        "their variance)",
+        avatar.config().surface_blend_components, 100 * explained);
   avatar.mutable_subject() = subject;
   if (const std::optional<CameraContract> contract = data.camera_contract()) avatar.set_camera_contract(*contract);
   if (const std::optional<AnchorReference> anchor = data.anchor_reference())

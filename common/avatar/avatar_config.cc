@@ -87,6 +87,9 @@ void AvatarConfig::Check() const {
   c.That(surface_blend == 0 || (surface_blend >= 4 && surface_blend <= 256), "surface_blend must be 0 or in [4, 256]");
   c.That(surface_blend == 0 || has_surface(), "surface_blend needs surface_features > 0");
   c.That(surface_blend == 0 || num_expression > 0, "surface_blend needs expression coefficients");
+  c.That(surface_blend_components >= 0 && surface_blend_components <= num_expression,
+         "surface_blend_components must be in [0, num_expression]");
+  c.That(surface_blend_components == 0 || surface_blend > 0, "surface_blend_components needs surface_blend");
   c.InRange("surface_hidden", surface_hidden, 0, 256)
       .InRange("surface_levels", surface_levels, 1, std::max(1, renderer_levels()));
   c.That(surface_levels == 1 || has_surface(), "surface_levels needs surface_features > 0");
@@ -139,6 +142,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"surface_shell", surface_shell},
                       {"surface_rigid", surface_rigid},
                       {"surface_blend", surface_blend},
+                      {"surface_blend_components", surface_blend_components},
                       {"surface_conditioned", surface_conditioned},
                       {"surface_hidden", surface_hidden},
                       {"surface_levels", surface_levels},
@@ -184,6 +188,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
     c.surface_rigid = j.value("surface_rigid", false);
     c.surface_blend = j.value("surface_blend", 0);
+    c.surface_blend_components = j.value("surface_blend_components", 0);
     c.surface_conditioned = j.value("surface_conditioned", false);
     c.surface_hidden = j.value("surface_hidden", 0);
     c.surface_levels = j.value("surface_levels", 1);

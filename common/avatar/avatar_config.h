@@ -111,6 +111,16 @@ struct AvatarConfig : AvatarCommonConfig {
   // grows with the coefficient, where the conditioned branch's per-frame
   // scale and shift act on every pixel alike. 0: none.
   int surface_blend = 0;
+  // With surface_blend: 0, one set of planes per coefficient; K > 0, one per
+  // principal direction of the subject's training frames' expressions (the
+  // first K), the frame's coefficients projected onto them and each held
+  // within the range it took on those frames. The coefficients of a few
+  // hundred frames move together, so a set per coefficient is fitted along
+  // directions the frames barely vary in and adds up what it learnt there on a
+  // combination no frame had; the first directions are where the frames do
+  // vary. The directions are the texture's (SurfaceTextureImpl::SetBlendBasis),
+  // set from the training frames before the blendshapes learn.
+  int surface_blend_components = 0;
   // The surface branch's hidden layer is scaled and shifted per frame by the
   // pose and expression (FiLM), so that the texture can hold detail that comes
   // and goes with the expression (forehead wrinkles, creases, the mouth's

@@ -218,10 +218,49 @@ SurfaceTextureImpl::SurfaceTextureImpl(const AvatarConfig& config) : extent_(con
     rigid_planes_ = register_parameter("rigid_planes", torch::zeros({3, config.surface_features, r, r}));
   if (config.surface_blend > 0) {
     blend_resolution_ = config.surface_blend;
+    num_expression_ = config.num_expression;
+    const int64_t k = config.surface_blend_components, rows = k > 0 ? k : num_expression_;
     blend_ = register_parameter(
-        "blend",
-        torch::zeros({config.num_expression, 3 * blend_resolution_ * blend_resolution_ * config.surface_features}));
+        "blend", torch::zeros({rows, 3 * blend_resolution_ * blend_resolution_ * config.surface_features}));
+    if (k > 0) {
+      blend_mean_ = register_buffer("blend_mean", torch::zeros({num_expression_}));
+      blend_directions_ = register_buffer("blend_directions", torch::zeros({k, num_expression_}));
+      blend_low_ = register_buffer("blend_low", torch::zeros({k}));
+      blend_high_ = register_buffer("blend_high", torch::zeros({k}));
+    }
   }
+}
+
+void SurfaceTextureImpl::SetBlendBasis(const torch::Tensor& mean, const torch::Tensor& directions,
+                                       const torch::Tensor& low, const torch::Tensor& high) {
+  if (!blend_directions_.defined())
+    throw std::invalid_argument("SurfaceTexture: only blendshapes over principal directions take a basis");
+  const int64_t k = blend_directions_.size(0);
+  if (mean.sizes() != blend_mean_.sizes() || directions.sizes() != blend_directions_.sizes() ||
+      low.sizes() != blend_low_.sizes() || high.sizes() != blend_high_.sizes())
+    throw std::invalid_argument("SurfaceTexture: the blend basis must be (" + std::to_string(num_expression_) + "), (" +
+                                std::to_string(k) + ", " + std::to_string(num_expression_) + "), (" +
+                                std::to_string(k) + ") and (" + std::to_string(k) + ")");
+  for (const torch::Tensor& t : {mean, directions, low, high})
+    if (!torch::isfinite(t).all().item<bool>())
+      throw std::invalid_argument("SurfaceTexture: the blend basis has values that are not finite");
+  if ((low > high).any().item<bool>())
+    throw std::invalid_argument("SurfaceTexture: a blend direction's range has low > high");
+  torch::NoGradGuard no_grad;
+  blend_mean_.copy_(mean);
+  blend_directions_.copy_(directions);
+  blend_low_.copy_(low);
+  blend_high_.copy_(high);
+}
+
+torch::Tensor SurfaceTextureImpl::BlendWeights(const torch::Tensor& expression) const {
+  if (!expression.defined() || expression.dim() != 2 || expression.size(0) != 1 ||
+      expression.size(1) != num_expression_)
+    throw std::invalid_argument("SurfaceTexture: a blended texture needs the frame's " +
+                                std::to_string(num_expression_) + " expression coefficients (1, E)");
+  const torch::Tensor e = expression.to(blend_.dtype());
+  if (!blend_directions_.defined()) return e;
+  return torch::max(torch::min(torch::mm(e - blend_mean_, blend_directions_.t()), blend_high_), blend_low_);
 }
 
 void SurfaceTextureImpl::UseChannelsLast() {
@@ -244,12 +283,9 @@ torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const 
 }
 
 torch::Tensor SurfaceTextureImpl::BlendedPlanes(const torch::Tensor& expression) const {
-  if (!expression.defined() || expression.dim() != 2 || expression.size(0) != 1 || expression.size(1) != blend_.size(0))
-    throw std::invalid_argument("SurfaceTexture: a blended texture needs the frame's " +
-                                std::to_string(blend_.size(0)) + " expression coefficients (1, E)");
   const int64_t b = blend_resolution_, c = planes_.size(1);
-  // (1, E) x (E, 3BBC): texel-major planes; viewed as (3, C, B, B) with channels-last strides.
-  return torch::mm(expression.to(blend_.dtype()), blend_).view({3, b, b, c}).permute({0, 3, 1, 2});
+  // (1, E or K) x (E or K, 3BBC): texel-major planes; viewed as (3, C, B, B) with channels-last strides.
+  return torch::mm(BlendWeights(expression), blend_).view({3, b, b, c}).permute({0, 3, 1, 2});
 }
 
 torch::Tensor SurfaceTextureImpl::LookUp(const torch::Tensor& planes, const torch::Tensor& points) const {

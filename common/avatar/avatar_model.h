@@ -101,6 +101,18 @@ class SurfaceTextureImpl : public torch::nn::Module {
                         const torch::Tensor& expression = torch::Tensor());
   bool rigid() const { return rigid_planes_.defined(); }
   bool blended() const { return blend_.defined(); }
+  // With surface_blend_components: the principal directions the blendshapes
+  // follow — the frames' mean expression (E), K orthonormal directions (K, E)
+  // and each projection's range (K), (K) — kept with the weights. Until set, the
+  // directions are zero and the blendshapes add nothing; throws on sizes that
+  // do not match, values that are not finite, or low > high.
+  void SetBlendBasis(const torch::Tensor& mean, const torch::Tensor& directions, const torch::Tensor& low,
+                     const torch::Tensor& high);
+  bool has_blend_basis() const {
+    return blend_directions_.defined() && blend_directions_.abs().sum().item<double>() > 0;
+  }
+  // The blendshapes' weights for a frame's expression coefficients (1, E) -> (1, rows of blend_).
+  torch::Tensor BlendWeights(const torch::Tensor& expression) const;
   // Inference: keeps the planes texel after texel (channels-last), so that a
   // lookup without gradients reads a texel's channels side by side
   // (LookUpTriplanes) instead of grid_sample's walk channel after channel.
@@ -114,8 +126,11 @@ class SurfaceTextureImpl : public torch::nn::Module {
   torch::Tensor rigid_planes_;  // the same, with surface_rigid (else undefined)
   // With surface_blend: (E, 3 * B * B * C), each coefficient's planes texel
   // after texel, so that their weighted sum is already in the receiver's layout.
-  torch::Tensor blend_;
+  torch::Tensor blend_;  // (E or K, 3 * B * B * C)
   int64_t blend_resolution_ = 0;
+  int64_t num_expression_ = 0;
+  // With surface_blend_components (buffers, in the file): (E), (K, E), (K), (K).
+  torch::Tensor blend_mean_, blend_directions_, blend_low_, blend_high_;
   torch::Tensor BlendedPlanes(const torch::Tensor& expression) const;  // -> (3, C, B, B), channels-last strides
   torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& points) const;
 };

@@ -858,6 +858,108 @@ TEST(SurfaceTexture, ExpressionBlendshapesAddPlanesWeightedByTheFrame) {
   EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
 }
 
+// Blendshapes over principal directions: one set of planes per direction,
+// weighted by the frame's expression projected onto the directions (less the
+// mean) and held within each projection's range. Nothing until the directions
+// are set; within the ranges, the per-coefficient blendshapes the directions
+// span draw the same; beyond, the weights stop at the range's ends. Checked,
+// refused when malformed, kept through a run-time switch and in the file.
+TEST(SurfaceTexture, BlendshapesOverPrincipalDirectionsFollowTheFramesProjections) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_blend = 8;
+  c.surface_blend_components = 3;
+  c.Check();
+  const int64_t e = c.num_expression, k = 3;
+  SurfaceTexture texture(c);
+  ASSERT_EQ(texture->named_parameters()["blend"].size(0), k);
+  EXPECT_FALSE(texture->has_blend_basis());
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : texture->parameters()) t.uniform_(-1, 1);
+  }
+  SurfaceTexture plain(TinyWithSurface());
+  {
+    torch::NoGradGuard no_grad;
+    plain->named_parameters()["planes"].copy_(texture->named_parameters()["planes"]);
+  }
+  const torch::Tensor canonical = (torch::rand({400, 3}) * 2 - 1) * 0.15;
+  const torch::Tensor base = plain->forward(canonical).detach();
+  const torch::Tensor psi = torch::rand({1, e}) * 0.1;
+  EXPECT_LT((texture->forward(canonical, {}, psi).detach() - base).abs().max().item<float>(), 1e-6)
+      << "no directions yet: nothing added";
+  const torch::Tensor mean = torch::rand({e}) * 0.1;
+  const torch::Tensor directions = std::get<0>(torch::linalg_qr(torch::randn({e, k}))).t().contiguous();  // (K, E)
+  const torch::Tensor low = torch::full({k}, -0.5), high = torch::full({k}, 0.5);
+  texture->SetBlendBasis(mean, directions, low, high);
+  EXPECT_TRUE(texture->has_blend_basis());
+  // Within the ranges: per-coefficient blendshapes directions^T x blend draw the same.
+  AvatarConfig per_coefficient = c;
+  per_coefficient.surface_blend_components = 0;
+  SurfaceTexture spanned(per_coefficient);
+  {
+    torch::NoGradGuard no_grad;
+    spanned->named_parameters()["planes"].copy_(texture->named_parameters()["planes"]);
+    spanned->named_parameters()["blend"].copy_(torch::mm(directions.t(), texture->named_parameters()["blend"]));
+  }
+  const torch::Tensor projected = torch::mm(psi - mean, directions.t());
+  ASSERT_LT(projected.abs().max().item<float>(), 0.5) << "the test frame is within the ranges";
+  EXPECT_TRUE(torch::allclose(texture->BlendWeights(psi), projected, 1e-5, 1e-6));
+  EXPECT_LT(
+      (texture->forward(canonical, {}, psi) - spanned->forward(canonical, {}, psi - mean)).abs().max().item<float>(),
+      1e-4)
+      << "the directions' blendshapes are the coefficients' they span";
+  // Beyond: each weight stops at its range's end.
+  const torch::Tensor far = mean.unsqueeze(0) + 10 * directions[0].unsqueeze(0) - 10 * directions[1].unsqueeze(0);
+  const torch::Tensor held = texture->BlendWeights(far);
+  EXPECT_NEAR(held[0][0].item<float>(), 0.5, 1e-5);
+  EXPECT_NEAR(held[0][1].item<float>(), -0.5, 1e-5);
+  EXPECT_NEAR(held[0][2].item<float>(), 0, 1e-4);
+  // Refusals.
+  EXPECT_THROW(texture->SetBlendBasis(mean, directions.narrow(0, 0, 2), low, high), std::invalid_argument);
+  EXPECT_THROW(texture->SetBlendBasis(mean.narrow(0, 0, e - 1), directions, low, high), std::invalid_argument);
+  torch::Tensor nan = directions.clone();
+  nan[1][2] = std::nanf("");
+  EXPECT_THROW(texture->SetBlendBasis(mean, nan, low, high), std::invalid_argument);
+  EXPECT_THROW(texture->SetBlendBasis(mean, directions, high, low - 1), std::invalid_argument) << "low > high";
+  EXPECT_THROW(spanned->SetBlendBasis(mean, directions, low, high), std::invalid_argument)
+      << "per-coefficient blendshapes take no directions";
+  EXPECT_THROW(texture->BlendWeights(torch::zeros({1, e + 1})), std::invalid_argument);
+  EXPECT_EQ(AvatarConfig::FromJson(c.ToJson()).surface_blend_components, 3);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_blend_components");
+  EXPECT_EQ(AvatarConfig::FromJson(old).surface_blend_components, 0) << "files from before them: per coefficient";
+  AvatarConfig bad = c;
+  bad.surface_blend_components = c.num_expression + 1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad = TinyWithSurface();
+  bad.surface_blend_components = 2;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "directions without blendshapes";
+
+  // Through a run-time switch and the file: the directions are kept.
+  const HeadModel& m = *Builtin();
+  Avatar a = Avatar::CreateRandom(c, m, DefaultSubject(m, 128), 4);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& t : a.modules().surface->parameters()) t.uniform_(-1, 1);
+  }
+  a.modules().surface->SetBlendBasis(mean, directions, low, high);
+  AvatarConfig switched = a.config();
+  switched.expression_low.assign(e, -1.f);
+  switched.expression_high.assign(e, 1.f);
+  Avatar b = a.WithRuntimeSwitches(switched);
+  EXPECT_TRUE(torch::equal(b.modules().surface->named_buffers()["blend_directions"], directions));
+  const std::string dir = testing::TempDir("blend_directions");
+  b.Save(dir + "/d.hcavatar");
+  Avatar back = Avatar::Load(dir + "/d.hcavatar", m);
+  const auto buffers = back.modules().surface->named_buffers();
+  EXPECT_TRUE(torch::equal(buffers["blend_mean"], mean));
+  EXPECT_TRUE(torch::equal(buffers["blend_directions"], directions));
+  EXPECT_TRUE(torch::equal(buffers["blend_low"], low));
+  EXPECT_TRUE(torch::equal(buffers["blend_high"], high));
+  FrameParams frame = Expressive();
+  EXPECT_EQ(cv::norm(Shown(b, frame), Shown(back, frame), cv::NORM_INF), 0) << "loaded: what the saved one drew";
+}
+
 TEST(SurfaceTexture, TheFileKeepsItAndRefusesOneWithoutIt) {
   const HeadModel& m = *Builtin();
   const std::string dir = testing::TempDir("surface");

@@ -72,5 +72,48 @@ TEST(RareExpressionWeights, RefusesBadInput) {
   EXPECT_THROW(RareExpressionWeights(RestingFaceAndBlinks(10, 0), o), std::invalid_argument);
 }
 
+// Expressions that vary along two known directions (one three times the
+// other) and a little noise: the directions come back first and second, with
+// their signs set, nearly all the variance, and the projections' range.
+TEST(PrincipalExpressions, FindsTheDirectionsTheFramesVaryAlong) {
+  std::mt19937 rng(7);
+  std::normal_distribution<float> unit(0, 1), noise(0, 0.01f);
+  Eigen::VectorXf base(5), u(5), v(5);
+  base << 0.2f, 0.1f, 0.3f, 0.05f, 0.4f;
+  u << 0.6f, -0.8f, 0, 0, 0;  // largest entry negative: returned as -u
+  v << 0, 0, 0.6f, 0.8f, 0;
+  std::vector<Eigen::VectorXf> e;
+  for (int i = 0; i < 400; ++i) {
+    Eigen::VectorXf x = base + 0.3f * unit(rng) * u + 0.1f * unit(rng) * v;
+    for (int k = 0; k < 5; ++k) x[k] += noise(rng);
+    e.push_back(x);
+  }
+  const ExpressionDirections d = PrincipalExpressions(e, 2);
+  ASSERT_EQ(d.directions.rows(), 2);
+  ASSERT_EQ(d.directions.cols(), 5);
+  EXPECT_GT(d.directions.row(0).dot(-u), 0.999f);
+  EXPECT_GT(d.directions.row(1).dot(v), 0.999f);
+  EXPECT_NEAR(d.directions.row(0).norm(), 1, 1e-5);
+  EXPECT_LT((d.mean - base).cwiseAbs().maxCoeff(), 0.05f);
+  EXPECT_GT(d.explained, 0.98);
+  EXPECT_LT(d.explained, 1);
+  float low = 1e9f, high = -1e9f;
+  for (const Eigen::VectorXf& x : e) {
+    const float p = d.directions.row(0).dot(x - d.mean);
+    low = std::min(low, p);
+    high = std::max(high, p);
+  }
+  EXPECT_NEAR(d.low[0], low, 1e-4);
+  EXPECT_NEAR(d.high[0], high, 1e-4);
+  EXPECT_LT(d.low[0], -0.5f);
+  EXPECT_GT(d.high[0], 0.5f);
+  EXPECT_NEAR(PrincipalExpressions(e, 5).explained, 1, 1e-9);
+  EXPECT_THROW(PrincipalExpressions({}, 1), std::invalid_argument);
+  EXPECT_THROW(PrincipalExpressions(e, 0), std::invalid_argument);
+  EXPECT_THROW(PrincipalExpressions(e, 6), std::invalid_argument);
+  e.push_back(Eigen::VectorXf::Zero(4));
+  EXPECT_THROW(PrincipalExpressions(e, 1), std::invalid_argument) << "an expression of another size";
+}
+
 }  // namespace
 }  // namespace headcast

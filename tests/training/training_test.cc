@@ -773,6 +773,34 @@ TEST(TrainAvatar, TheBlendshapesDecayByTheirRateTimesTheDecay) {
   EXPECT_THROW(bad.Check(), std::invalid_argument) << "a decay that would wipe them out in one step";
 }
 
+// Blendshapes over principal directions: a fine-tune refuses to start
+// without the directions; SetBlendDirections takes them from the training
+// frames' expressions (unit rows), and the run then trains them.
+TEST(TrainAvatar, BlendshapesOverDirectionsTakeThemFromTheTrainingFrames) {
+  const PreparedDataset real = PreparedDataset::Load(WriteRenderedDataset("dataset_blend_dirs", 6, 1), Model(), 128);
+  AvatarConfig c = Tiny();
+  c.surface_features = 4;
+  c.surface_resolution = 32;
+  c.surface_blend = 8;
+  c.surface_blend_components = 2;
+  Avatar avatar = Avatar::CreateRandom(c, Model(), real.subject(), 4);
+  FitOptions f;
+  f.iterations = 1;
+  f.batch = 2;
+  EXPECT_THROW(TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f), std::invalid_argument);
+  const double explained = SetBlendDirections(avatar, real);
+  EXPECT_GT(explained, 0);
+  EXPECT_LE(explained, 1 + 1e-9);
+  const torch::Tensor directions = avatar.modules().surface->named_buffers()["blend_directions"];
+  ASSERT_EQ(directions.size(0), 2);
+  EXPECT_TRUE(torch::allclose(directions.norm(2, 1), torch::ones({2}), 1e-4, 1e-5));
+  TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f);
+  AvatarConfig per_coefficient = c;
+  per_coefficient.surface_blend_components = 0;
+  Avatar other = Avatar::CreateRandom(per_coefficient, Model(), real.subject(), 4);
+  EXPECT_EQ(SetBlendDirections(other, real), 0) << "per coefficient: nothing to set";
+}
+
 // c10d scale-out: two ranks (threads here, each with its own Gloo endpoint over
 // loopback TCP) end with the weights of one process running the whole batch.
 TEST(TrainAvatar, TwoRanksTrainWhatOneProcessTrainsWithTheCombinedBatch) {
