@@ -350,24 +350,22 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
 }
 
 // The texture's and its blendshapes' root-mean-square texel values, and the
-// coefficients with the largest blendshapes: what a decay of the blendshapes
-// (FitOptions::blend_decay) holds back is read here.
-void LogBlendshapeSizes(SurfaceTextureImpl& surface) {
+// rows (expression coefficients or principal directions) with the largest
+// blendshapes: what a decay of the blendshapes (FitOptions::blend_decay)
+// holds back is read here.
+void LogBlendshapeSizes(const std::vector<torch::Tensor>& texture, const torch::Tensor& blend) {
   torch::NoGradGuard no_grad;
-  torch::Tensor planes, blend;
-  for (const auto& p : surface.named_parameters()) {
-    if (p.key() == "planes") planes = p.value();
-    if (p.key() == "blend") blend = p.value();
-  }
-  if (!planes.defined() || !blend.defined()) return;
-  const torch::Tensor per_coefficient = blend.square().mean(1).sqrt();
-  const auto top = per_coefficient.topk(std::min<int64_t>(5, per_coefficient.size(0)));
+  std::vector<torch::Tensor> flat;
+  for (const torch::Tensor& t : texture) flat.push_back(t.flatten());
+  const torch::Tensor per_row = blend.square().mean(1).sqrt();
+  const auto top = per_row.topk(std::min<int64_t>(5, per_row.size(0)));
   std::string largest;
   for (int64_t i = 0; i < std::get<0>(top).size(0); ++i)
     largest += fmt::format("{}{} {:.3f}", i ? ", " : "", std::get<1>(top)[i].item<int64_t>(),
                            std::get<0>(top)[i].item<float>());
-  spdlog::info("surface texture rms {:.3f}; its blendshapes rms {:.3f}, the largest (coefficient rms) {}",
-               planes.square().mean().sqrt().item<float>(), blend.square().mean().sqrt().item<float>(), largest);
+  spdlog::info("surface texture rms {:.3f}; its blendshapes rms {:.3f}, the largest (row rms) {}",
+               torch::cat(flat).square().mean().sqrt().item<float>(), blend.square().mean().sqrt().item<float>(),
+               largest);
 }
 
 }  // namespace
@@ -558,7 +556,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     }
   }
   if (average) average->Swap();  // the avatar keeps the average
-  if (writes && modules.surface && !blend_params.empty()) LogBlendshapeSizes(*modules.surface);
+  if (writes && !surface_params.empty() && blend_params.size() == 1)
+    LogBlendshapeSizes(surface_params, blend_params[0]);
   result.seconds = watch.ElapsedSeconds();
   const int steps = options.iterations - result.first_step;
   result.samples_per_s = result.seconds > 0 ? steps * options.batch / result.seconds : 0;

@@ -293,7 +293,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     return general.WithRuntimeSwitches(c);
   }();
   if (o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
-  if (const double explained = SetBlendDirections(avatar, data); explained > 0)
+  if (const double explained = SetBlendDirections(avatar, data); explained > 0 && o.fit.distributed.rank == 0)
     spdlog::info(
         "the texture's blendshapes follow the training frames' first {} expression directions ({:.1f} % of "
         "their variance)",
