@@ -493,10 +493,13 @@ int main(int argc, char** argv) {
       FitOptions& fit = pretrain->parsed() ? g.fit : s.fit;
       if (subject->parsed() && subject->get_option("--weight-average")->count() == 0)
         fit.weight_average = SubjectWeightAverage(fit.iterations);
-      // The default conditioning belongs to the default texture: without a
-      // texture (the thesis's avatar) there is nothing to condition, unless asked.
-      if (subject->parsed() && !s.config.has_surface() && subject->get_option("--surface-conditioned")->count() == 0)
-        s.config.surface_conditioned = false;
+      // The default conditioning and blendshapes belong to the default texture:
+      // without a texture (the thesis's avatar) there is nothing to condition
+      // or to add to, unless asked.
+      if (subject->parsed() && !s.config.has_surface()) {
+        if (subject->get_option("--surface-conditioned")->count() == 0) s.config.surface_conditioned = false;
+        if (subject->get_option("--surface-blend")->count() == 0) s.config.surface_blend = 0;
+      }
       // A fine-tune takes its general model's network: a size given with it
       // would be dropped without a word.
       if (subject->parsed() && !s.from_scratch)

@@ -238,6 +238,10 @@ FitOptions SubjectFitDefaults() {
   f.loss.regions.weight = 4;
   f.learning_rate = 4e-3;  // twice pretraining's; a fine-tune at this rate diverges without the warm-up
   f.warmup_steps = 200;
+  // The default blendshapes (kSubjectSurfaceBlend) undecayed overfit a clip
+  // whose frames vary along few directions; held back they gain on every clip
+  // (bench/results/fidelity_ablation.md).
+  f.blend_decay = 0.5;
   return f;
 }
 

@@ -231,6 +231,7 @@ AvatarConfig AvatarConfig::HeadNeRFSized() {
 
 void ApplySubjectDefaults(AvatarConfig* config) {
   config->surface_features = kSubjectSurfaceFeatures;
+  config->surface_blend = kSubjectSurfaceBlend;
   config->surface_conditioned = true;
   config->canonical_samples = true;
   config->matte = kSubjectMatte;

@@ -38,8 +38,10 @@ const char* MotionConditioningName(MotionConditioning mode);
 MotionConditioning ParseMotionConditioning(const std::string& name);  // throws std::invalid_argument
 
 // What a subject's avatar gets by default (headcast-train subject, create):
-// surface-texture channels and the matte.
+// surface-texture channels, its expression blendshapes' texels along an edge
+// (held back by SubjectFitDefaults' decay) and the matte.
 inline constexpr int kSubjectSurfaceFeatures = 8;
+inline constexpr int kSubjectSurfaceBlend = 64;
 inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
 
 // The CNeRF backend's configuration: the shared part (output size,
@@ -198,8 +200,8 @@ struct AvatarConfig : AvatarCommonConfig {
 
 // A subject's avatar by default (headcast-train subject and create, the render
 // benchmark's subject row): the surface texture with its branch conditioned
-// per frame, CNeRF samples in the canonical head, and the bounded matte. The
-// thesis's avatar has none of them.
+// per frame and its expression blendshapes, CNeRF samples in the canonical
+// head, and the bounded matte. The thesis's avatar has none of them.
 void ApplySubjectDefaults(AvatarConfig* config);
 
 // The renderer with two x2 levels (a feature map of output/4, four times the
