@@ -105,13 +105,16 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
   surface.surface_features = kSubjectSurfaceFeatures;
   out["with_surface"] =
       timings(MeasureConfig(options, surface, frames), {{"surface_features", surface.surface_features}});
-  // And a subject's default avatar: the texture, its conditioned branch and the
-  // bounded matte (its bound's dilations and polygon per frame, the coverage's convolutions).
+  // And a subject's default avatar: the texture, its conditioned branch and
+  // expression blendshapes (as many as the builtin head's coefficients), and
+  // the bounded matte (its bound's dilations and polygon per frame, the
+  // coverage's convolutions).
   AvatarConfig subject = AvatarConfig::Default(options.resolution);
   ApplySubjectDefaults(&subject);
   out["subject_default"] =
       timings(MeasureConfig(options, subject, frames), {{"surface_features", subject.surface_features},
                                                         {"surface_conditioned", subject.surface_conditioned},
+                                                        {"surface_blend", subject.surface_blend},
                                                         {"matte", MatteModeName(subject.matte)}});
   // A subject's avatar with a two-level renderer: the feature map at output/4
   // (four times the rays, with the same reach beyond the silhouette) and half

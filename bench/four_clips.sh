@@ -7,18 +7,22 @@
 # avatar's creation time (prep + fine-tune), the frames whose brow or mouth
 # landmarks the tracker disputed and repaired, and the PSNR/SSIM on 150 of the
 # avatar's own training frames (what it fits against what it generalises to);
-# then the receiver's frame rate at 256² and 512² (headcast-bench render,
-# default subject configuration).
+# then the receiver's frame rate on each clip's avatar at 256² (headcast-avatar
+# render, synthetic motion: the avatar as trained, with the head model's
+# expression coefficients) and on a random avatar of the default subject
+# configuration at 256² and 512² (headcast-bench render, the builtin head).
 #   bench/four_clips.sh OUT [--general G.hcavatar] [--iterations N (3000, as headcast-train create)] [--ict DIR]
 #       [--clips "d9 d10 ..."]
 #       [--z-augmentation P]        probability of the distance augmentation (0, as headcast-train create)
 #       [--subject-flags "FLAGS"]   extra `headcast-train subject` flags (default: none)
 #       [--prep-flags "FLAGS"]      extra `headcast-train prep` flags (default: none)
 #       [--no-render]               skip the receiver's frame rate (ablations of the avatar only)
+#       [--reuse]                   keep the datasets, avatars and evaluations OUT already has (the receiver and
+#                                   the table only; a clip without them is made as usual)
 # Writes OUT/four_clips.{json,md} and prints the table; the work stays in OUT.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/script_start.sh"
-name=four_clips iterations=3000 z_augmentation=0 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1
+name=four_clips iterations=3000 z_augmentation=0 general="" ict=$data/head-models/ict-facekit clips="d9 d10 d14 d3" subject_flags="" prep_flags="" render=1 reuse=0
 while [ $# -gt 0 ]; do
   case $1 in
     --general) general=$2; shift 2 ;;
@@ -29,6 +33,7 @@ while [ $# -gt 0 ]; do
     --subject-flags) subject_flags=$2; shift 2 ;;
     --prep-flags) prep_flags=$2; shift 2 ;;
     --no-render) render=0; shift ;;
+    --reuse) reuse=1; shift ;;
     *) echo "$name: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -40,6 +45,11 @@ ict_and_general
 for clip in $clips; do
   video=$data/video/talking_$clip.mp4
   [ -f "$video" ] || { echo "four_clips: no video $video" >&2; exit 2; }
+  if [ "$reuse" = 1 ] && [ -f "$out/eval_$clip/eval.json" ] && [ -f "$out/eval_train_$clip/eval.json" ] &&
+    [ -f "$out/time_$clip.json" ]; then
+    step "$clip: reusing OUT's dataset, avatar and evaluations"
+    continue
+  fi
   t0=$(date +%s.%N)
   step "$clip: prep $prep_flags"
   rm -rf "$out/ds_$clip"
@@ -60,6 +70,12 @@ for clip in $clips; do
   step "$clip: eval on training frames"
   run "eval_train_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
     --data "$out/ds_$clip" --out "$out/eval_train_$clip" --split train --max-frames 150 --orbit-frames 0 --no-landmarks
+done
+for clip in $clips; do
+  [ "$render" = 1 ] || break
+  step "$clip: the receiver on its avatar"
+  run "receiver_$clip.log" "$bin/headcast-avatar" render "$out/avatar_$clip.hcavatar" --head-model "$model" \
+    --display none --pacing none --threads 2 --synthetic 150 --json "$out/receiver_$clip.json"
 done
 for r in 256 512; do
   [ "$render" = 1 ] || break
@@ -95,6 +111,11 @@ for c in clips:
                  "landmark_disputed": checks.get("disputed"), "landmark_repaired_frames": checks.get("repaired_frames"),
                  "prep_s": t["prep_s"], "fine_tune_s": t["fine_tune_s"],
                  "creation_min": (t["prep_s"] + t["fine_tune_s"]) / 60})
+    receiver = os.path.join(out, f"receiver_{c}.json")
+    if os.path.exists(receiver):
+        j = json.load(open(receiver))
+        rows[-1]["receiver_256"] = {"fps": j["fps"], "ms_median": j["render_ms_median"], "ms_p95": j["render_ms_p95"],
+                                    "threads": 2}
 render = {}
 for r in ("256", "512"):
     if not os.path.exists(os.path.join(out, f"render_{r}.json")):
@@ -111,8 +132,8 @@ L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iteratio
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
      "frames, over the true eye distance. Training frames: 150 of the avatar's own training frames, spread evenly over them, "
      "through the same render path (no per-frame offsets).", "",
-     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) |",
-     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) | receiver 256² fps / p95 ms |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
     L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | "
@@ -120,8 +141,10 @@ for x in rows:
              f"{x['train_psnr_db']:.2f} / {x['train_ssim']:.4f} | "
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
-             f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} |")
-L += [] if not render else ["", "Receiver (headcast-bench render, random avatar of the default subject configuration: surface texture with its conditioned branch, bounded matte, frames carrying a skin colour to match): " +
+             f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} | "
+             + (f"{x['receiver_256']['fps']:.1f} / {x['receiver_256']['ms_p95']:.1f} |" if "receiver_256" in x else "– |"))
+L += [] if not render else ["", "Receiver: each clip's avatar in the table (`headcast-avatar render AVATAR --head-model ict.npz --display none --pacing none --threads 2 --synthetic 150`); "
+      "a random avatar of the default subject configuration (headcast-bench render, the builtin head's 13 expression coefficients: surface texture with its conditioned branch and expression blendshapes, bounded matte, frames carrying a skin colour to match): " +
       "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
                 for r, v in render.items())]
 open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")
