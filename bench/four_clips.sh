@@ -45,8 +45,8 @@ ict_and_general
 for clip in $clips; do
   video=$data/video/talking_$clip.mp4
   [ -f "$video" ] || { echo "four_clips: no video $video" >&2; exit 2; }
-  if [ "$reuse" = 1 ] && [ -f "$out/eval_$clip/eval.json" ] && [ -f "$out/eval_train_$clip/eval.json" ] &&
-    [ -f "$out/time_$clip.json" ]; then
+  if [ "$reuse" = 1 ] && [ -f "$out/avatar_$clip.hcavatar" ] && [ -f "$out/eval_$clip/eval.json" ] &&
+    [ -f "$out/eval_train_$clip/eval.json" ] && [ -f "$out/time_$clip.json" ]; then
     step "$clip: reusing OUT's dataset, avatar and evaluations"
     continue
   fi
