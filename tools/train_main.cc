@@ -152,6 +152,12 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--surface-rigid,!--no-surface-rigid", config->surface_rigid,
                 "a second texture looked up at the posed surface point in the head frame, beside the canonical one "
                 "(what moves with the head but not with the skin under it: glasses, hair over the face)");
+  app->add_flag("--surface-displacement,!--no-surface-displacement", config->surface_displacement,
+                "the surface branch told, per pixel, how far the expression moved the skin there (the posed surface "
+                "point less the canonical one), beside the texture");
+  app->add_flag("--surface-eye-symmetry,!--no-surface-eye-symmetry", config->surface_eye_symmetry,
+                "the texture looked up on the eyeballs by the angle from their pole alone, so that the sclera seen "
+                "beside the iris is drawn above and below it too");
   app->add_option("--surface-blend", config->surface_blend,
                   "texels along an edge of the texture's expression blendshapes: planes per expression coefficient, "
                   "weighted by the frame's (detail at its place on the face that grows with the expression; 0: none)")

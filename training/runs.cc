@@ -203,6 +203,8 @@ void CopySurfaceTexture(const AvatarConfig& from, AvatarConfig* to) {
   to->surface_extent = from.surface_extent;
   to->surface_shell = from.surface_shell;
   to->surface_rigid = from.surface_rigid;
+  to->surface_displacement = from.surface_displacement;
+  to->surface_eye_symmetry = from.surface_eye_symmetry;
   to->surface_blend = from.surface_blend;
   to->surface_blend_components = from.surface_blend_components;
   to->surface_conditioned = from.surface_conditioned;

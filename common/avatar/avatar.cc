@@ -111,7 +111,8 @@ Avatar Avatar::WithRuntimeSwitches(const AvatarConfig& config) const {
       (config.surface_features != c.surface_features || config.surface_resolution != c.surface_resolution ||
        config.surface_extent != c.surface_extent || config.surface_conditioned != c.surface_conditioned ||
        config.surface_hidden_channels() != c.surface_hidden_channels() || config.surface_levels != c.surface_levels ||
-       config.surface_rigid != c.surface_rigid || config.surface_blend != c.surface_blend ||
+       config.surface_rigid != c.surface_rigid || config.surface_displacement != c.surface_displacement ||
+       config.surface_eye_symmetry != c.surface_eye_symmetry || config.surface_blend != c.surface_blend ||
        config.surface_blend_components != c.surface_blend_components))
     throw std::invalid_argument(
         "WithRuntimeSwitches: the surface texture differs; it can only be added to an avatar without one");

@@ -83,6 +83,12 @@ void AvatarConfig::Check() const {
   c.That(!surface_rigid || has_surface(), "surface_rigid needs surface_features > 0");
   c.That(!surface_rigid || surface_shell == 0,
          "surface_rigid takes no surface_shell (a shell pixel has no posed point)");
+  c.That(!surface_displacement || has_surface(), "surface_displacement needs surface_features > 0");
+  c.That(!surface_displacement || surface_shell == 0,
+         "surface_displacement takes no surface_shell (a shell pixel has no posed point)");
+  c.That(!surface_eye_symmetry || has_surface(), "surface_eye_symmetry needs surface_features > 0");
+  c.That(!surface_eye_symmetry || !surface_displacement,
+         "surface_eye_symmetry moves the eyeballs' canonical points, which surface_displacement measures from");
   c.That(!surface_conditioned || has_surface(), "surface_conditioned needs surface_features > 0");
   c.That(surface_blend == 0 || (surface_blend >= 4 && surface_blend <= 256), "surface_blend must be 0 or in [4, 256]");
   c.That(surface_blend == 0 || has_surface(), "surface_blend needs surface_features > 0");
@@ -141,6 +147,8 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"surface_extent", surface_extent},
                       {"surface_shell", surface_shell},
                       {"surface_rigid", surface_rigid},
+                      {"surface_displacement", surface_displacement},
+                      {"surface_eye_symmetry", surface_eye_symmetry},
                       {"surface_blend", surface_blend},
                       {"surface_blend_components", surface_blend_components},
                       {"surface_conditioned", surface_conditioned},
@@ -187,6 +195,8 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.surface_extent = j.value("surface_extent", c.surface_extent);
     c.surface_shell = j.value("surface_shell", 0.0);  // files from before the shell: the mesh only
     c.surface_rigid = j.value("surface_rigid", false);
+    c.surface_displacement = j.value("surface_displacement", false);
+    c.surface_eye_symmetry = j.value("surface_eye_symmetry", false);
     c.surface_blend = j.value("surface_blend", 0);
     c.surface_blend_components = j.value("surface_blend_components", 0);
     c.surface_conditioned = j.value("surface_conditioned", false);

@@ -42,6 +42,10 @@ MotionConditioning ParseMotionConditioning(const std::string& name);  // throws 
 // (held back by SubjectFitDefaults' decay) and the matte.
 inline constexpr int kSubjectSurfaceFeatures = 8;
 inline constexpr int kSubjectSurfaceBlend = 64;
+// AvatarConfig::surface_displacement in the branch's units per metre: an
+// expression moves the skin by up to a few centimetres, so the branch sees
+// values of about one, as it sees the texture's.
+inline constexpr float kSurfaceDisplacementScale = 100;
 inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
 
 // The CNeRF backend's configuration: the shared part (output size,
@@ -105,6 +109,20 @@ struct AvatarConfig : AvatarCommonConfig {
   // the canonical texture that skin moves with every blink, cheek and jaw,
   // and with it what the texture painted there. false: the canonical texture only.
   bool surface_rigid = false;
+  // The surface branch is also told, per pixel, how far the expression (and
+  // the joints: jaw, eyes, a neck) moved the skin there: the posed surface
+  // point less the canonical one (model frame, kSurfaceDisplacementScale per
+  // metre), beside the texture's features. What the frame's coefficients say
+  // of the whole face, this says of one place: a wide-open mouth no training
+  // frame had still stretches each lip and the chin by amounts some training
+  // frames stretched them by, where the coefficients' combination is new to
+  // the networks. false: the texture's features only.
+  bool surface_displacement = false;
+  // The texture looked up on the eyeballs by the angle from their pole alone
+  // (FoldEyeballPoints): what the video shows of the sclera beside the iris
+  // is drawn all around it, where lids that open wider than in any training
+  // frame bare the eyeball. false: the eyeball's own point.
+  bool surface_eye_symmetry = false;
   // Expression blendshapes of the canonical texture: one set of planes per
   // expression coefficient, of this many texels along an edge, summed with
   // the frame's (told) coefficients as weights and looked up beside the
@@ -162,6 +180,10 @@ struct AvatarConfig : AvatarCommonConfig {
   std::vector<float> expression_low, expression_high;
 
   bool has_surface() const { return surface_features > 0; }
+  // The surface lookup needs each mesh pixel's posed point (SurfaceBatch::posed).
+  bool needs_posed_points() const { return surface_rigid || surface_displacement; }
+  // The surface branch's inputs: the texture's channels [, the displacement's 3].
+  int surface_branch_inputs() const { return surface_features + (surface_displacement ? 3 : 0); }
   int surface_hidden_channels() const { return surface_hidden > 0 ? surface_hidden : 2 * surface_features; }
   bool has_matte() const { return matte != MatteMode::kNone; }
   bool has_expression_span() const { return !expression_low.empty(); }

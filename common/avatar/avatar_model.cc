@@ -316,8 +316,8 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   input_rgb_ = register_module("input_rgb", torch::nn::Conv2d(torch::nn::Conv2dOptions(ch[0], 3, 1)));
   if (config.has_surface()) {
     const int hidden = config.surface_hidden_channels();
-    surface_hidden_ = register_module("surface_hidden",
-                                      torch::nn::Conv2d(torch::nn::Conv2dOptions(config.surface_features, hidden, 1)));
+    surface_hidden_ = register_module(
+        "surface_hidden", torch::nn::Conv2d(torch::nn::Conv2dOptions(config.surface_branch_inputs(), hidden, 1)));
     surface_out_ = register_module("surface_out", torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, ch[levels_], 1)));
     // Zero: a renderer given surface features starts as the one without (a
     // fine-tune from a general model starts where the general model is); the

@@ -147,19 +147,24 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
         torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
     const torch::Tensor pixels =
         torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
+    const AvatarConfig& config = modules.cnerf->config();
     torch::Tensor posed;
-    if (modules.surface->rigid()) {
+    if (config.needs_posed_points()) {
       if (surface.posed.size() != surface.canonical.size())
-        throw std::invalid_argument("RunAvatarUpsampling: the rigid texture needs the surface's posed points");
+        throw std::invalid_argument(
+            "RunAvatarUpsampling: the rigid texture and the displacement need the surface's posed points");
       posed = torch::from_blob(const_cast<float*>(surface.posed.data()), {n, 3}, torch::kFloat);
     }
-    const AvatarConfig& config = modules.cnerf->config();
     // The blendshapes weighted by what the networks are told (within the avatar's span).
     const torch::Tensor expression =
         modules.surface->blended() ? conditioning.geometry.narrow(1, config.expression_offset(), config.num_expression)
                                    : torch::Tensor();
-    const torch::Tensor features =
-        n > 0 ? modules.surface->forward(canonical, posed, expression) : torch::zeros({0, config.surface_features});
+    torch::Tensor features =
+        n > 0 ? modules.surface->forward(canonical, modules.surface->rigid() ? posed : torch::Tensor(), expression)
+              : torch::zeros({0, config.surface_features});
+    if (config.surface_displacement)
+      features =
+          torch::cat({features, n > 0 ? (posed - canonical) * kSurfaceDisplacementScale : torch::zeros({0, 3})}, 1);
     const torch::Tensor motion = config.surface_conditioned
                                      ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
                                      : torch::Tensor();
@@ -230,9 +235,11 @@ void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, co
                           AvatarTimings* timings) {
   Stopwatch watch;
   // The bound needs the full-resolution silhouette the surface lookup makes.
-  if (config.has_surface() || config.matte == MatteMode::kBounded)
+  if (config.has_surface() || config.matte == MatteMode::kBounded) {
     sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface,
-                           config.surface_rigid ? &out->posed.vertices : nullptr);
+                           config.needs_posed_points() ? &out->posed.vertices : nullptr);
+    if (config.surface_eye_symmetry) FoldEyeballPoints(model, identity, &out->surface);
+  }
   if (config.matte == MatteMode::kBounded) {
     MakeMatteBound(config, out->surface, out->posed, out->cam_from_head, subject.intrinsics, out);
   } else {

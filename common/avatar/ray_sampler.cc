@@ -2,6 +2,7 @@
 #include "common/avatar/ray_sampler.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <stdexcept>
 
@@ -106,6 +107,31 @@ void PointUnderPixel(const RasterBuffers& b, int p, const RasterFaces& faces, co
 
 }  // namespace
 
+int FoldEyeballPoints(const HeadModel& model, const HeadIdentity& identity, SurfaceBatch* surface) {
+  if (surface->face.size() != static_cast<size_t>(surface->mesh_pixels))
+    throw std::invalid_argument("FoldEyeballPoints: the surface's mesh pixels come without their triangles");
+  const HeadModelData& d = model.data();
+  auto eye_of = [&](int f) {
+    for (int joint : {kLeftEyeJoint, kRightEyeJoint}) {
+      bool all = true;
+      for (int k = 0; k < 3; ++k) all = all && d.weights(d.faces(f, k), joint) > 0.5f;
+      if (all) return joint;
+    }
+    return -1;
+  };
+  int moved = 0;
+  for (int i = 0; i < surface->mesh_pixels; ++i) {
+    const int eye = eye_of(surface->face[i]);
+    if (eye < 0) continue;
+    float* p = &surface->canonical[3 * static_cast<size_t>(i)];
+    const float cx = identity.joints(eye, 0), cy = identity.joints(eye, 1);
+    p[0] = cx + std::hypot(p[0] - cx, p[1] - cy);
+    p[1] = cy;
+    ++moved;
+  }
+  return moved;
+}
+
 void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const RasterFaces& faces,
                                const Eigen::VectorXf& canonical_vertices, const PinholeCamera& cam, SurfaceBatch* out,
                                const RowMatrixX3f* posed_vertices) {
@@ -121,10 +147,12 @@ void RaySampler::SampleSurface(const RasterVertices& vertices_in_cam, const Rast
   out->pixel.clear();
   out->canonical.clear();
   out->posed.clear();
+  out->face.clear();
   const RasterBuffers& b = surface_buffers_;
   for (int p = 0; p < cam.width * cam.height; ++p) {
     if (b.face[p] < 0) continue;
     out->pixel.push_back(p);
+    out->face.push_back(b.face[p]);
     float point[3];
     PointUnderPixel(b, p, faces, canonical_vertices.data(), nullptr, 0.f, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);
@@ -158,6 +186,7 @@ void RaySampler::AppendShell(const RasterVertices& vertices_in_cam, const Raster
   for (int p = 0; p < cam.width * cam.height; ++p) {
     if (b.face[p] < 0 || mesh.face[p] >= 0) continue;
     out->pixel.push_back(p);
+    out->face.push_back(b.face[p]);
     float point[3];
     PointUnderPixel(b, p, faces, canonical_vertices.data(), &canonical_normals_, shell, point);
     out->canonical.insert(out->canonical.end(), point, point + 3);

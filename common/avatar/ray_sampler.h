@@ -39,7 +39,8 @@ struct SurfaceBatch {
   // With posed vertices given: 3 per mesh pixel, the posed surface point there
   // (model frame, metres); empty otherwise.
   std::vector<float> posed;
-  int mesh_pixels = 0;  // the first this many pixels are the mesh's: its silhouette
+  std::vector<int32_t> face;  // per mesh pixel, the triangle under it
+  int mesh_pixels = 0;        // the first this many pixels are the mesh's: its silhouette
   int num_pixels() const { return static_cast<int>(pixel.size()); }
 };
 
@@ -52,6 +53,16 @@ struct SurfaceBatch {
 // the identity. `canonical_vertices`: 3N, x y z per vertex.
 void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed_vertices, const RasterFaces& faces,
                          const Eigen::VectorXf& canonical_vertices, std::vector<float>* out);
+
+// Moves every mesh pixel's canonical point that lies on an eyeball (a
+// triangle whose three vertices are mostly skinned to an eye joint) about the
+// eye's pivot (`identity`'s rest joint) to one meridian: the same distance
+// from the pivot and the same angle from the pole (+z, the rest gaze), at
+// azimuth zero. The texture is then a function of the angle from the pole:
+// the sclera, iris and pupil a video shows beside the iris are drawn above and
+// below it too, where the lids always covered the eyeball in training and a
+// wide-eyed frame shows it. Returns how many points moved.
+int FoldEyeballPoints(const HeadModel& model, const HeadIdentity& identity, SurfaceBatch* surface);
 
 class RaySampler {
  public:

@@ -165,6 +165,85 @@ TEST(SurfaceSampling, ThePosedPointIsTheSurfaceSeenAtThePixel) {
                std::invalid_argument);
 }
 
+// The eyeballs' canonical points are folded about their eye's pivot onto one
+// meridian: the same distance from the pivot and angle from the pole (+z),
+// azimuth zero; every other point stays. Each mesh pixel keeps its triangle.
+TEST(SurfaceSampling, TheEyeballsPointsAreFoldedOntoOneMeridian) {
+  const HeadModel& m = *Builtin();
+  FrameParams frame = Expressive();
+  frame.left_eye = Eigen::Vector3f(0.2f, 0.3f, 0);  // a gaze: the eyeball's pixels are not its rest front
+  frame.right_eye = Eigen::Vector3f(0.2f, 0.3f, 0);
+  const Posed p = Pose(frame, 256);
+  RaySampler sampler(TinyWithSurface());
+  SurfaceBatch plain;
+  sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &plain);
+  ASSERT_EQ(plain.face.size(), static_cast<size_t>(plain.mesh_pixels));
+  SurfaceBatch folded = plain;
+  const int moved = FoldEyeballPoints(m, p.identity, &folded);
+  ASSERT_GT(moved, 20) << "the test frame shows too little of the eyeballs";
+  EXPECT_LT(moved, plain.num_pixels() / 10);
+  int changed = 0;
+  for (int i = 0; i < plain.num_pixels(); ++i) {
+    const Eigen::Vector3f a(plain.canonical[3 * i], plain.canonical[3 * i + 1], plain.canonical[3 * i + 2]);
+    const Eigen::Vector3f b(folded.canonical[3 * i], folded.canonical[3 * i + 1], folded.canonical[3 * i + 2]);
+    const int f = plain.face[i];
+    int eye = -1;
+    for (int joint : {kLeftEyeJoint, kRightEyeJoint})
+      if (m.data().weights(m.data().faces(f, 0), joint) > 0.5f &&
+          m.data().weights(m.data().faces(f, 1), joint) > 0.5f && m.data().weights(m.data().faces(f, 2), joint) > 0.5f)
+        eye = joint;
+    if (eye < 0) {
+      EXPECT_EQ(a, b) << "pixel " << i << " is not on an eyeball";
+      continue;
+    }
+    const Eigen::Vector3f c = p.identity.joints.row(eye).transpose();
+    EXPECT_NEAR((b - c).norm(), (a - c).norm(), 1e-6);
+    EXPECT_NEAR(b.z(), a.z(), 1e-7) << "the same angle from the pole";
+    EXPECT_NEAR(b.y(), c.y(), 1e-7) << "on the meridian";
+    EXPECT_GE(b.x(), c.x());
+    changed += (a - b).norm() > 1e-4;
+  }
+  EXPECT_GT(changed, moved / 2) << "most eyeball points lie off the meridian";
+  SurfaceBatch lost = plain;
+  lost.face.clear();
+  EXPECT_THROW(FoldEyeballPoints(m, p.identity, &lost), std::invalid_argument);
+}
+
+// The avatar option folds them where the receiver and training prepare a
+// frame, needs a texture, is kept in the file and is not a run-time switch.
+TEST(SurfaceSampling, EyeSymmetryFoldsTheEyeballsOfTheFramesItPrepares) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig c = TinyWithSurface();
+  c.surface_eye_symmetry = true;
+  c.Check();
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).surface_eye_symmetry);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_eye_symmetry");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).surface_eye_symmetry);
+  AvatarConfig bad = testing::TinyAvatarConfig();
+  bad.surface_eye_symmetry = true;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "no texture to look up";
+  bad = c;
+  bad.surface_displacement = true;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "the displacement would start at a folded point";
+
+  const FrameParams frame = Expressive();
+  const HeadIdentity identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  const SubjectParams subject = DefaultSubject(m, 128);
+  RaySampler plain_sampler(TinyWithSurface()), sampler(c);
+  AvatarFrameInputs plain, folded;
+  PrepareAvatarFrame(TinyWithSurface(), m, identity, subject, frame, &plain_sampler, nullptr, &plain);
+  PrepareAvatarFrame(c, m, identity, subject, frame, &sampler, nullptr, &folded);
+  SurfaceBatch expected = plain.surface;
+  ASSERT_GT(FoldEyeballPoints(m, identity, &expected), 0);
+  EXPECT_EQ(folded.surface.canonical, expected.canonical);
+  EXPECT_NE(folded.surface.canonical, plain.surface.canonical);
+
+  auto [with, back] = AddedSavedAndLoaded(c, testing::TempDir("eye_symmetry"));
+  EXPECT_TRUE(back.config().surface_eye_symmetry);
+  EXPECT_THROW(with.WithRuntimeSwitches(TinyWithSurface()), std::invalid_argument);
+}
+
 // The shell leaves the mesh's pixels as they were and adds pixels beyond its
 // silhouette, each mapped to a point the shell's thickness off the canonical surface.
 TEST(SurfaceShell, AddsPixelsBeyondTheMeshOffTheCanonicalSurface) {
@@ -755,6 +834,69 @@ TEST(SurfaceTexture, ARigidTextureAddsPlanesLookedUpAtThePosedPoints) {
   entries["manifest.json"] = manifest.dump();
   WriteZip(dir + "/lying.hcavatar", entries);
   EXPECT_THROW(Avatar::Load(dir + "/lying.hcavatar", m), std::runtime_error);
+}
+
+// The displacement: the surface branch's inputs are the texture's channels
+// and each mesh pixel's posed point less its canonical one. Added to a general
+// model it draws the general model's picture; with the branch drawing, a frame
+// that moves nothing draws the same whatever the displacement's weights and an
+// expressive one does not; those weights learn from the picture; refused
+// without a texture or with a shell; kept in the file; not a run-time switch.
+TEST(SurfaceTexture, TheBranchIsToldHowFarTheExpressionMovedTheSkin) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_displacement = true;
+  c.Check();
+  EXPECT_EQ(c.surface_branch_inputs(), c.surface_features + 3);
+  EXPECT_TRUE(c.needs_posed_points());
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).surface_displacement);
+  nlohmann::json old = c.ToJson();
+  old.erase("surface_displacement");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).surface_displacement) << "files from before it: the texture only";
+  AvatarConfig bad = testing::TinyAvatarConfig();
+  bad.surface_displacement = true;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a displacement without a texture";
+  bad = c;
+  bad.surface_shell = 0.02;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "a shell pixel has no posed point";
+
+  const HeadModel& m = *Builtin();
+  auto [with, back] = AddedSavedAndLoaded(c, testing::TempDir("surface_displacement"));
+  EXPECT_TRUE(back.config().surface_displacement);
+  const int64_t features = c.surface_features;
+  torch::Tensor hidden = back.modules().renderer->named_parameters()["surface_hidden.weight"];
+  ASSERT_EQ(hidden.size(1), features + 3);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : back.modules().renderer->named_parameters())
+      if (p.key().rfind("surface_", 0) == 0) p.value().uniform_(-0.5, 0.5);
+  }
+  FrameParams still = Expressive(), moved = Expressive();
+  still.expression.setZero();
+  still.jaw.setZero();
+  still.neck.setZero();
+  moved.neck.setZero();  // the expression and the jaw alone move the skin
+  RaySampler sampler(back.config());
+  AvatarFrameInputs inputs;
+  PrepareAvatarFrame(back.config(), m, m.MakeIdentity(back.subject().shape.cast<double>()), back.subject(), moved,
+                     &sampler, nullptr, &inputs);
+  ASSERT_GT(inputs.surface.num_pixels(), 0);
+  EXPECT_EQ(inputs.surface.posed.size(), inputs.surface.canonical.size()) << "each mesh pixel's posed point";
+
+  // The displacement's weights get gradients from an expressive frame's picture.
+  back.modules().train();
+  torch::mse_loss(RunAvatar(back.modules(), inputs).image, torch::full({1, 3, 128, 128}, 0.8f)).backward();
+  EXPECT_GT(hidden.grad().narrow(1, features, 3).abs().max().item<float>(), 0.f);
+
+  const cv::Mat still_drawn = Shown(back, still), moved_drawn = Shown(back, moved);
+  {
+    torch::NoGradGuard no_grad;
+    hidden.narrow(1, features, 3).zero_();
+  }
+  EXPECT_LE(cv::norm(still_drawn, Shown(back, still), cv::NORM_INF), 1) << "nothing moved: no displacement to read";
+  EXPECT_GT(cv::norm(moved_drawn, Shown(back, moved), cv::NORM_INF), 2) << "the moved skin reads its displacement";
+  AvatarConfig without = c;
+  without.surface_displacement = false;
+  EXPECT_THROW(with.WithRuntimeSwitches(without), std::invalid_argument) << "the branch's inputs are not a switch";
 }
 
 // The expression blendshapes: planes per coefficient, summed with the
