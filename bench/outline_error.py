@@ -8,11 +8,12 @@ FRAMES: the folder `headcast-train eval --write-frames` writes (truth_N.png,
 avatar_N.png). The truth's head is every pixel not of the background colour
 (its corner's). Prints each part's share of the summed squared error and the
 PSNR of the mean squared error with and without the outline band."""
-import argparse, glob, json, math, os, sys
+import argparse, json, math, sys
 
 import numpy as np
-from matplotlib.image import imread
 from scipy import ndimage
+
+from eval_frames import avatar_paths, head_of, load_pair
 
 
 def main():
@@ -21,16 +22,11 @@ def main():
     ap.add_argument("--band", type=int, default=3, help="pixels either side of the outline")
     ap.add_argument("--json")
     a = ap.parse_args()
-    avatars = sorted(glob.glob(os.path.join(a.frames, "avatar_*.png")))
-    if not avatars:
-        sys.exit(f"outline_error: no avatar_*.png in {a.frames} (headcast-train eval --write-frames)")
+    avatars = avatar_paths(a.frames, "outline_error")
     parts = dict(band_lower=0.0, band_upper=0.0, inside=0.0, outside=0.0)
     for path in avatars:
-        truth_path = os.path.join(os.path.dirname(path), os.path.basename(path).replace("avatar_", "truth_"))
-        avatar, truth = imread(path)[..., :3].astype(np.float64), imread(truth_path)[..., :3].astype(np.float64)
-        if avatar.shape != truth.shape:
-            sys.exit(f"outline_error: {path} and {truth_path} differ in size")
-        head = np.abs(truth - truth[0, 0]).sum(2) > 0.02
+        avatar, truth = load_pair(path, "outline_error")
+        head = head_of(truth)
         band = ndimage.binary_dilation(head, iterations=a.band) & ~ndimage.binary_erosion(head, iterations=a.band)
         rows = np.nonzero(head)[0]
         lower = np.zeros_like(head)

@@ -13,11 +13,12 @@ truth's head is every pixel not of the background colour (its corner's);
 that the training frames do not show but the held-out ones do is what the
 networks draw differently on unseen frames (wide-open lids drawn ordinary
 read as a face drawn too low), not the fit's placement, which both share."""
-import argparse, glob, json, os, sys
+import argparse, json, sys
 
 import numpy as np
-from matplotlib.image import imread
 from scipy import ndimage
+
+from eval_frames import avatar_paths, head_of, load_pair
 
 
 def main():
@@ -27,19 +28,14 @@ def main():
     ap.add_argument("--max-shift", type=float, default=1.5, help="largest shift tried, pixels")
     ap.add_argument("--json")
     a = ap.parse_args()
-    avatars = sorted(glob.glob(os.path.join(a.frames, "avatar_*.png")))
+    avatars = avatar_paths(a.frames, "shift_error")
     if len(avatars) < a.blocks:
-        sys.exit(f"shift_error: {len(avatars)} avatar_*.png in {a.frames}, fewer than --blocks {a.blocks} "
-                 "(headcast-train eval --write-frames)")
+        sys.exit(f"shift_error: {len(avatars)} avatar_*.png in {a.frames}, fewer than --blocks {a.blocks}")
     shifts = np.arange(-a.max_shift, a.max_shift + 1e-9, 0.25)
     best = {"inside": [], "outline_upper": [], "outline_lower": []}
     for path in avatars:
-        truth_path = os.path.join(os.path.dirname(path), os.path.basename(path).replace("avatar_", "truth_"))
-        avatar, truth = imread(path)[..., :3].astype(np.float64), imread(truth_path)[..., :3].astype(np.float64)
-        if avatar.shape != truth.shape:
-            sys.exit(f"shift_error: {path} and {truth_path} differ in size")
-        head = np.abs(truth - truth[0, 0]).sum(2) > 0.02
-        head = ndimage.binary_fill_holes(ndimage.binary_closing(head, iterations=2))
+        avatar, truth = load_pair(path, "shift_error")
+        head = ndimage.binary_fill_holes(ndimage.binary_closing(head_of(truth), iterations=2))
         band = ndimage.binary_dilation(head, iterations=3) & ~ndimage.binary_erosion(head, iterations=3)
         rows = np.nonzero(head.any(1))[0]
         upper = np.zeros_like(head)

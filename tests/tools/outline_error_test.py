@@ -2,13 +2,15 @@
 """bench/outline_error.py on frames with known errors: a head shifted by two
 pixels has all its error in the outline band; a head whose inner colour is off
 has it inside; an empty folder, and frames without any error, are refused."""
-import json, os, subprocess, sys, tempfile
+import os, sys, tempfile
 
 import numpy as np
 from matplotlib.image import imsave
 
+import frame_scripts
+
 SCRIPT = sys.argv[1]
-BG = np.array([0.16, 0.17, 0.20])
+BG = frame_scripts.BG
 
 
 def frame(cx, cy, inner=None):
@@ -22,9 +24,7 @@ def frame(cx, cy, inner=None):
 
 
 def run(folder, *extra):
-    out = os.path.join(folder, "r.json")
-    p = subprocess.run([sys.executable, SCRIPT, folder, "--json", out, *extra], capture_output=True, text=True)
-    return p, (json.load(open(out)) if p.returncode == 0 else None)
+    return frame_scripts.run(SCRIPT, folder, *extra)
 
 
 failures = []

@@ -3,13 +3,15 @@
 pixel too low in every frame is found one pixel low inside and along both
 halves of its outline; drawn where the truth is, at zero; a folder with fewer
 frames than blocks is refused."""
-import json, os, subprocess, sys, tempfile
+import os, sys, tempfile
 
 import numpy as np
 from matplotlib.image import imsave
 
+import frame_scripts
+
 SCRIPT = sys.argv[1]
-BG = np.array([0.16, 0.17, 0.20])
+BG = frame_scripts.BG
 
 
 def frame(cy):
@@ -22,9 +24,7 @@ def frame(cy):
 
 
 def run(folder, *extra):
-    out = os.path.join(folder, "r.json")
-    p = subprocess.run([sys.executable, SCRIPT, folder, "--json", out, *extra], capture_output=True, text=True)
-    return p, (json.load(open(out)) if p.returncode == 0 else None)
+    return frame_scripts.run(SCRIPT, folder, *extra)
 
 
 failures = []
