@@ -108,8 +108,8 @@ void PointUnderPixel(const RasterBuffers& b, int p, const RasterFaces& faces, co
 }  // namespace
 
 int FoldEyeballPoints(const HeadModel& model, const HeadIdentity& identity, SurfaceBatch* surface) {
-  if (surface->face.size() != static_cast<size_t>(surface->mesh_pixels))
-    throw std::invalid_argument("FoldEyeballPoints: the surface's mesh pixels come without their triangles");
+  if (surface->face.size() != static_cast<size_t>(surface->num_pixels()))
+    throw std::invalid_argument("FoldEyeballPoints: the surface's pixels come without their triangles");
   const HeadModelData& d = model.data();
   auto eye_of = [&](int f) {
     for (int joint : {kLeftEyeJoint, kRightEyeJoint}) {

@@ -39,7 +39,7 @@ struct SurfaceBatch {
   // With posed vertices given: 3 per mesh pixel, the posed surface point there
   // (model frame, metres); empty otherwise.
   std::vector<float> posed;
-  std::vector<int32_t> face;  // per mesh pixel, the triangle under it
+  std::vector<int32_t> face;  // per covered pixel, the triangle under it (the inflated mesh's for a shell pixel)
   int mesh_pixels = 0;        // the first this many pixels are the mesh's: its silhouette
   int num_pixels() const { return static_cast<int>(pixel.size()); }
 };

@@ -177,7 +177,7 @@ TEST(SurfaceSampling, TheEyeballsPointsAreFoldedOntoOneMeridian) {
   RaySampler sampler(TinyWithSurface());
   SurfaceBatch plain;
   sampler.SampleSurface(p.v_cam, m.data().faces, p.identity.v_shaped, p.camera, &plain);
-  ASSERT_EQ(plain.face.size(), static_cast<size_t>(plain.mesh_pixels));
+  ASSERT_EQ(plain.face.size(), static_cast<size_t>(plain.num_pixels()));
   SurfaceBatch folded = plain;
   const int moved = FoldEyeballPoints(m, p.identity, &folded);
   ASSERT_GT(moved, 20) << "the test frame shows too little of the eyeballs";
