@@ -191,6 +191,9 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--rigid-margin,!--no-rigid-margin", config->rigid_margin,
                 "with canonical samples: the rays beside the silhouette (the hair beyond the head) stay rigid with "
                 "the skull instead of following the nearest triangle, which a raised brow or a moved jaw stretches");
+  app->add_flag("--covered-apart,!--no-covered-apart", config->covered_apart,
+                "with canonical samples: the parts the neutral head covers (the mouth's inside, the eyeballs under "
+                "the lids) looked up at a place of their own, not just behind the lips and lids");
   app->add_option_function<std::string>(
          "--motion-conditioning",
          [config](const std::string& name) { config->motion_conditioning = ParseMotionConditioning(name); },

@@ -154,6 +154,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;
     c.rigid_margin = o.config.rigid_margin;
+    c.covered_apart = o.config.covered_apart;
     c.motion_conditioning = o.config.motion_conditioning;
     c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
     return init.WithRuntimeSwitches(c);
@@ -288,6 +289,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.output_size = o.resolution;
     c.canonical_samples = o.config.canonical_samples;  // the subject's choice, whatever the general model's
     c.rigid_margin = o.config.rigid_margin;
+    c.covered_apart = o.config.covered_apart;
     c.motion_conditioning = o.config.motion_conditioning;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);

@@ -102,6 +102,9 @@ void AvatarConfig::Check() const {
   c.That(!canonical_samples || sampling == SamplingMode::kMeshGuided,
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.That(!rigid_margin || canonical_samples, "rigid_margin needs canonical_samples");
+  c.That(!covered_apart || canonical_samples, "covered_apart needs canonical_samples");
+  c.That(!covered_apart || !surface_displacement,
+         "covered_apart moves the covered parts' canonical points, which surface_displacement measures from");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
   c.That(expression_low.size() == expression_high.size(),
          "expression_low and expression_high must have as many values");
@@ -142,6 +145,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"renderer_channels", renderer_channels},
                       {"canonical_samples", canonical_samples},
                       {"rigid_margin", rigid_margin},
+                      {"covered_apart", covered_apart},
                       {"surface_features", surface_features},
                       {"surface_resolution", surface_resolution},
                       {"surface_extent", surface_extent},
@@ -190,6 +194,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     // Files from before surface features have none.
     c.canonical_samples = j.value("canonical_samples", false);
     c.rigid_margin = j.value("rigid_margin", false);
+    c.covered_apart = j.value("covered_apart", false);
     c.surface_features = j.value("surface_features", 0);
     c.surface_resolution = j.value("surface_resolution", c.surface_resolution);
     c.surface_extent = j.value("surface_extent", c.surface_extent);

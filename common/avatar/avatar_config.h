@@ -70,6 +70,15 @@ struct AvatarConfig : AvatarCommonConfig {
   // triangle in front — a forehead or cheek that a raised brow or a moved jaw
   // stretches, which would move the hair with it (false in files from before).
   bool rigid_margin = false;
+  // With canonical samples: the parts of the mesh that the neutral head
+  // covers from the front (CoveredFaces: the mouth's inside behind the closed
+  // lips, the eyeballs under the lids) are carried to a place of their own in
+  // the canonical space (kCoveredApart), the CNeRF's samples and the texture's
+  // points alike. In the neutral head they lie just behind the lips and lids,
+  // so a mouth opened or lids raised further than in any training frame
+  // showed the networks' lips and lids where the mesh bares what is behind
+  // them. false: every part where the neutral head has it.
+  bool covered_apart = false;
   // Sampling.
   SamplingMode sampling = SamplingMode::kMeshGuided;
   int samples_per_ray = 8;

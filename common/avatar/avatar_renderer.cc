@@ -225,7 +225,8 @@ void PrepareAvatarRays(const AvatarConfig& config, const HeadModel& model, const
                   &out->rays);
   out->to_canonical.clear();
   if (config.canonical_samples)
-    CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical);
+    CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical,
+                        config.covered_apart ? &sampler->Covered(identity.v_shaped, model.data().faces) : nullptr);
   out->conditioning = MakeConditioning(config, subject, frame);
   if (timings) timings->sample_ms = watch.ElapsedMs();
 }
@@ -239,6 +240,9 @@ void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, co
     sampler->SampleSurface(out->v_cam, model.data().faces, identity.v_shaped, subject.intrinsics, &out->surface,
                            config.needs_posed_points() ? &out->posed.vertices : nullptr);
     if (config.surface_eye_symmetry) FoldEyeballPoints(model, identity, &out->surface);
+    // The rays' table (PrepareAvatarRays made it): read only here, beside the network.
+    if (config.covered_apart && config.has_surface())
+      MoveCoveredPointsApart(sampler->Covered(identity.v_shaped, model.data().faces), &out->surface);
   }
   if (config.matte == MatteMode::kBounded) {
     MakeMatteBound(config, out->surface, out->posed, out->cam_from_head, subject.intrinsics, out);

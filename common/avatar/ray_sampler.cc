@@ -107,6 +107,94 @@ void PointUnderPixel(const RasterBuffers& b, int p, const RasterFaces& faces, co
 
 }  // namespace
 
+std::vector<uint8_t> CoveredFaces(const Eigen::VectorXf& canonical, const RasterFaces& faces, float depth) {
+  if (canonical.size() % 3 != 0 || canonical.size() == 0)
+    throw std::invalid_argument("CoveredFaces: the canonical mesh needs x y z per vertex");
+  if (!(depth > 0)) throw std::invalid_argument("CoveredFaces: depth must be positive");
+  const Eigen::Index n = canonical.size() / 3;
+  const Eigen::Map<const RowMatrixX3f> v(canonical.data(), n, 3);
+  const Eigen::RowVector3f low = v.colwise().minCoeff(), high = v.colwise().maxCoeff();
+  // Seen from the front and far away (nearly orthographic), about 0.3 mm a
+  // pixel for a head: finer than the mouth's and eyes' triangles, so each
+  // face's centre falls on a pixel of its own or of what covers it.
+  constexpr int kSize = 1024;
+  constexpr float kDistance = 10.f;
+  const float span = 1.02f * std::max(high.x() - low.x(), high.y() - low.y());
+  if (!(span > 0)) throw std::invalid_argument("CoveredFaces: the mesh has no extent");
+  PinholeCamera cam;
+  cam.width = cam.height = kSize;
+  cam.fx = cam.fy = kSize * kDistance / span;
+  cam.cx = cam.cy = 0.5 * kSize - 0.5;
+  // Camera frame: x right, y down, z into the scene; the camera on the face's side.
+  const Eigen::RowVector3f middle = 0.5f * (low + high);
+  RasterVertices in_cam(n, 3);
+  in_cam.col(0) = v.col(0).array() - middle.x();
+  in_cam.col(1) = middle.y() - v.col(1).array();
+  in_cam.col(2) = high.z() + kDistance - v.col(2).array();
+  RasterBuffers b;
+  RasterOptions raster;
+  raster.cull_back_faces = true;
+  Rasterize(in_cam, faces, cam, raster, &b);
+  // A face that wins a pixel is seen; one too small or too steep to win any
+  // lies behind its neighbours' pixels by about its slope times a pixel
+  // (the crown's, seen edge on, by several millimetres), while the lids and
+  // lips lie further in front of what they cover.
+  constexpr float kTolerance = 2e-3f;
+  const float pixel_metres = span / kSize;
+  std::vector<uint8_t> seen(static_cast<size_t>(faces.rows()), 0);
+  for (const int32_t f : b.face)
+    if (f >= 0) seen[f] = 1;
+  std::vector<uint8_t> covered(static_cast<size_t>(faces.rows()), 0);
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    if (seen[f]) continue;
+    const Eigen::RowVector3f a = v.row(faces(f, 0)), e1 = v.row(faces(f, 1)) - a, e2 = v.row(faces(f, 2)) - a;
+    const Eigen::RowVector3f normal = e1.cross(e2);
+    if (!(normal.z() > 0)) continue;  // looks away from the front
+    const float slope = normal.head<2>().norm() / normal.z();
+    const Eigen::RowVector3f centre = (3 * a + e1 + e2) / 3;
+    const Eigen::Vector2d pixel = cam.Project(
+        Eigen::Vector3d(centre.x() - middle.x(), middle.y() - centre.y(), high.z() + kDistance - centre.z()));
+    const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
+    if (x < 0 || y < 0 || x >= kSize || y >= kSize) continue;
+    const size_t p = static_cast<size_t>(y) * kSize + x;
+    const float gap = (high.z() + kDistance - centre.z()) - b.depth[p];
+    covered[f] = b.face[p] >= 0 && b.face[p] != f && gap > kTolerance + slope * pixel_metres && gap < depth;
+  }
+  return covered;
+}
+
+namespace {
+
+void MoveApart(float p[3]) {
+  for (int k = 0; k < 3; ++k) p[k] = kCoveredApartTo[k] + kCoveredApartScale * (p[k] - kCoveredApartFrom[k]);
+}
+
+}  // namespace
+
+int MoveCoveredPointsApart(const std::vector<uint8_t>& covered, SurfaceBatch* surface) {
+  if (surface->face.size() != static_cast<size_t>(surface->num_pixels()))
+    throw std::invalid_argument("MoveCoveredPointsApart: the surface's pixels come without their triangles");
+  int moved = 0;
+  for (int i = 0; i < surface->num_pixels(); ++i) {
+    const int f = surface->face[i];
+    if (f < 0 || static_cast<size_t>(f) >= covered.size())
+      throw std::invalid_argument("MoveCoveredPointsApart: a pixel's triangle is not the covered table's mesh's");
+    if (!covered[f]) continue;
+    MoveApart(&surface->canonical[3 * static_cast<size_t>(i)]);
+    ++moved;
+  }
+  return moved;
+}
+
+const std::vector<uint8_t>& RaySampler::Covered(const Eigen::VectorXf& canonical, const RasterFaces& faces) {
+  if (covered_of_.size() != canonical.size() || covered_of_ != canonical ||
+      covered_.size() != static_cast<size_t>(faces.rows())) {
+    covered_ = CoveredFaces(canonical, faces, static_cast<float>(config_.shell_front + config_.shell_back));
+    covered_of_ = canonical;
+  }
+  return covered_;
+}
+
 int FoldEyeballPoints(const HeadModel& model, const HeadIdentity& identity, SurfaceBatch* surface) {
   if (surface->face.size() != static_cast<size_t>(surface->num_pixels()))
     throw std::invalid_argument("FoldEyeballPoints: the surface's pixels come without their triangles");
@@ -209,8 +297,12 @@ bool LocalFrame(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen:
 }  // namespace
 
 void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed, const RasterFaces& faces,
-                         const Eigen::VectorXf& canonical, std::vector<float>* out) {
+                         const Eigen::VectorXf& canonical, std::vector<float>* out,
+                         const std::vector<uint8_t>* covered) {
   CheckCanonicalVertices("CanonicalTransforms", canonical, posed.rows());
+  if (covered && covered->size() != static_cast<size_t>(faces.rows()))
+    throw std::invalid_argument("CanonicalTransforms: " + std::to_string(covered->size()) +
+                                " covered flags for a mesh of " + std::to_string(faces.rows()) + " faces");
   out->assign(12 * rays.face.size(), 0.f);
   for (size_t r = 0; r < rays.face.size(); ++r) {
     float* t = out->data() + 12 * r;
@@ -222,8 +314,12 @@ void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed, const 
     if (!LocalFrame(posed.row(faces(f, 0)), posed.row(faces(f, 1)), posed.row(faces(f, 2)), &from) ||
         !LocalFrame(corner(0), corner(1), corner(2), &to))
       continue;
-    const Eigen::Matrix3f a = to * from.inverse();
-    const Eigen::Vector3f o = corner(0) - a * posed.row(faces(f, 0)).transpose();
+    Eigen::Matrix3f a = to * from.inverse();
+    Eigen::Vector3f o = corner(0) - a * posed.row(faces(f, 0)).transpose();
+    if (covered && (*covered)[f]) {  // p -> To + s (A p + o - From)
+      a *= kCoveredApartScale;
+      o = kCoveredApartTo + kCoveredApartScale * (o - kCoveredApartFrom);
+    }
     for (int i = 0; i < 3; ++i) {
       for (int j = 0; j < 3; ++j) t[3 * i + j] = a(i, j);
       t[9 + i] = o[i];

@@ -50,9 +50,33 @@ struct SurfaceBatch {
 // idea: the mesh carries the motion, a point off the surface keeps its
 // distance along the normal). 12 floats per ray, row-major A then o, with
 // p_canonical = A p + o; rays without a triangle (or a degenerate one) get
-// the identity. `canonical_vertices`: 3N, x y z per vertex.
+// the identity. `canonical_vertices`: 3N, x y z per vertex. With `covered`
+// (CoveredFaces), the rays of a covered triangle are carried on to the
+// covered parts' place (kCoveredApartTo).
 void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed_vertices, const RasterFaces& faces,
-                         const Eigen::VectorXf& canonical_vertices, std::vector<float>* out);
+                         const Eigen::VectorXf& canonical_vertices, std::vector<float>* out,
+                         const std::vector<uint8_t>* covered = nullptr);
+
+// Per face of a mesh (`canonical_vertices`: 3N, the neutral head, model frame:
+// y up, z out of the face), 1 where, seen from the front, the face looks
+// forward, shows in no pixel, and another surface lies in front of its centre
+// by more than 2 mm and less than `depth` metres: what the neutral head covers
+// (the mouth's inside behind the closed lips, the eyeballs under the lids).
+std::vector<uint8_t> CoveredFaces(const Eigen::VectorXf& canonical_vertices, const RasterFaces& faces, float depth);
+
+// Where AvatarConfig::covered_apart carries the covered faces' points:
+// p -> kCoveredApartTo + kCoveredApartScale (p - kCoveredApartFrom), model
+// frame, metres. Halved and set in front of the forehead and above it, where
+// neither the rest of the head's CNeRF samples nor its points on any of the
+// texture's three planes (xy, xz, yz) reach: a head model's neutral head
+// lies within about 0.15 m of its origin, its face's front below y = 0.1.
+inline const Eigen::Vector3f kCoveredApartFrom(0.f, -0.01f, 0.05f);
+inline const Eigen::Vector3f kCoveredApartTo(0.1f, 0.17f, 0.17f);
+constexpr float kCoveredApartScale = 0.5f;
+
+// Carries the surface pixels whose triangle is `covered` (CoveredFaces) to the
+// covered parts' place (kCoveredApartTo). Returns how many moved.
+int MoveCoveredPointsApart(const std::vector<uint8_t>& covered, SurfaceBatch* surface);
 
 // Moves every mesh pixel's canonical point that lies on an eyeball (a
 // triangle whose three vertices are mostly skinned to an eye joint) about the
@@ -83,6 +107,11 @@ class RaySampler {
                      const Eigen::VectorXf& canonical_vertices, const PinholeCamera& output_camera, SurfaceBatch* out,
                      const RowMatrixX3f* posed_vertices = nullptr);
 
+  // CoveredFaces of `canonical_vertices` at the config's shell depth
+  // (shell_front + shell_back: how far a ray's samples reach), kept while
+  // the canonical mesh stays the one they are of.
+  const std::vector<uint8_t>& Covered(const Eigen::VectorXf& canonical_vertices, const RasterFaces& faces);
+
  private:
   void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,
               RayBatch* out) const;
@@ -100,6 +129,8 @@ class RaySampler {
   // subject's neutral shape, the same every frame) stays the one they are of.
   Eigen::VectorXf normals_of_;
   RowMatrixX3f canonical_normals_;
+  Eigen::VectorXf covered_of_;
+  std::vector<uint8_t> covered_;
   std::vector<float> surface_depth_;
   std::vector<int32_t> surface_face_;
 };

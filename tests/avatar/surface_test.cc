@@ -434,6 +434,149 @@ TEST(CanonicalSamples, ARigidMarginKeepsTheRaysBesideTheHeadInTheHeadFrame) {
   EXPECT_THROW(c.Check(), std::invalid_argument);
 }
 
+// Seen from the front, a face that shows in no pixel and has another surface
+// more than 2 mm before its centre, within the depth, is covered; the
+// covering surface, a face beside it, one behind it beyond the depth or
+// within 2 mm of it, and one looking away are not.
+TEST(CoveredFaces, AreWhatTheNeutralHeadHidesBehindASurfaceJustInFront) {
+  // Squares of two triangles each, 2 cm tall, counter-clockwise seen from +z
+  // unless they look away.
+  std::vector<Eigen::Vector3f> v;
+  RasterFaces faces(12, 3);
+  auto square = [&](int at, float x0, float x1, float z, bool away) {
+    const int base = static_cast<int>(v.size());
+    v.insert(v.end(), {{x0, -0.01f, z}, {x1, -0.01f, z}, {x1, 0.01f, z}, {x0, 0.01f, z}});
+    faces.row(2 * at) << base, base + 1, base + 2;
+    faces.row(2 * at + 1) << base, base + 2, base + 3;
+    if (away) {
+      std::swap(faces(2 * at, 1), faces(2 * at, 2));
+      std::swap(faces(2 * at + 1, 1), faces(2 * at + 1, 2));
+    }
+  };
+  square(0, 0.f, 0.02f, 0.f, false);            // covered by the front one, 1 cm before it
+  square(1, -0.005f, 0.025f, 0.01f, false);     // front (taller: the corners' rows)
+  square(2, 0.005f, 0.015f, -0.1f, false);      // 11 cm behind the front one
+  square(3, 0.005f, 0.015f, 0.004f, true);      // looks away
+  square(4, 0.03f, 0.05f, 0.f, false);          // beside the front one: seen
+  square(5, 0.f, 0.01f, 0.009f, false);         // 1 mm behind the front one
+  for (int k : {4, 5, 6, 7}) v[k].y() *= 1.2f;  // the front square's corners beyond the others'
+  Eigen::VectorXf flat(3 * v.size());
+  for (size_t i = 0; i < v.size(); ++i) flat.segment<3>(3 * i) = v[i];
+  const std::vector<uint8_t> covered = CoveredFaces(flat, faces, 0.055f);
+  ASSERT_EQ(covered.size(), 12u);
+  EXPECT_EQ(covered[0] + covered[1], 2) << "1 cm behind the front square";
+  EXPECT_EQ(covered[2] + covered[3], 0) << "the front square covers, it is not covered";
+  EXPECT_EQ(covered[4] + covered[5], 0) << "11 cm behind: beyond the depth";
+  EXPECT_EQ(covered[6] + covered[7], 0) << "a face looking away";
+  EXPECT_EQ(covered[8] + covered[9], 0) << "seen beside the front square";
+  EXPECT_EQ(covered[10] + covered[11], 0) << "within 2 mm: a neighbour's pixel, not a covering surface";
+  const std::vector<uint8_t> deeper = CoveredFaces(flat, faces, 0.2f);
+  EXPECT_EQ(deeper[4] + deeper[5], 2) << "within a deeper depth";
+  EXPECT_THROW(CoveredFaces(flat.head(5), faces, 0.055f), std::invalid_argument);
+  EXPECT_THROW(CoveredFaces(flat, faces, 0.f), std::invalid_argument);
+
+  // The head: some of its eyeballs' faces lie under the lids, and no face
+  // that covers another is covered.
+  const HeadModel& m = *Builtin();
+  const HeadIdentity identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  const std::vector<uint8_t> head = CoveredFaces(identity.v_shaped, m.data().faces, 0.055f);
+  int eyeball = 0, eyeball_covered = 0, any = 0;
+  for (int f = 0; f < m.num_faces(); ++f) {
+    bool on_eye = false;
+    for (int joint : {kLeftEyeJoint, kRightEyeJoint})
+      on_eye = on_eye || (m.data().weights(m.data().faces(f, 0), joint) > 0.5f &&
+                          m.data().weights(m.data().faces(f, 1), joint) > 0.5f &&
+                          m.data().weights(m.data().faces(f, 2), joint) > 0.5f);
+    eyeball += on_eye;
+    eyeball_covered += on_eye && head[f];
+    any += head[f];
+  }
+  ASSERT_GT(eyeball, 0);
+  EXPECT_GT(eyeball_covered, 0) << "the lids cover no part of the eyeballs";
+  EXPECT_LT(eyeball_covered, eyeball) << "the eyes are open in the neutral head";
+  EXPECT_LT(any, m.num_faces() / 5);
+}
+
+// With the covered table, a covered triangle's rays are carried on to the
+// covered parts' place: To + s (the plain map - From); the others keep theirs.
+TEST(CanonicalSamples, CoveredRaysAreCarriedApart) {
+  const HeadModel& m = *Builtin();
+  const FrameParams frame = Expressive();
+  const Posed p = Pose(frame, 128);
+  const RasterFaces& faces = m.data().faces;
+  RayBatch rays;
+  RaySampler(testing::TinyAvatarConfig())
+      .Sample(p.v_cam, faces, p.camera.Resized(32, 32), frame.CamFromHead(), nullptr, &rays);
+  std::vector<uint8_t> covered(static_cast<size_t>(faces.rows()), 0);
+  for (size_t f = 0; f < covered.size(); f += 2) covered[f] = 1;
+  std::vector<float> plain, apart;
+  CanonicalTransforms(rays, p.posed.vertices, faces, p.identity.v_shaped, &plain);
+  CanonicalTransforms(rays, p.posed.vertices, faces, p.identity.v_shaped, &apart, &covered);
+  int moved = 0;
+  for (int r = 0; r < rays.num_rays(); ++r) {
+    const Eigen::Map<const Eigen::Matrix<float, 3, 3, Eigen::RowMajor>> a(plain.data() + 12 * r),
+        b(apart.data() + 12 * r);
+    const Eigen::Map<const Eigen::Vector3f> oa(plain.data() + 12 * r + 9), ob(apart.data() + 12 * r + 9);
+    const Eigen::Vector3f point(0.01f, 0.02f, 0.09f);
+    const Eigen::Vector3f want =
+        covered[rays.face[r]]
+            ? Eigen::Vector3f(kCoveredApartTo + kCoveredApartScale * (a * point + oa - kCoveredApartFrom))
+            : Eigen::Vector3f(a * point + oa);
+    EXPECT_LT((b * point + ob - want).norm(), 1e-6) << "ray " << r;
+    moved += covered[rays.face[r]];
+  }
+  EXPECT_GT(moved, 20);
+  EXPECT_LT(moved, rays.num_rays());
+  covered.pop_back();
+  EXPECT_THROW(CanonicalTransforms(rays, p.posed.vertices, faces, p.identity.v_shaped, &apart, &covered),
+               std::invalid_argument);
+}
+
+// The avatar option carries the covered parts apart where the receiver and
+// training prepare a frame (rays and texture points alike), needs canonical
+// samples, refuses the displacement and is kept in the file.
+TEST(CanonicalSamples, CoveredApartMovesTheRaysAndTextureOfTheFramesItPrepares) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig plain_config = TinyWithSurface();
+  plain_config.canonical_samples = true;
+  AvatarConfig c = plain_config;
+  c.covered_apart = true;
+  c.Check();
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).covered_apart);
+  nlohmann::json old = c.ToJson();
+  old.erase("covered_apart");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).covered_apart);
+  AvatarConfig bad = c;
+  bad.canonical_samples = false;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "nothing carries the rays";
+  bad = c;
+  bad.surface_displacement = true;
+  EXPECT_THROW(bad.Check(), std::invalid_argument) << "the displacement would start at a moved point";
+
+  FrameParams frame = Expressive();
+  frame.jaw = Eigen::Vector3f(0.3f, 0, 0);                         // the mouth open: its inside seen
+  frame.left_eye = frame.right_eye = Eigen::Vector3f(0.4f, 0, 0);  // the eyeballs turned: their covered parts seen
+  const HeadIdentity identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  const SubjectParams subject = DefaultSubject(m, 128);
+  RaySampler plain_sampler(plain_config), sampler(c);
+  AvatarFrameInputs plain, apart;
+  PrepareAvatarFrame(plain_config, m, identity, subject, frame, &plain_sampler, nullptr, &plain);
+  PrepareAvatarFrame(c, m, identity, subject, frame, &sampler, nullptr, &apart);
+  const std::vector<uint8_t> covered =
+      CoveredFaces(identity.v_shaped, m.data().faces, static_cast<float>(c.shell_front + c.shell_back));
+  EXPECT_EQ(sampler.Covered(identity.v_shaped, m.data().faces), covered);
+  SurfaceBatch expected = plain.surface;
+  EXPECT_GT(MoveCoveredPointsApart(covered, &expected), 0) << "the frame shows nothing the neutral head covers";
+  EXPECT_EQ(apart.surface.canonical, expected.canonical);
+  std::vector<float> transforms;
+  CanonicalTransforms(plain.rays, plain.posed.vertices, m.data().faces, identity.v_shaped, &transforms, &covered);
+  EXPECT_EQ(apart.to_canonical, transforms);
+  EXPECT_NE(apart.to_canonical, plain.to_canonical);
+  SurfaceBatch lost = plain.surface;
+  lost.face.clear();
+  EXPECT_THROW(MoveCoveredPointsApart(covered, &lost), std::invalid_argument);
+}
+
 // With a span, the networks are told each expression coefficient held between
 // its training frames' extremes and the posed mesh the frame's own: the
 // picture of a frame beyond the span is the one the same networks draw from
