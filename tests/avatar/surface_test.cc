@@ -84,6 +84,14 @@ std::vector<std::string> CopySharedWeights(Avatar& from, Avatar& to) {
 
 Eigen::Vector3f Corner(const Eigen::VectorXf& flat, int v) { return {flat[3 * v], flat[3 * v + 1], flat[3 * v + 2]}; }
 
+// The tiny avatar's mesh-guided rays of `frame`, posed as `p`, on a 32² feature map.
+RayBatch FeatureRays(const Posed& p, const FrameParams& frame) {
+  RayBatch rays;
+  RaySampler(testing::TinyAvatarConfig())
+      .Sample(p.v_cam, Builtin()->data().faces, p.camera.Resized(32, 32), frame.CamFromHead(), nullptr, &rays);
+  return rays;
+}
+
 }  // namespace
 
 // Each covered pixel's canonical point lies on the canonical triangle under
@@ -339,9 +347,7 @@ TEST(CanonicalSamples, TheRaysTriangleCarriesItsSamplesToTheNeutralHead) {
   const FrameParams frame = Expressive();
   const Posed p = Pose(frame, 128);
   const RasterFaces& faces = m.data().faces;
-  RayBatch rays;
-  RaySampler(testing::TinyAvatarConfig())
-      .Sample(p.v_cam, faces, p.camera.Resized(32, 32), frame.CamFromHead(), nullptr, &rays);
+  const RayBatch rays = FeatureRays(p, frame);
   ASSERT_GT(rays.num_rays(), 100);
   ASSERT_EQ(rays.face.size(), rays.pixel.size());
   std::vector<float> to;
@@ -504,9 +510,7 @@ TEST(CanonicalSamples, CoveredRaysAreCarriedApart) {
   const FrameParams frame = Expressive();
   const Posed p = Pose(frame, 128);
   const RasterFaces& faces = m.data().faces;
-  RayBatch rays;
-  RaySampler(testing::TinyAvatarConfig())
-      .Sample(p.v_cam, faces, p.camera.Resized(32, 32), frame.CamFromHead(), nullptr, &rays);
+  const RayBatch rays = FeatureRays(p, frame);
   std::vector<uint8_t> covered(static_cast<size_t>(faces.rows()), 0);
   for (size_t f = 0; f < covered.size(); f += 2) covered[f] = 1;
   std::vector<float> plain, apart;
