@@ -60,8 +60,9 @@ void CanonicalTransforms(const RayBatch& rays, const RowMatrixX3f& posed_vertice
 // Per face of a mesh (`canonical_vertices`: 3N, the neutral head, model frame:
 // y up, z out of the face), 1 where, seen from the front, the face looks
 // forward, shows in no pixel, and another surface lies in front of its centre
-// by more than 2 mm and less than `depth` metres: what the neutral head covers
-// (the mouth's inside behind the closed lips, the eyeballs under the lids).
+// by more than 2 mm (plus the face's slope times a pixel of the 1024² view)
+// and less than `depth` metres: what the neutral head covers (the mouth's
+// inside behind the closed lips, the eyeballs under the lids).
 std::vector<uint8_t> CoveredFaces(const Eigen::VectorXf& canonical_vertices, const RasterFaces& faces, float depth);
 
 // Where AvatarConfig::covered_apart carries the covered faces' points:
