@@ -127,10 +127,11 @@ std::vector<uint8_t> CoveredFaces(const Eigen::VectorXf& canonical, const Raster
   cam.cx = cam.cy = 0.5 * kSize - 0.5;
   // Camera frame: x right, y down, z into the scene; the camera on the face's side.
   const Eigen::RowVector3f middle = 0.5f * (low + high);
+  const auto to_cam = [&](const Eigen::RowVector3f& p) {
+    return Eigen::RowVector3f(p.x() - middle.x(), middle.y() - p.y(), high.z() + kDistance - p.z());
+  };
   RasterVertices in_cam(n, 3);
-  in_cam.col(0) = v.col(0).array() - middle.x();
-  in_cam.col(1) = middle.y() - v.col(1).array();
-  in_cam.col(2) = high.z() + kDistance - v.col(2).array();
+  for (Eigen::Index i = 0; i < n; ++i) in_cam.row(i) = to_cam(v.row(i));
   RasterBuffers b;
   RasterOptions raster;
   raster.cull_back_faces = true;
@@ -151,13 +152,12 @@ std::vector<uint8_t> CoveredFaces(const Eigen::VectorXf& canonical, const Raster
     const Eigen::RowVector3f normal = e1.cross(e2);
     if (!(normal.z() > 0)) continue;  // looks away from the front
     const float slope = normal.head<2>().norm() / normal.z();
-    const Eigen::RowVector3f centre = (3 * a + e1 + e2) / 3;
-    const Eigen::Vector2d pixel = cam.Project(
-        Eigen::Vector3d(centre.x() - middle.x(), middle.y() - centre.y(), high.z() + kDistance - centre.z()));
+    const Eigen::RowVector3f centre = to_cam((3 * a + e1 + e2) / 3);
+    const Eigen::Vector2d pixel = cam.Project(centre.transpose().cast<double>());
     const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
     if (x < 0 || y < 0 || x >= kSize || y >= kSize) continue;
     const size_t p = static_cast<size_t>(y) * kSize + x;
-    const float gap = (high.z() + kDistance - centre.z()) - b.depth[p];
+    const float gap = centre.z() - b.depth[p];
     covered[f] = b.face[p] >= 0 && b.face[p] != f && gap > kTolerance + slope * pixel_metres && gap < depth;
   }
   return covered;
