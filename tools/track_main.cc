@@ -132,6 +132,11 @@ void AddFlags(CLI::App& app, TrackFlags& f) {
              "which eyeLook shapes the prior weighs: all, or vertical (Up, Down: sideways looks keep their lids)")
           ->check(CLI::IsMember(kEyeLookPriorShapes))
           ->capture_default_str());
+  f.expression_fit_flags.push_back(
+      app.add_option("--lid-gaze-weight", t.tracker.fit.lid_gaze_weight,
+                     "weight of each vertical eyeLook coefficient against the lids the eye's fitted pitch implies, "
+                     "against squared landmark pixels (0: off): other lid motion is a blink or a wide eye")
+          ->capture_default_str());
   app.add_option("--calibration-mean-expression", t.tracker.fit.calibration_mean_expression,
                  "with --calibrate: weight of the key frames' mean expression (per frame, against squared landmark "
                  "pixels): what every key frame shows goes into the shape")

@@ -268,6 +268,10 @@ int main(int argc, char** argv) {
                    "their lids)")
       ->check(CLI::IsMember(kEyeLookPriorShapes))
       ->capture_default_str();
+  prep->add_option("--lid-gaze-weight", p.expression_fit.lid_gaze_weight,
+                   "tracking: weight of each vertical eyeLook coefficient against the lids the eye's fitted pitch "
+                   "implies, against squared landmark pixels (0: off): other lid motion is a blink or a wide eye")
+      ->capture_default_str();
   prep->add_option("--calibration-mean-expression", p.calibration_mean_expression,
                    "identity calibration: weight of the key frames' mean expression (per frame, against squared "
                    "landmark pixels): what every key frame shows goes into the shape")

@@ -19,6 +19,7 @@ struct ExpressionFitSettings {
   double expression_range_weight = HeadFitterOptions{}.expression_range_weight;
   double eye_look_prior = HeadFitterOptions{}.eye_look_prior;
   std::string eye_look_prior_shapes = HeadFitterOptions{}.eye_look_prior_shapes;
+  double lid_gaze_weight = HeadFitterOptions{}.lid_gaze_weight;
 
   static ExpressionFitSettings Of(const HeadFitterOptions& o);
   void ApplyTo(HeadFitterOptions* o) const;
@@ -28,7 +29,8 @@ struct ExpressionFitSettings {
   // hold them check them this way).
   void CheckInto(OptionsCheck* c) const;
   // Throws std::invalid_argument on a missing or mistyped key, a negative or
-  // non-finite weight, or shapes other than kEyeLookPriorShapes.
+  // non-finite weight, or shapes other than kEyeLookPriorShapes. A missing
+  // lid_gaze_weight is 0: files from before it was a setting were fitted without.
   static ExpressionFitSettings FromJson(const nlohmann::json& j);
   // What files from before the settings travelled were fitted with (the
   // defaults of then; their eyeLook prior, where the dataset recorded one, is

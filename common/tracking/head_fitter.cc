@@ -83,6 +83,28 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   };
   for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i)
     if (weighed(names[i])) expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
+  // The vertical eyeLook shapes of an articulated eye: each shape's side is
+  // where it moves the mesh, and the look it stands for is the arc its
+  // largest lid motion makes about the eye's pivot (the lid rides on the ball).
+  const HeadModelData& d = model.data();
+  for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i) {
+    const bool up = names[i].rfind("eyeLookUp", 0) == 0, down = names[i].rfind("eyeLookDown", 0) == 0;
+    if (!up && !down) continue;
+    double x_sum = 0, weight_sum = 0, largest = 0;
+    for (int v = 0; v < model.num_vertices(); ++v) {
+      const double moved = d.expressiondirs.block(3 * v, i, 3, 1).norm();
+      x_sum += moved * d.v_template(v, 0);
+      weight_sum += moved;
+      largest = std::max(largest, moved);
+    }
+    const int joint = x_sum > 0 ? kLeftEyeJoint : kRightEyeJoint;  // the subject's left is +x
+    const int pupil = model.PupilVertex(joint);
+    if (weight_sum <= 0 || pupil < 0 || !model.JointIsArticulated(joint)) continue;
+    const Eigen::Vector3d pivot = (d.j_regressor.row(joint) * d.v_template).transpose().cast<double>();
+    const Eigen::Vector3d axis = d.v_template.row(pupil).transpose().cast<double>() - pivot;
+    lid_gaze_.push_back(
+        {i, joint, up ? 1.0 : -1.0, std::asin(std::min(1.0, largest / axis.norm())), axis.normalized()});
+  }
   rigid_vertices_ = RigidHeadVertices(model, MakeBasis(PoseVector::Zero(), true).base, 64);
   SetIdentity(Eigen::VectorXd::Zero(model.num_shape()));
 }
@@ -237,6 +259,22 @@ class MeanCost : public ceres::CostFunction {
 
 }  // namespace
 
+void HeadFitter::AddLidGaze(ceres::Problem* problem, double* expression, double* left_eye, double* right_eye,
+                            bool gaze_fitted) const {
+  if (options_.lid_gaze_weight <= 0) return;
+  for (const LidGaze& l : lid_gaze_) {
+    double* eye = l.joint == kLeftEyeJoint ? left_eye : right_eye;
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<LidGazeResidual, 4>(
+        new LidGazeResidual(l.coefficient, l.axis, l.sign, l.radians, std::sqrt(options_.lid_gaze_weight)));
+    cost->AddParameterBlock(num_expression_);
+    cost->AddParameterBlock(3);
+    cost->SetNumResiduals(1);
+    problem->AddResidualBlock(cost, nullptr, {expression, eye});
+    // Without an iris this frame the gaze is held, and the lids follow the held one.
+    if (!gaze_fitted) problem->SetParameterBlockConstant(eye);
+  }
+}
+
 void HeadFitter::AddExpressionPriors(ceres::Problem* problem, double* expression) const {
   if (num_expression_ == 0) return;
   const HeadModelData& d = model_.data();
@@ -360,6 +398,7 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);
   const bool gaze = irises && AddGaze(&problem, *irises, cam, rotation, translation, left_eye, right_eye);
+  AddLidGaze(&problem, expression.data(), left_eye, right_eye, gaze);
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::DENSE_QR;
   solver.max_num_iterations = options_.max_iterations;

@@ -57,10 +57,17 @@ struct HeadFitterOptions {
   // Down) only — the lid confusion is vertical, while In and Out move the lids
   // with a sideways look that the avatar's eyes should follow.
   std::string eye_look_prior_shapes = "all";  // one of kEyeLookPriorShapes
-  double jaw_prior = 10;                      // weight of |jaw|^2 (radians^2)
-  double contour_weight = 0.5;                // landmarks 0..16 sit on a contour the model only approximates
-  int max_iterations = 25;                    // Levenberg-Marquardt iterations per frame
-  double huber_px = 3;                        // robust loss scale on landmark residuals, pixels
+  // Weight of each vertical eyeLook coefficient against the lid motion the
+  // eye's own pitch implies, against squared pixels; 0: off. The upper lid
+  // follows a vertical look (it rides on the eyeball), so how far eyeLookUp or
+  // eyeLookDown moves the lids is decided by the gaze the irises show, and what
+  // else the lid landmarks show has to be a blink or a wide eye — where a prior
+  // toward zero (eye_look_prior) also takes away the lids of a real look.
+  double lid_gaze_weight = 0;
+  double jaw_prior = 10;        // weight of |jaw|^2 (radians^2)
+  double contour_weight = 0.5;  // landmarks 0..16 sit on a contour the model only approximates
+  int max_iterations = 25;      // Levenberg-Marquardt iterations per frame
+  double huber_px = 3;          // robust loss scale on landmark residuals, pixels
   // Gaze (the eye joints), fitted to located irises when the model's eyes are articulated.
   double iris_weight = 1;        // an iris against a landmark
   double gaze_prior = 10;        // weight of the eyes' pitch and yaw^2 (radians^2) against squared pixels
@@ -150,8 +157,20 @@ class HeadFitter {
   HeadIdentity identity_;
   int num_expression_;
   std::vector<double> expression_prior_weights_;  // per fitted coefficient: sqrt of its prior (eyeLook* heavier)
-  std::vector<int> rigid_vertices_;               // above the brows, moved by no expression
-  RowMatrixX3f rigid_normals_;                    // theirs, for the identity
+  // The vertical eyeLook coefficients and what ties each to its eye's pitch (lid_gaze_weight).
+  struct LidGaze {
+    int coefficient;
+    int joint;             // kLeftEyeJoint or kRightEyeJoint: the side the shape moves
+    double sign;           // +1: the shape is a look up, -1: down
+    double radians;        // the look whose lids the shape at 1 draws
+    Eigen::Vector3d axis;  // the eye's line of sight at rest (pivot to pupil), head frame
+  };
+  std::vector<LidGaze> lid_gaze_;
+  // Adds the lid_gaze_weight residuals; the eye blocks stay constant unless `gaze_fitted`.
+  void AddLidGaze(ceres::Problem* problem, double* expression, double* left_eye, double* right_eye,
+                  bool gaze_fitted) const;
+  std::vector<int> rigid_vertices_;  // above the brows, moved by no expression
+  RowMatrixX3f rigid_normals_;       // theirs, for the identity
 };
 
 // The normalised landmark error: mean distance / outer-eye-corner distance (points 36, 45).

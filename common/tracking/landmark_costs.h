@@ -169,4 +169,34 @@ struct PupilResidual {
   double weight;
 };
 
+// A vertical eyeLook coefficient against the lids its eye's pitch implies:
+// weight * (c - max(0, sign * elevation) / radians), where elevation is how
+// far `eye` turns the line of sight `axis` up (head frame, y up) from its rest
+// elevation. DynamicAutoDiffCostFunction's form: the blocks are the
+// expression and the eye's rotation.
+struct LidGazeResidual {
+  LidGazeResidual(int coefficient, const Eigen::Vector3d& axis, double sign, double radians, double weight)
+      : coefficient(coefficient), axis(axis), sign(sign), radians(radians), weight(weight) {}
+
+  template <typename T>
+  bool operator()(T const* const* blocks, T* residual) const {
+    const T* expression = blocks[0];
+    const T* eye = blocks[1];
+    const T rest[3] = {T(axis.x()), T(axis.y()), T(axis.z())};
+    T d[3];
+    ceres::AngleAxisRotatePoint(eye, rest, d);
+    using std::atan2, std::sqrt;
+    const T elevation =
+        atan2(d[1], sqrt(d[0] * d[0] + d[2] * d[2])) - T(std::atan2(axis.y(), std::hypot(axis.x(), axis.z())));
+    const T look = T(sign) * elevation;
+    const T target = look > T(0) ? look / T(radians) : T(0);
+    residual[0] = T(weight) * (expression[coefficient] - target);
+    return true;
+  }
+
+  int coefficient;
+  Eigen::Vector3d axis;
+  double sign, radians, weight;
+};
+
 }  // namespace headcast

@@ -12,7 +12,7 @@ namespace headcast {
 namespace {
 
 TEST(ExpressionFitSettings, TravelAsJsonIntoTheFittersOptions) {
-  const ExpressionFitSettings s{5, 50, 100, "vertical"};
+  const ExpressionFitSettings s{5, 50, 100, "vertical", 30};
   const ExpressionFitSettings back = ExpressionFitSettings::FromJson(nlohmann::json::parse(s.ToJson().dump()));
   EXPECT_EQ(back, s);
   HeadFitterOptions o;
@@ -22,6 +22,7 @@ TEST(ExpressionFitSettings, TravelAsJsonIntoTheFittersOptions) {
   EXPECT_EQ(o.expression_range_weight, 50);
   EXPECT_EQ(o.eye_look_prior, 100);
   EXPECT_EQ(o.eye_look_prior_shapes, "vertical");
+  EXPECT_EQ(o.lid_gaze_weight, 30);
   EXPECT_EQ(o.contour_weight, 0.7);  // the rest of the fit is not theirs
   EXPECT_EQ(ExpressionFitSettings::Of(o), s);
   o.Check();
@@ -29,6 +30,11 @@ TEST(ExpressionFitSettings, TravelAsJsonIntoTheFittersOptions) {
   const ExpressionFitSettings legacy = ExpressionFitSettings::Legacy();
   EXPECT_EQ(legacy.expression_prior, 2e-3);
   EXPECT_EQ(legacy.eye_look_prior, 0);
+  EXPECT_EQ(legacy.lid_gaze_weight, 0);
+  // Files written before the lids' tie to the gaze was a setting were fitted without it.
+  nlohmann::json before = s.ToJson();
+  before.erase("lid_gaze_weight");
+  EXPECT_EQ(ExpressionFitSettings::FromJson(before).lid_gaze_weight, 0);
 }
 
 TEST(ExpressionFitSettings, RefuseWhatIsMalformedByName) {
@@ -50,6 +56,12 @@ TEST(ExpressionFitSettings, RefuseWhatIsMalformedByName) {
   bad = good;
   bad["eye_look_prior"] = -1;
   refused(bad, "tracking_fit.eye_look_prior wants a finite non-negative number");
+  bad = good;
+  bad["lid_gaze_weight"] = -2;
+  refused(bad, "tracking_fit.lid_gaze_weight wants a finite non-negative number");
+  bad = good;
+  bad["lid_gaze_weight"] = "1";
+  refused(bad, "tracking_fit.lid_gaze_weight wants a number");
   bad = good;
   bad["expression_prior"] = std::numeric_limits<double>::infinity();
   refused(bad, "tracking_fit.expression_prior wants a finite");
@@ -79,9 +91,11 @@ TEST(ExpressionFitSettings, TheOptionsHoldingThemRefuseBadOnesByName) {
   ExpressionFitSettings bad;
   bad.expression_prior = std::nan("");
   bad.eye_look_prior_shapes = "sideways";
+  bad.lid_gaze_weight = -1;
   const std::string message = says(bad);
   EXPECT_NE(message.find("expression_prior"), std::string::npos) << message;
   EXPECT_NE(message.find("must be all or vertical, not \"sideways\""), std::string::npos) << message;
+  EXPECT_NE(message.find("lid_gaze_weight"), std::string::npos) << message;
   HeadFitterOptions fitter;
   fitter.expression_range_weight = -1;
   EXPECT_THROW(fitter.Check(), std::invalid_argument);

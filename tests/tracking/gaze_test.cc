@@ -290,5 +290,74 @@ TEST(Gaze, TheVerticalEyeLookPriorLeavesSidewaysLooks) {
   wrong.eye_look_prior_shapes = "sideways";
   EXPECT_THROW(wrong.Check(), std::invalid_argument);
 }
+
+// ICT's eyeLookUp raises the lids as a wide eye does; a fit free to choose
+// takes raised lids over eyes that look ahead partly as a look up. With the
+// lids tied to the pitch the irises show (lid_gaze_weight), wide eyes looking
+// ahead are fitted with eyeWide and no eyeLookUp, while a real look up keeps
+// the lids' eyeLookUp — which a prior toward zero (eye_look_prior) takes away.
+TEST(Gaze, TheLidsFollowThePitchTheIrisesShow) {
+  const HeadModel* m = Ict();
+  if (!m) GTEST_SKIP() << "needs ../shared/data (ICT-FaceKit)";
+  auto index = [&](const char* name) {
+    const int i = m->ExpressionIndex(name);
+    EXPECT_GE(i, 0) << name;
+    return i;
+  };
+  const int wide[2] = {index("eyeWide_L"), index("eyeWide_R")}, up[2] = {index("eyeLookUp_L"), index("eyeLookUp_R")};
+  struct Fitted {
+    double wide, up;  // the two eyes' mean
+  };
+  auto fit = [&](const FrameParams& truth, const HeadFitterOptions& o) {
+    const Scene s = Render(*m, truth);
+    const EyeIrises irises = LocateIrises(s.gray, s.landmarks);
+    EXPECT_TRUE(irises.left.found && irises.right.found);
+    HeadFitter fitter(*m, o);
+    FrameParams f = truth;
+    f.expression.setZero();
+    f.left_eye.setZero();
+    f.right_eye.setZero();
+    EXPECT_TRUE(fitter.Fit(s.landmarks, kCamera, &f, &irises).ok);
+    return Fitted{0.5 * (f.expression[wide[0]] + f.expression[wide[1]]),
+                  0.5 * (f.expression[up[0]] + f.expression[up[1]])};
+  };
+  FrameParams wide_ahead = Looking(*m, 0, 0);
+  for (int i : wide) wide_ahead.expression[i] = 1;
+  FrameParams looking_up = Looking(*m, -0.3, 0);  // +pitch turns the line of sight toward -y: down
+  for (int i : up) looking_up.expression[i] = 0.7;
+  HeadFitterOptions free, tied, zeroed;
+  tied.lid_gaze_weight = 100;
+  zeroed.eye_look_prior = 100;
+  zeroed.eye_look_prior_shapes = "vertical";
+  const Fitted wide_free = fit(wide_ahead, free), wide_tied = fit(wide_ahead, tied);
+  const Fitted up_tied = fit(looking_up, tied), up_zeroed = fit(looking_up, zeroed);
+  std::cout << "wide eyes ahead: eyeWide / eyeLookUp " << wide_free.wide << " / " << wide_free.up << " free, "
+            << wide_tied.wide << " / " << wide_tied.up << " tied; a look up with its lids (eyeLookUp 0.7): eyeLookUp "
+            << up_tied.up << " tied, " << up_zeroed.up << " with the vertical eyeLook prior\n";
+  EXPECT_GT(wide_free.up, 0.2);  // the confusion the tie is for
+  EXPECT_LT(wide_tied.up, 0.1);
+  EXPECT_GT(wide_tied.wide, wide_free.wide + 0.1);
+  EXPECT_GT(up_tied.up, 0.4);
+  EXPECT_LT(up_zeroed.up, up_tied.up - 0.2);
+  // Lids lowered by eyeLookDown over eyes that look ahead, no iris found (as
+  // when dlib's lids meet): the held gaze is ahead, so the blink shapes shut them.
+  FrameParams lowered = Looking(*m, 0, 0);
+  const int blink = index("eyeBlink_L"), down = index("eyeLookDown_L");
+  lowered.expression[down] = lowered.expression[index("eyeLookDown_R")] = 1;
+  HeadFitter fitter(*m, tied);
+  FrameParams f = lowered;
+  f.expression.setZero();
+  const EyeIrises none;
+  ASSERT_TRUE(fitter.Fit(fitter.Project(lowered, kCamera), kCamera, &f, &none).ok);
+  std::cout << "lids lowered by eyeLookDown, no iris, tied: eyeBlink_L " << f.expression[blink] << ", eyeLookDown_L "
+            << f.expression[down] << "\n";
+  EXPECT_GT(f.expression[blink], 0.4);
+  EXPECT_LT(f.expression[down], 0.2);
+  EXPECT_EQ(f.left_eye, lowered.left_eye);  // the held gaze is not moved by the lids
+  HeadFitterOptions negative;
+  negative.lid_gaze_weight = -1;
+  EXPECT_THROW(HeadFitter(*m, negative), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace headcast
