@@ -264,12 +264,9 @@ void HeadFitter::AddLidGaze(ceres::Problem* problem, double* expression, double*
   if (options_.lid_gaze_weight <= 0) return;
   for (const LidGaze& l : lid_gaze_) {
     double* eye = l.joint == kLeftEyeJoint ? left_eye : right_eye;
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<LidGazeResidual, 4>(
-        new LidGazeResidual(l.coefficient, l.axis, l.sign, l.radians, std::sqrt(options_.lid_gaze_weight)));
-    cost->AddParameterBlock(num_expression_);
-    cost->AddParameterBlock(3);
-    cost->SetNumResiduals(1);
-    problem->AddResidualBlock(cost, nullptr, {expression, eye});
+    problem->AddResidualBlock(
+        new LidGazeCost(num_expression_, l.coefficient, l.axis, l.sign, l.radians, std::sqrt(options_.lid_gaze_weight)),
+        nullptr, {expression, eye});
     // Without an iris this frame the gaze is held, and the lids follow the held one.
     if (!gaze_fitted) problem->SetParameterBlockConstant(eye);
   }

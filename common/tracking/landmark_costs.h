@@ -6,6 +6,8 @@
 #include <ceres/rotation.h>
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
 
 #include "common/core/camera.h"
 
@@ -172,31 +174,42 @@ struct PupilResidual {
 // A vertical eyeLook coefficient against the lids its eye's pitch implies:
 // weight * (c - max(0, sign * elevation) / radians), where elevation is how
 // far `eye` turns the line of sight `axis` up (head frame, y up) from its rest
-// elevation. DynamicAutoDiffCostFunction's form: the blocks are the
-// expression and the eye's rotation.
-struct LidGazeResidual {
-  LidGazeResidual(int coefficient, const Eigen::Vector3d& axis, double sign, double radians, double weight)
-      : coefficient(coefficient), axis(axis), sign(sign), radians(radians), weight(weight) {}
+// elevation. Blocks: the expression and the eye's rotation. The derivative by
+// the eye is left out on purpose: the lids follow the gaze the irises show,
+// and must not pull it toward whatever look would explain raised lids.
+class LidGazeCost : public ceres::CostFunction {
+ public:
+  LidGazeCost(int num_expression, int coefficient, const Eigen::Vector3d& axis, double sign, double radians,
+              double weight)
+      : coefficient_(coefficient), axis_(axis), sign_(sign), radians_(radians), weight_(weight) {
+    set_num_residuals(1);
+    mutable_parameter_block_sizes()->push_back(num_expression);
+    mutable_parameter_block_sizes()->push_back(3);
+  }
 
-  template <typename T>
-  bool operator()(T const* const* blocks, T* residual) const {
-    const T* expression = blocks[0];
-    const T* eye = blocks[1];
-    const T rest[3] = {T(axis.x()), T(axis.y()), T(axis.z())};
-    T d[3];
-    ceres::AngleAxisRotatePoint(eye, rest, d);
-    using std::atan2, std::sqrt;
-    const T elevation =
-        atan2(d[1], sqrt(d[0] * d[0] + d[2] * d[2])) - T(std::atan2(axis.y(), std::hypot(axis.x(), axis.z())));
-    const T look = T(sign) * elevation;
-    const T target = look > T(0) ? look / T(radians) : T(0);
-    residual[0] = T(weight) * (expression[coefficient] - target);
+  // What the coefficient should be for the eye's rotation `eye` (axis-angle, head frame).
+  double Target(const double* eye) const {
+    double d[3];
+    ceres::AngleAxisRotatePoint(eye, axis_.data(), d);
+    const double elevation =
+        std::atan2(d[1], std::hypot(d[0], d[2])) - std::atan2(axis_.y(), std::hypot(axis_.x(), axis_.z()));
+    return std::max(0.0, sign_ * elevation) / radians_;
+  }
+
+  bool Evaluate(double const* const* blocks, double* residual, double** jacobians) const override {
+    residual[0] = weight_ * (blocks[0][coefficient_] - Target(blocks[1]));
+    if (jacobians && jacobians[0]) {
+      std::fill(jacobians[0], jacobians[0] + parameter_block_sizes()[0], 0.0);
+      jacobians[0][coefficient_] = weight_;
+    }
+    if (jacobians && jacobians[1]) std::fill(jacobians[1], jacobians[1] + 3, 0.0);
     return true;
   }
 
-  int coefficient;
-  Eigen::Vector3d axis;
-  double sign, radians, weight;
+ private:
+  int coefficient_;
+  Eigen::Vector3d axis_;
+  double sign_, radians_, weight_;
 };
 
 }  // namespace headcast

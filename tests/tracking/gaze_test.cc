@@ -307,6 +307,7 @@ TEST(Gaze, TheLidsFollowThePitchTheIrisesShow) {
   const int wide[2] = {index("eyeWide_L"), index("eyeWide_R")}, up[2] = {index("eyeLookUp_L"), index("eyeLookUp_R")};
   struct Fitted {
     double wide, up;  // the two eyes' mean
+    Eigen::Vector3f left_eye;
   };
   auto fit = [&](const FrameParams& truth, const HeadFitterOptions& o) {
     const Scene s = Render(*m, truth);
@@ -319,7 +320,7 @@ TEST(Gaze, TheLidsFollowThePitchTheIrisesShow) {
     f.right_eye.setZero();
     EXPECT_TRUE(fitter.Fit(s.landmarks, kCamera, &f, &irises).ok);
     return Fitted{0.5 * (f.expression[wide[0]] + f.expression[wide[1]]),
-                  0.5 * (f.expression[up[0]] + f.expression[up[1]])};
+                  0.5 * (f.expression[up[0]] + f.expression[up[1]]), f.left_eye};
   };
   FrameParams wide_ahead = Looking(*m, 0, 0);
   for (int i : wide) wide_ahead.expression[i] = 1;
@@ -336,6 +337,8 @@ TEST(Gaze, TheLidsFollowThePitchTheIrisesShow) {
             << up_tied.up << " tied, " << up_zeroed.up << " with the vertical eyeLook prior\n";
   EXPECT_GT(wide_free.up, 0.2);  // the confusion the tie is for
   EXPECT_LT(wide_tied.up, 0.1);
+  // The lids follow the gaze; they do not turn it toward a look that would explain them.
+  EXPECT_LT(AxisErrorDeg(wide_tied.left_eye, wide_free.left_eye), 1.0);
   EXPECT_GT(wide_tied.wide, wide_free.wide + 0.1);
   EXPECT_GT(up_tied.up, 0.4);
   EXPECT_LT(up_zeroed.up, up_tied.up - 0.2);
