@@ -1,4 +1,4 @@
-// Landmark reprojection residuals of the head fitter (Ceres autodiff), in a
+// The head fitter's residuals (landmark reprojection by Ceres autodiff; the lids' tie to the gaze), in a
 // header so tests can check them with ceres::GradientChecker.
 #pragma once
 
@@ -172,7 +172,7 @@ struct PupilResidual {
 };
 
 // A vertical eyeLook coefficient against the lids its eye's pitch implies:
-// weight * (c - max(0, sign * elevation) / radians), where elevation is how
+// weight * (c - clamp(sign * elevation / radians, 0, 1)), where elevation is how
 // far `eye` turns the line of sight `axis` up (head frame, y up) from its rest
 // elevation. Blocks: the expression and the eye's rotation. The derivative by
 // the eye is left out on purpose: the lids follow the gaze the irises show,
@@ -193,7 +193,7 @@ class LidGazeCost : public ceres::CostFunction {
     ceres::AngleAxisRotatePoint(eye, axis_.data(), d);
     const double elevation =
         std::atan2(d[1], std::hypot(d[0], d[2])) - std::atan2(axis_.y(), std::hypot(axis_.x(), axis_.z()));
-    return std::max(0.0, sign_ * elevation) / radians_;
+    return std::clamp(sign_ * elevation / radians_, 0.0, 1.0);  // the shape's range: a wrong iris moves it no further
   }
 
   bool Evaluate(double const* const* blocks, double* residual, double** jacobians) const override {

@@ -14,6 +14,7 @@
 #include "common/raster/rasterizer.h"
 #include "common/tracking/head_fitter.h"
 #include "common/tracking/iris_locator.h"
+#include "common/tracking/landmark_costs.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -289,6 +290,29 @@ TEST(Gaze, TheVerticalEyeLookPriorLeavesSidewaysLooks) {
   HeadFitterOptions wrong;
   wrong.eye_look_prior_shapes = "sideways";
   EXPECT_THROW(wrong.Check(), std::invalid_argument);
+}
+
+// The tie's target: the look's elevation over the shape's, within the
+// shape's range 0..1; the residual's derivative is by the coefficient only.
+TEST(Gaze, TheLidsTieTargetsTheLooksShareOfTheShape) {
+  const LidGazeCost up(3, 1, Eigen::Vector3d(0, 0, 1), 1.0, 0.3, 10.0),
+      down(3, 1, Eigen::Vector3d(0, 0, 1), -1.0, 0.6, 10.0);
+  const double ahead[3] = {0, 0, 0}, raised[3] = {-0.15, 0, 0}, far_up[3] = {-0.6, 0, 0}, lowered[3] = {0.3, 0, 0};
+  EXPECT_NEAR(up.Target(ahead), 0, 1e-9);
+  EXPECT_NEAR(up.Target(raised), 0.5, 1e-6);  // +pitch turns the line of sight toward -y: down
+  EXPECT_NEAR(up.Target(far_up), 1, 1e-9);
+  EXPECT_NEAR(up.Target(lowered), 0, 1e-9);
+  EXPECT_NEAR(down.Target(lowered), 0.5, 1e-6);
+  const double expression[3] = {0.2, 0.7, -0.1};
+  const double* blocks[2] = {expression, raised};
+  double residual, d_expression[3], d_eye[3];
+  double* jacobians[2] = {d_expression, d_eye};
+  ASSERT_TRUE(up.Evaluate(blocks, &residual, jacobians));
+  EXPECT_NEAR(residual, 10 * (0.7 - 0.5), 1e-6);
+  EXPECT_EQ(d_expression[0], 0);
+  EXPECT_EQ(d_expression[1], 10);
+  EXPECT_EQ(d_expression[2], 0);
+  for (double d : d_eye) EXPECT_EQ(d, 0);
 }
 
 // ICT's eyeLookUp raises the lids as a wide eye does; a fit free to choose
