@@ -113,6 +113,13 @@ double AxisErrorDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
   return std::acos(std::clamp(za.dot(zb), -1.0, 1.0)) * 180 / M_PI;
 }
 
+// The coefficient named `name`, failing the test when the model has none.
+int ExpressionIndexOrFail(const HeadModel& m, const char* name) {
+  const int i = m.ExpressionIndex(name);
+  EXPECT_GE(i, 0) << name;
+  return i;
+}
+
 const double kGazes[][2] = {{0, 0}, {0, 0.3}, {0, -0.3}, {0.2, 0}, {-0.15, 0.2}, {0.1, -0.2}};
 
 TEST(Gaze, ModelsHavePupilsInFrontOfTheirEyes) {
@@ -260,11 +267,7 @@ TEST(Gaze, TheEyeLookPriorClosesLidsWithTheBlinkShapes) {
 TEST(Gaze, TheVerticalEyeLookPriorLeavesSidewaysLooks) {
   const HeadModel* m = Ict();
   if (!m) GTEST_SKIP() << "needs ../shared/data (ICT-FaceKit)";
-  auto index = [&](const char* name) {
-    const int i = m->ExpressionIndex(name);
-    EXPECT_GE(i, 0) << name;
-    return i;
-  };
+  auto index = [&](const char* name) { return ExpressionIndexOrFail(*m, name); };
   const int blink = index("eyeBlink_L"), down = index("eyeLookDown_L");
   const int in = index("eyeLookIn_L"), out = index("eyeLookOut_R");
   auto fit = [&](const std::string& shapes, const std::vector<int>& truth_shapes) {
@@ -323,11 +326,7 @@ TEST(Gaze, TheLidsTieTargetsTheLooksShareOfTheShape) {
 TEST(Gaze, TheLidsFollowThePitchTheIrisesShow) {
   const HeadModel* m = Ict();
   if (!m) GTEST_SKIP() << "needs ../shared/data (ICT-FaceKit)";
-  auto index = [&](const char* name) {
-    const int i = m->ExpressionIndex(name);
-    EXPECT_GE(i, 0) << name;
-    return i;
-  };
+  auto index = [&](const char* name) { return ExpressionIndexOrFail(*m, name); };
   const int wide[2] = {index("eyeWide_L"), index("eyeWide_R")}, up[2] = {index("eyeLookUp_L"), index("eyeLookUp_R")};
   struct Fitted {
     double wide, up;  // the two eyes' mean
