@@ -76,10 +76,10 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   // Once per fitter, not per frame: the names decide which coefficients the eyeLook prior weighs.
   const std::vector<std::string>& names = model.data().expression_names;
   expression_prior_weights_.assign(num_expression_, std::sqrt(options.expression_prior));
+  auto starts = [](const std::string& name, const char* prefix) { return name.rfind(prefix, 0) == 0; };
   auto weighed = [&](const std::string& name) {
-    auto starts = [&](const char* prefix) { return name.rfind(prefix, 0) == 0; };
-    return options.eye_look_prior_shapes == "vertical" ? starts("eyeLookUp") || starts("eyeLookDown")
-                                                       : starts("eyeLook");
+    return options.eye_look_prior_shapes == "vertical" ? starts(name, "eyeLookUp") || starts(name, "eyeLookDown")
+                                                       : starts(name, "eyeLook");
   };
   for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i)
     if (weighed(names[i])) expression_prior_weights_[i] = std::sqrt(options.expression_prior + options.eye_look_prior);
@@ -88,7 +88,7 @@ HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options)
   // largest lid motion makes about the eye's pivot (the lid rides on the ball).
   const HeadModelData& d = model.data();
   for (int i = 0; i < num_expression_ && i < static_cast<int>(names.size()); ++i) {
-    const bool up = names[i].rfind("eyeLookUp", 0) == 0, down = names[i].rfind("eyeLookDown", 0) == 0;
+    const bool up = starts(names[i], "eyeLookUp"), down = starts(names[i], "eyeLookDown");
     if (!up && !down) continue;
     double x_sum = 0, weight_sum = 0, largest = 0;
     for (int v = 0; v < model.num_vertices(); ++v) {

@@ -152,6 +152,9 @@ class HeadFitter {
   // The pupil residuals and gaze priors; false when no iris was usable.
   bool AddGaze(ceres::Problem* problem, const EyeIrises& irises, const PinholeCamera& camera, double* rotation,
                double* translation, double* left_eye, double* right_eye) const;
+  // Adds the lid_gaze_weight residuals; the eye blocks stay constant unless `gaze_fitted`.
+  void AddLidGaze(ceres::Problem* problem, double* expression, double* left_eye, double* right_eye,
+                  bool gaze_fitted) const;
   const HeadModel& model_;
   HeadFitterOptions options_;
   HeadIdentity identity_;
@@ -166,9 +169,6 @@ class HeadFitter {
     Eigen::Vector3d axis;  // the eye's line of sight at rest (pivot to pupil), head frame
   };
   std::vector<LidGaze> lid_gaze_;
-  // Adds the lid_gaze_weight residuals; the eye blocks stay constant unless `gaze_fitted`.
-  void AddLidGaze(ceres::Problem* problem, double* expression, double* left_eye, double* right_eye,
-                  bool gaze_fitted) const;
   std::vector<int> rigid_vertices_;  // above the brows, moved by no expression
   RowMatrixX3f rigid_normals_;       // theirs, for the identity
 };

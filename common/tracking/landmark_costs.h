@@ -181,7 +181,12 @@ class LidGazeCost : public ceres::CostFunction {
  public:
   LidGazeCost(int num_expression, int coefficient, const Eigen::Vector3d& axis, double sign, double radians,
               double weight)
-      : coefficient_(coefficient), axis_(axis), sign_(sign), radians_(radians), weight_(weight) {
+      : coefficient_(coefficient),
+        axis_(axis),
+        rest_elevation_(std::atan2(axis.y(), std::hypot(axis.x(), axis.z()))),
+        sign_(sign),
+        radians_(radians),
+        weight_(weight) {
     set_num_residuals(1);
     mutable_parameter_block_sizes()->push_back(num_expression);
     mutable_parameter_block_sizes()->push_back(3);
@@ -191,8 +196,7 @@ class LidGazeCost : public ceres::CostFunction {
   double Target(const double* eye) const {
     double d[3];
     ceres::AngleAxisRotatePoint(eye, axis_.data(), d);
-    const double elevation =
-        std::atan2(d[1], std::hypot(d[0], d[2])) - std::atan2(axis_.y(), std::hypot(axis_.x(), axis_.z()));
+    const double elevation = std::atan2(d[1], std::hypot(d[0], d[2])) - rest_elevation_;
     return std::clamp(sign_ * elevation / radians_, 0.0, 1.0);  // the shape's range: a wrong iris moves it no further
   }
 
@@ -209,6 +213,7 @@ class LidGazeCost : public ceres::CostFunction {
  private:
   int coefficient_;
   Eigen::Vector3d axis_;
+  double rest_elevation_;  // of axis_, once: Target runs a few times a frame
   double sign_, radians_, weight_;
 };
 
