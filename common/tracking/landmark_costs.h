@@ -183,7 +183,7 @@ class LidGazeCost : public ceres::CostFunction {
               double weight)
       : coefficient_(coefficient),
         axis_(axis),
-        rest_elevation_(std::atan2(axis.y(), std::hypot(axis.x(), axis.z()))),
+        rest_elevation_(Elevation(axis.data())),
         sign_(sign),
         radians_(radians),
         weight_(weight) {
@@ -196,7 +196,7 @@ class LidGazeCost : public ceres::CostFunction {
   double Target(const double* eye) const {
     double d[3];
     ceres::AngleAxisRotatePoint(eye, axis_.data(), d);
-    const double elevation = std::atan2(d[1], std::hypot(d[0], d[2])) - rest_elevation_;
+    const double elevation = Elevation(d) - rest_elevation_;
     return std::clamp(sign_ * elevation / radians_, 0.0, 1.0);  // the shape's range: a wrong iris moves it no further
   }
 
@@ -211,6 +211,9 @@ class LidGazeCost : public ceres::CostFunction {
   }
 
  private:
+  // Angle of the direction `d` above the head's horizontal plane (y up).
+  static double Elevation(const double* d) { return std::atan2(d[1], std::hypot(d[0], d[2])); }
+
   int coefficient_;
   Eigen::Vector3d axis_;
   double rest_elevation_;  // of axis_, once: Target runs a few times a frame
