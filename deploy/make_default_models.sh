@@ -8,16 +8,23 @@
 #        last frames are the demo's input (never trained on; deploy/demo.sh
 #        renders them again from models/demo/subject.json);
 #     3. their reports, logs and plots; the avatar is made by `headcast-train create`.
-#   ict (from the ICT-FaceKit folder, ~12 min on 2 cores): what `headcast-train
+#   ict (from the ICT-FaceKit folder, ~17 min on 2 cores): what `headcast-train
 #     create` starts from, so a real person's avatar needs no download:
-#     1. ICT-FaceKit converted compactly (int16 bases, 5 µm a step; MIT, its
-#        licence beside it as ict_facekit.LICENSE);
-#     2. its general model (pretrain on synthetic renders of it, 128 px).
+#     1. ICT-FaceKit converted compactly (int16 bases, 5 µm a step, its parts
+#        painted; MIT, its licence beside it as ict_facekit.LICENSE);
+#     2. its general model in two stages, as measured (bench/results/
+#        fidelity_ablation.md, session 63): pretrained on unpainted renders with
+#        head-frame samples, then continued on painted renders with canonical
+#        samples and the covered parts apart (the settings of a person's
+#        avatar). Pretrained on painted canonical renders from the start it was
+#        worse on talking_d9 (session 62).
 #   demo (steps 2-3 of builtin, with the general model already in OUT_DIR, ~30 min).
 # Usage: deploy/make_default_models.sh [OUT_DIR] [builtin|ict|demo|all]   (default: models/ all)
 #   WORK=DIR  keep the intermediate files (dataset, checkpoints, eval videos) there
 #   ICT=DIR  the ICT-FaceKit folder (default ../shared/data/head-models/ict-facekit)
-# Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 ICT_ITERATIONS=300 deploy/make_default_models.sh /tmp/m
+#   ICT_STAGE1=G.hcavatar  continue this first-stage ICT-FaceKit general model instead of pretraining one
+# Shorter runs for a try: GENERAL_ITERATIONS=500 SUBJECT_ITERATIONS=200 ICT_ITERATIONS=300 ICT_CONTINUE_ITERATIONS=100 \
+#   deploy/make_default_models.sh /tmp/m
 set -euo pipefail
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bin=${HEADCAST_BIN:-$here/build/bin}
@@ -27,6 +34,7 @@ general_iterations=${GENERAL_ITERATIONS:-6000}
 subject_iterations=${SUBJECT_ITERATIONS:-3000}
 demo_train=${DEMO_TRAIN_FRAMES:-900}
 ict_iterations=${ICT_ITERATIONS:-4000}
+ict_continue_iterations=${ICT_CONTINUE_ITERATIONS:-1500}
 ict=${ICT:-$here/../shared/data/head-models/ict-facekit}
 case $which in builtin | ict | all | demo) ;; *) echo "make_default_models: builtin, ict, demo or all, not $which" >&2; exit 2 ;; esac
 if [ -n "${WORK:-}" ]; then
@@ -40,16 +48,31 @@ mkdir -p "$out"
 
 if [ "$which" = ict ] || [ "$which" = all ]; then
   [ -d "$ict/FaceXModel" ] || { echo "make_default_models: no ICT-FaceKit folder at $ict (set ICT=DIR)" >&2; exit 2; }
-  echo "== ICT-FaceKit, compact (int16 bases, 5 µm a step)"
+  echo "== ICT-FaceKit, compact (int16 bases, 5 µm a step), painted"
   "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --out "$out/ict_facekit.npz" > /dev/null
   cp "$ict/LICENSE" "$out/ict_facekit.LICENSE"
-  echo "== general model for ICT-FaceKit (128 px, $ict_iterations steps, 2 processes)"
-  mkdir -p "$out/ict_general"
-  "$bin/headcast-train" pretrain --head-model "$out/ict_facekit.npz" --resolution 128 --iterations "$ict_iterations" \
-    --processes 2 --eval 40 --eval-every 500 --log-csv "$out/ict_general/loss.csv" \
-    --eval-csv "$out/ict_general/eval.csv" --plots "$out/ict_general" --preview "$out/ict_general/preview.png" \
-    --json "$out/ict_general/report.json" --checkpoint-dir "$work/ckpt_ict" --out "$out/ict_general.hcavatar" \
-    > /dev/null
+  mkdir -p "$out/ict_general/stage1"
+  if [ -n "${ICT_STAGE1:-}" ]; then
+    echo "== general model for ICT-FaceKit, stage 1: $ICT_STAGE1 as given"
+    stage1=$work/ict_general_stage1.hcavatar
+    cp "$ICT_STAGE1" "$stage1"  # OUT's own may be it, and is overwritten below
+  else
+    echo "== general model for ICT-FaceKit, stage 1 (unpainted renders, 128 px, $ict_iterations steps, 2 processes)"
+    "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --no-paint-parts \
+      --out "$work/ict_unpainted.npz" > /dev/null
+    stage1=$work/ict_general_stage1.hcavatar
+    "$bin/headcast-train" pretrain --head-model "$work/ict_unpainted.npz" --resolution 128 \
+      --iterations "$ict_iterations" --processes 2 --eval 40 --eval-every 500 \
+      --log-csv "$out/ict_general/stage1/loss.csv" --eval-csv "$out/ict_general/stage1/eval.csv" \
+      --plots "$out/ict_general/stage1" --preview "$out/ict_general/stage1/preview.png" \
+      --json "$out/ict_general/stage1/report.json" --checkpoint-dir "$work/ckpt_ict" --out "$stage1" > /dev/null
+  fi
+  echo "== stage 2: continued on painted renders, canonical samples, covered parts apart ($ict_continue_iterations steps)"
+  "$bin/headcast-train" pretrain --head-model "$out/ict_facekit.npz" --init "$stage1" --resolution 128 \
+    --iterations "$ict_continue_iterations" --processes 2 --eval 40 --eval-every 500 --canonical-samples \
+    --covered-apart --log-csv "$out/ict_general/loss.csv" --eval-csv "$out/ict_general/eval.csv" \
+    --plots "$out/ict_general" --preview "$out/ict_general/preview.png" --json "$out/ict_general/report.json" \
+    --checkpoint-dir "$work/ckpt_ict2" --out "$out/ict_general.hcavatar" > /dev/null
   /usr/bin/python3 "$here/bench/strip_machine_paths.py" --root "$here" "$out/ict_general"
   [ "$which" = ict ] && { du -sh "$out"; exit 0; }
 fi

@@ -352,9 +352,10 @@ int main(int argc, char** argv) {
       "--parts", ict_parts,
       "comma-separated parts to keep: face,head,mouth,eyes,gums_tongue,teeth,eyeballs,eye_accessories, or all "
       "(default: all but eye_accessories, which would cover the eyeballs)");
-  ict->add_flag("--paint-parts", ict_options.paint_parts,
+  ict->add_flag("--paint-parts,!--no-paint-parts", ict_options.paint_parts,
                 "paint an albedo (upstream has none): each part a plain colour, the eyeballs a sclera, iris and pupil "
-                "(default: every part rendered skin-coloured)");
+                "(off: every part rendered skin-coloured)")
+      ->capture_default_str();
   ict->add_option("--out", out, "output .npz")->required();
   HeadModelSaveOptions save;
   const char* step_help =

@@ -513,6 +513,11 @@ int main(int argc, char** argv) {
         if (subject->get_option("--surface-conditioned")->count() == 0) s.config.surface_conditioned = false;
         if (subject->get_option("--surface-blend")->count() == 0) s.config.surface_blend = 0;
       }
+      // Likewise the covered parts apart belong to the canonical samples, and
+      // would move the points a surface displacement is measured from.
+      if (subject->parsed() && (!s.config.canonical_samples || s.config.surface_displacement) &&
+          subject->get_option("--covered-apart")->count() == 0)
+        s.config.covered_apart = false;
       // A fine-tune takes its general model's network: a size given with it
       // would be dropped without a word.
       if (subject->parsed() && !s.from_scratch)

@@ -249,6 +249,7 @@ void ApplySubjectDefaults(AvatarConfig* config) {
   config->surface_blend = kSubjectSurfaceBlend;
   config->surface_conditioned = true;
   config->canonical_samples = true;
+  config->covered_apart = true;
   config->matte = kSubjectMatte;
 }
 

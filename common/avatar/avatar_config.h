@@ -232,7 +232,8 @@ struct AvatarConfig : AvatarCommonConfig {
 // A subject's avatar by default (headcast-train subject and create, the render
 // benchmark's subject row): the surface texture with its branch conditioned
 // per frame and its expression blendshapes, CNeRF samples in the canonical
-// head, and the bounded matte. The thesis's avatar has none of them.
+// head with the covered parts apart, and the bounded matte. The thesis's
+// avatar has none of them.
 void ApplySubjectDefaults(AvatarConfig* config);
 
 // The renderer with two x2 levels (a feature map of output/4, four times the

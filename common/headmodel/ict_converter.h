@@ -30,9 +30,9 @@ struct IctConvertOptions {
   // synthetic training pictures, the fit panel) is one skin colour: skin-lit
   // mouth cavities and blank eyeballs. Painted, each part has a plain colour
   // of its own (IctPartAlbedo) and the eyeballs a sclera, iris and pupil about
-  // their front pole. Off: a general model pretrained on painted renders drew
-  // open mouths darker but was not better over the clips (bench/results).
-  bool paint_parts = false;
+  // their front pole. On: the shipped general model is continued on painted
+  // renders, and a fine-tune mixes renders of the model it is given.
+  bool paint_parts = true;
   void Check() const;
 };
 

@@ -134,10 +134,9 @@ TEST(IctConverter, KeepsTheEyeAccessoriesOnlyWhenAsked) {
 // open mouth shows its dark lining; unpainted, the model has no albedo at all.
 TEST(IctConverter, PaintsEachPartAndTheEyesAboutTheirPoles) {
   HEADCAST_REQUIRE_DATA("head-models/ict-facekit");
-  IctConvertOptions painted;
+  IctConvertOptions painted;  // the default
   painted.folder = testing::DataDir() + "/head-models/ict-facekit";
   painted.max_identity = 0;
-  painted.paint_parts = true;
   const HeadModel m = ConvertIctFaceKit(painted);
   ASSERT_TRUE(m.has_texture());
   EXPECT_EQ(m.num_texture(), 0);
@@ -194,7 +193,7 @@ TEST(IctConverter, PaintsEachPartAndTheEyesAboutTheirPoles) {
   unpainted.paint_parts = false;
   const HeadModel plain = ConvertIctFaceKit(unpainted);
   EXPECT_FALSE(plain.has_texture());
-  EXPECT_FALSE(Ict().has_texture());  // the default
+  EXPECT_TRUE(Ict().has_texture());  // the default
   // The same geometry: avatars and datasets of either fit both.
   EXPECT_EQ(plain.fingerprint(), m.fingerprint());
   // The painting travels in the file.

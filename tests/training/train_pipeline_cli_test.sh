@@ -118,8 +118,9 @@ interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
   bad "interpolation: $interp frames, $(json "$tmp/i.json" "j['interpolated_frames']")"
 
 # A subject's texture branch is conditioned per frame, has 64² expression blendshapes held back by a decay of 0.5,
-# and its CNeRF samples are canonical by default (the general model has head-frame samples); without a texture
-# there is nothing to condition or add to, and asking for both is refused.
+# and its CNeRF samples are canonical with the covered parts apart by default (the general model has head-frame
+# samples); without a texture or canonical samples there is nothing to condition, add to or carry apart, and asking
+# for both is refused.
 # --surface-features 0 --no-canonical-samples is the thesis's avatar.
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
   --eval 2 --surface-features 0 --no-canonical-samples --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
@@ -127,13 +128,15 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
 [ "$(config "$tmp/general.hcavatar" "['canonical_samples']")" = False ] &&
   [ "$(config "$tmp/i.hcavatar" "['surface_conditioned']")" = True ] &&
   [ "$(config "$tmp/i.hcavatar" "['canonical_samples']")" = True ] &&
+  [ "$(config "$tmp/i.hcavatar" "['covered_apart']")" = True ] &&
   [ "$(config "$tmp/i.hcavatar" "['surface_blend']")" = 64 ] &&
   [ "$(json "$tmp/i.json" "j['fit']['blend_decay']")" = 0.5 ] &&
   [ "$(config "$tmp/t.hcavatar" "['surface_features']")" = 0 ] &&
   [ "$(config "$tmp/t.hcavatar" "['surface_conditioned']")" = False ] &&
   [ "$(config "$tmp/t.hcavatar" "['surface_blend']")" = 0 ] &&
   [ "$(config "$tmp/t.hcavatar" "['canonical_samples']")" = False ] &&
-  ok "subject: conditioned texture, decayed blendshapes, canonical samples by default; the thesis's flags: none" ||
+  [ "$(config "$tmp/t.hcavatar" "['covered_apart']")" = False ] &&
+  ok "subject: conditioned texture, decayed blendshapes, canonical samples with the covered parts apart by default; the thesis's flags: none" ||
   bad "subject conditioning: $(tail -3 "$tmp/t.err")"
 # A subject's optimiser: twice pretraining's rate, reached over a 200-step warm-up (pretraining: none).
 [ "$(json "$tmp/i.json" "j['fit']['learning_rate'] == 0.004 and j['fit']['warmup_steps'] == 200")" = True ] &&
