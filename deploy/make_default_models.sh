@@ -52,15 +52,14 @@ if [ "$which" = ict ] || [ "$which" = all ]; then
   "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --out "$out/ict_facekit.npz" > /dev/null
   cp "$ict/LICENSE" "$out/ict_facekit.LICENSE"
   mkdir -p "$out/ict_general/stage1"
+  stage1=$work/ict_general_stage1.hcavatar
   if [ -n "${ICT_STAGE1:-}" ]; then
     echo "== general model for ICT-FaceKit, stage 1: $ICT_STAGE1 as given"
-    stage1=$work/ict_general_stage1.hcavatar
     cp "$ICT_STAGE1" "$stage1"  # OUT's own may be it, and is overwritten below
   else
     echo "== general model for ICT-FaceKit, stage 1 (unpainted renders, 128 px, $ict_iterations steps, 2 processes)"
     "$bin/headcast-headmodel" convert ict --folder "$ict" --basis-step 5e-6 --no-paint-parts \
       --out "$work/ict_unpainted.npz" > /dev/null
-    stage1=$work/ict_general_stage1.hcavatar
     "$bin/headcast-train" pretrain --head-model "$work/ict_unpainted.npz" --resolution 128 \
       --iterations "$ict_iterations" --processes 2 --eval 40 --eval-every 500 \
       --log-csv "$out/ict_general/stage1/loss.csv" --eval-csv "$out/ict_general/stage1/eval.csv" \
