@@ -125,6 +125,13 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
       timings(MeasureConfig(options, two_levels, frames), {{"renderer_channels", two_levels.renderer_channels},
                                                            {"feature_size", two_levels.feature_size()},
                                                            {"samples_per_ray", two_levels.samples_per_ray}});
+  // The subject's default without the covered parts apart (the thesis's
+  // head-frame samples keep them together), side by side: what the covered
+  // faces' look-up and move cost per frame.
+  AvatarConfig together = subject;
+  together.covered_apart = false;
+  out["subject_covered_together"] =
+      timings(MeasureConfig(options, together, frames), {{"covered_apart", together.covered_apart}});
   // The subject's default with frames that carry the camera's skin colour, as
   // a default sender's do: the receiver measures its picture's skin and scales
   // the head to match (in the "convert" stage).

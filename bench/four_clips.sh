@@ -103,6 +103,7 @@ for c in clips:
                  "worst_5pct_psnr_db": sum(worst) / len(worst), "test_frames": e["frames"],
                  "train_psnr_db": tr["psnr_db"], "train_ssim": tr["ssim"], "train_frames": tr["frames"],
                  "landmark_error_iod": fid.get("error_iod"), "landmarks_found": fid.get("found_in_both"),
+                 "landmarks_against_fit": fid.get("fit"),
                  "blink_correlation": (fid.get("blink") or {}).get("correlation"),
                  "gaze_correlation_x": (fid.get("gaze") or {}).get("correlation_x"),
                  "gaze_correlation_y": (fid.get("gaze") or {}).get("correlation_y"),
@@ -143,6 +144,17 @@ for x in rows:
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
              f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} | "
              + (f"{x['receiver_256']['fps']:.1f} / {x['receiver_256']['ms_p95']:.1f} |" if "receiver_256" in x else "– |"))
+regions = ("eyes", "brows", "mouth", "jaw")
+L += ["", "Where an expression is lost (held-out frames): dlib's points on the true and on the avatar's picture against "
+      "the fitted head's landmarks, each point's mean offset over the frames left out (dlib's points and the model's "
+      "landmark embedding differ by a steady amount), over the eye distance: the truth's figure is how far the person "
+      "moves off the fit's motion, the avatar's how far its picture moves off the mesh it is driven with.", "",
+      "| clip | truth off the fit: " + " / ".join(regions) + " | avatar off the fit: " + " / ".join(regions) + " |",
+      "|---|---|---|"]
+for x in rows:
+    fit = x["landmarks_against_fit"] or {}
+    cell = lambda k: " / ".join(f((fit.get(k) or {}).get(r), ".4f") for r in regions)
+    L.append(f"| {x['clip']} | {cell('truth_vs_fit_moving')} | {cell('avatar_vs_fit_moving')} |")
 L += [] if not render else ["", "Receiver: each clip's avatar in the table (`headcast-avatar render AVATAR --head-model ict.npz --display none --pacing none --threads 2 --synthetic 150`); "
       "a random avatar of the default subject configuration (headcast-bench render, the builtin head's 13 expression coefficients: surface texture with its conditioned branch and expression blendshapes, bounded matte, frames carrying a skin colour to match): " +
       "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"

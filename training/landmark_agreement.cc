@@ -21,6 +21,53 @@ Eigen::Vector2d Mean(const Landmarks2d& l, int first, int last) {
   return m / (last - first + 1);
 }
 
+// Each region's mean length of its points' vectors.
+std::array<double, 5> RegionSizes(const Landmarks2d& v) {
+  std::array<double, 5> e{};
+  for (size_t r = 0; r < 5; ++r) {
+    const Region& g = kRegions[r];
+    for (int i = g.first; i <= g.last; ++i) e[r] += v[i].norm();
+    e[r] /= g.last - g.first + 1;
+  }
+  return e;
+}
+
+// Each point of `a` less `b`'s, over `scale`.
+Landmarks2d Offsets(const Landmarks2d& a, const Landmarks2d& b, double scale) {
+  Landmarks2d d;
+  for (int i = 0; i < kNumLandmarks; ++i) d[i] = (a[i] - b[i]) / scale;
+  return d;
+}
+
+// Each region's mean over the frames, and "all": every point alike (regions
+// weighted by their point counts).
+nlohmann::json RegionMeans(const std::vector<std::array<double, 5>>& frames) {
+  const size_t n = frames.size();
+  nlohmann::json errors = nlohmann::json::object();
+  double all = 0;
+  for (size_t r = 0; r < 5; ++r) {
+    double sum = 0;
+    for (const auto& e : frames) sum += e[r];
+    errors[kRegions[r].name] = n ? sum / n : 0.0;
+    all += sum * (kRegions[r].last - kRegions[r].first + 1) / 68.0;
+  }
+  errors["all"] = n ? all / n : 0.0;
+  return errors;
+}
+
+// Per frame, each region's mean length of the points' offsets; with
+// `moving`, each point's mean offset over the frames taken out first.
+std::vector<std::array<double, 5>> OffsetSizes(const std::vector<Landmarks2d>& offsets, bool moving) {
+  Landmarks2d steady;
+  for (auto& p : steady) p.setZero();
+  if (moving)
+    for (const Landmarks2d& o : offsets)
+      for (int i = 0; i < kNumLandmarks; ++i) steady[i] += o[i] / static_cast<double>(offsets.size());
+  std::vector<std::array<double, 5>> sizes;
+  for (const Landmarks2d& o : offsets) sizes.push_back(RegionSizes(Offsets(o, steady, 1.0)));
+  return sizes;
+}
+
 FaceTrackerOptions StillImages(const std::string& predictor_path) {
   FaceTrackerOptions o;
   o.predictor_path = predictor_path;
@@ -71,20 +118,18 @@ bool LandmarkAgreement::Detect(const cv::Mat& image, FaceObservation* out) {
   return out->status != FaceStatus::kNoFace;
 }
 
-void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr) {
+void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr, const Landmarks2d* fitted) {
   ++frames_;
   FaceObservation seen_truth, seen_avatar;
   if (!Detect(truth_bgr, &seen_truth) || !Detect(avatar_bgr, &seen_avatar)) return;
   const Landmarks2d &truth = seen_truth.raw, &avatar = seen_avatar.raw;
   const double iod = (Mean(truth, 36, 41) - Mean(truth, 42, 47)).norm();
   if (!(iod > 1)) return;
-  std::array<double, 5> e{};
-  for (size_t r = 0; r < 5; ++r) {
-    const Region& g = kRegions[r];
-    for (int i = g.first; i <= g.last; ++i) e[r] += (truth[i] - avatar[i]).norm();
-    e[r] /= (g.last - g.first + 1) * iod;
+  region_errors_.push_back(RegionSizes(Offsets(truth, avatar, iod)));
+  if (fitted) {
+    truth_from_fit_.push_back(Offsets(truth, *fitted, iod));
+    avatar_from_fit_.push_back(Offsets(avatar, *fitted, iod));
   }
-  region_errors_.push_back(e);
   truth_opening_.push_back(EyeOpening(truth));
   avatar_opening_.push_back(EyeOpening(avatar));
   const IrisObservation* irises[2][2] = {{&seen_truth.irises.right, &seen_avatar.irises.right},
@@ -103,16 +148,6 @@ void LandmarkAgreement::Add(const cv::Mat& truth_bgr, const cv::Mat& avatar_bgr)
 
 nlohmann::json LandmarkAgreement::Summary() const {
   const size_t n = region_errors_.size();
-  nlohmann::json errors = nlohmann::json::object();
-  double all = 0;
-  for (size_t r = 0; r < 5; ++r) {
-    double sum = 0;
-    for (const auto& e : region_errors_) sum += e[r];
-    errors[kRegions[r].name] = n ? sum / n : 0.0;
-  }
-  for (const auto& e : region_errors_)  // every point alike: regions weighted by their point counts
-    for (size_t r = 0; r < 5; ++r) all += e[r] * (kRegions[r].last - kRegions[r].first + 1) / 68.0;
-  errors["all"] = n ? all / n : 0.0;
   const size_t eyes = truth_gaze_[0].size();
   double gaze_error = 0;
   for (size_t i = 0; i < eyes; ++i)
@@ -123,13 +158,20 @@ nlohmann::json LandmarkAgreement::Summary() const {
                                {"error", eyes ? gaze_error / eyes : 0.0},
                                {"truth_sd_x", StandardDeviation(truth_gaze_[0])},
                                {"truth_sd_y", StandardDeviation(truth_gaze_[1])}};
-  return {{"frames", frames_},
-          {"found_in_both", n},
-          {"error_iod", errors},
-          {"blink",
-           {{"correlation", PearsonCorrelation(truth_opening_, avatar_opening_)},
-            {"truth_opening_sd", StandardDeviation(truth_opening_)}}},
-          {"gaze", gaze}};
+  nlohmann::json summary = {{"frames", frames_},
+                            {"found_in_both", n},
+                            {"error_iod", RegionMeans(region_errors_)},
+                            {"blink",
+                             {{"correlation", PearsonCorrelation(truth_opening_, avatar_opening_)},
+                              {"truth_opening_sd", StandardDeviation(truth_opening_)}}},
+                            {"gaze", gaze}};
+  if (!truth_from_fit_.empty())
+    summary["fit"] = {{"frames", truth_from_fit_.size()},
+                      {"truth_vs_fit", RegionMeans(OffsetSizes(truth_from_fit_, false))},
+                      {"avatar_vs_fit", RegionMeans(OffsetSizes(avatar_from_fit_, false))},
+                      {"truth_vs_fit_moving", RegionMeans(OffsetSizes(truth_from_fit_, true))},
+                      {"avatar_vs_fit_moving", RegionMeans(OffsetSizes(avatar_from_fit_, true))}};
+  return summary;
 }
 
 }  // namespace headcast

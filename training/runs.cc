@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
+#include "common/avatar/avatar_pipeline.h"
 #include "common/core/image_io.h"
 #include "common/core/log.h"
 #include "common/core/options.h"
@@ -421,9 +422,12 @@ nlohmann::json RunEval(const EvalOptions& o) {
   std::copy(subject.light.begin(), subject.light.end(), render_options.light.begin());
   const cv::Mat albedo = AlbedoTexture(model, subject.texture.cast<double>());
   const HeadIdentity identity = model.MakeIdentity(subject.shape.cast<double>());
-  auto head_model_view = [&](const FrameParams& f) {
+  auto posed_head = [&](const FrameParams& f) {
     HeadModelOutput posed;
     model.Forward(identity, Resized(f.expression, model.num_expression()).cast<double>(), f.HeadPose(), &posed);
+    return posed;
+  };
+  auto head_model_view = [&](const FrameParams& f, const HeadModelOutput& posed) {
     return RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
   };
   const double fps = 30;
@@ -446,10 +450,15 @@ nlohmann::json RunEval(const EvalOptions& o) {
         avatar, model, data, positions,
         [&](int i, const cv::Mat& truth, const cv::Mat& rendered) {
           progress.Show(done++, "evaluating");
+          const FrameParams& params = data.At(i).params;
+          const HeadModelOutput posed = posed_head(params);
           cv::Mat row;
-          cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(data.At(i).params)}, row);
+          cv::hconcat(std::vector<cv::Mat>{truth, rendered, head_model_view(params, posed)}, row);
           side.Write(row);
-          if (agreement) agreement->Add(truth, rendered);
+          if (agreement) {
+            const Landmarks2d fitted = ProjectLandmarks(posed, params.CamFromHead(), subject.intrinsics);
+            agreement->Add(truth, rendered, &fitted);
+          }
           temporal.Add(data.At(i).frame, truth, rendered);
           if (o.write_frames) {
             char name[32];
@@ -479,7 +488,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
                                      "dlib's 68 landmarks on the avatar's frames against the true frames', mean "
                                      "distance over the true eye distance per region; blink: correlation of the "
                                      "eye opening; gaze: the iris in its eye's frame (eye widths), correlation "
-                                     "and mean distance"},
+                                     "and mean distance; fit: each picture's points against the fitted head's "
+                                     "landmarks projected (where the fit or the avatar lost an expression)"},
                                     {"result", agreement->Summary()}}
                    : fidelity},
         {"temporal", temporal.Summary()},
@@ -511,7 +521,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
         f.expression = d.expression;
         f.jaw = d.jaw;
         cv::Mat row;
-        cv::hconcat(head_model_view(f), RenderAvatarBgr(avatar, model, subject, f), row);
+        cv::hconcat(head_model_view(f, posed_head(f)), RenderAvatarBgr(avatar, model, subject, f), row);
         transfer.Write(row);
       }
       report["videos"].push_back("transfer.mp4: " + o.drive + "'s expressions (head model | avatar)");

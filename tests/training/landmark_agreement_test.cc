@@ -54,6 +54,7 @@ TEST(LandmarkAgreement, ShiftedPictureIsOffByTheShift) {
   const nlohmann::json s = same.Summary();
   ASSERT_EQ(s["found_in_both"], 1) << s.dump();
   EXPECT_LT(s["error_iod"]["all"].get<double>(), 1e-9);
+  EXPECT_FALSE(s.contains("fit")) << "no fitted landmarks were given";
   cv::Mat shifted;
   cv::warpAffine(face, shifted, cv::Matx23d(1, 0, 5, 0, 1, 0), face.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   LandmarkAgreement moved(predictor);
@@ -67,6 +68,51 @@ TEST(LandmarkAgreement, ShiftedPictureIsOffByTheShift) {
     const double e = m["error_iod"][region];
     EXPECT_GT(e, 0.04) << region;
     EXPECT_LT(e, 0.2) << region;
+  }
+}
+
+// With fitted landmarks each picture is also set against the fit: here the
+// "fit" is dlib's own points on the true picture, so the truth agrees with it
+// and the shifted picture is as far from it as from the truth.
+TEST(LandmarkAgreement, EachPictureIsSetAgainstTheFit) {
+  HEADCAST_REQUIRE_DATA("video/talking_d9.mp4");
+  FaceTrackerOptions options;
+  if (!std::filesystem::exists(options.predictor_path))
+    GTEST_SKIP() << "no dlib shape predictor at " << options.predictor_path;
+  cv::VideoCapture video(testing::DataDir() + "/video/talking_d9.mp4");
+  cv::Mat frame, face;
+  ASSERT_TRUE(video.read(frame));
+  cv::resize(frame, face, cv::Size(256, 256), 0, 0, cv::INTER_AREA);
+  options.redetect_interval = 1;
+  options.repair.enabled = false;
+  FaceTracker tracker(options);
+  const FaceObservation seen = tracker.Track(face, 0);
+  ASSERT_NE(seen.status, FaceStatus::kNoFace);
+  cv::Mat shifted;
+  cv::warpAffine(face, shifted, cv::Matx23d(1, 0, 0, 0, 1, 6), face.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  LandmarkAgreement agreement(options.predictor_path);
+  agreement.Add(face, shifted, &seen.raw);
+  const nlohmann::json s = agreement.Summary();
+  ASSERT_TRUE(s.contains("fit")) << s.dump();
+  EXPECT_EQ(s["fit"]["frames"], 1);
+  for (const char* region : {"eyes", "brows", "nose", "mouth", "jaw", "all"}) {
+    EXPECT_LT(s["fit"]["truth_vs_fit"][region].get<double>(), 1e-9) << region;
+    EXPECT_NEAR(s["fit"]["avatar_vs_fit"][region].get<double>(), s["error_iod"][region].get<double>(), 1e-12) << region;
+    EXPECT_GT(s["fit"]["avatar_vs_fit"][region].get<double>(), 0.05) << region;  // 6 px of about 50
+    // One frame: its offsets are their own mean, nothing moves.
+    EXPECT_LT(s["fit"]["avatar_vs_fit_moving"][region].get<double>(), 1e-9) << region;
+  }
+  // A second frame, the avatar shifted the other way: against the steady
+  // offset (the mean: no shift) each frame's avatar is 6 px off, the truth 0.
+  cv::Mat back;
+  cv::warpAffine(face, back, cv::Matx23d(1, 0, 0, 0, 1, -6), face.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  agreement.Add(face, back, &seen.raw);
+  const nlohmann::json two = agreement.Summary();
+  EXPECT_EQ(two["fit"]["frames"], 2);
+  for (const char* region : {"eyes", "brows", "nose", "mouth", "jaw", "all"}) {
+    EXPECT_LT(two["fit"]["truth_vs_fit_moving"][region].get<double>(), 1e-9) << region;
+    EXPECT_GT(two["fit"]["avatar_vs_fit_moving"][region].get<double>(), 0.05) << region;
+    EXPECT_LT(two["fit"]["avatar_vs_fit_moving"][region].get<double>(), 0.25) << region;
   }
 }
 
