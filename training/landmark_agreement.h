@@ -52,8 +52,7 @@ class LandmarkAgreement {
   bool Detect(const cv::Mat& image, FaceObservation* out);
   FaceTracker tracker_;
   int frames_ = 0;
-  using RegionErrors = std::array<double, 5>;
-  std::vector<RegionErrors> region_errors_;  // per frame found in both
+  std::vector<std::array<double, 5>> region_errors_;  // per frame found in both
   // Per such frame with fitted landmarks: each point's offset from the fit, in eye distances.
   std::vector<Landmarks2d> truth_from_fit_, avatar_from_fit_;
   std::vector<double> truth_opening_, avatar_opening_;

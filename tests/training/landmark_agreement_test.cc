@@ -27,6 +27,14 @@ Landmarks2d Eyes(double open) {
   return l;
 }
 
+// The first frame of talking_d9 at 256², as the avatar's pictures are.
+cv::Mat TalkingHeadFace() {
+  cv::VideoCapture video(testing::DataDir() + "/video/talking_d9.mp4");
+  cv::Mat frame, face;
+  if (video.read(frame)) cv::resize(frame, face, cv::Size(256, 256), 0, 0, cv::INTER_AREA);
+  return face;
+}
+
 }  // namespace
 
 TEST(LandmarkAgreement, EyeOpeningAndCorrelation) {
@@ -45,10 +53,8 @@ TEST(LandmarkAgreement, ShiftedPictureIsOffByTheShift) {
   HEADCAST_REQUIRE_DATA("video/talking_d9.mp4");
   const std::string predictor = FaceTrackerOptions{}.predictor_path;
   if (!std::filesystem::exists(predictor)) GTEST_SKIP() << "no dlib shape predictor at " << predictor;
-  cv::VideoCapture video(testing::DataDir() + "/video/talking_d9.mp4");
-  cv::Mat frame, face;
-  ASSERT_TRUE(video.read(frame));
-  cv::resize(frame, face, cv::Size(256, 256), 0, 0, cv::INTER_AREA);
+  const cv::Mat face = TalkingHeadFace();
+  ASSERT_FALSE(face.empty());
   LandmarkAgreement same(predictor);
   same.Add(face, face);
   const nlohmann::json s = same.Summary();
@@ -79,10 +85,8 @@ TEST(LandmarkAgreement, EachPictureIsSetAgainstTheFit) {
   FaceTrackerOptions options;
   if (!std::filesystem::exists(options.predictor_path))
     GTEST_SKIP() << "no dlib shape predictor at " << options.predictor_path;
-  cv::VideoCapture video(testing::DataDir() + "/video/talking_d9.mp4");
-  cv::Mat frame, face;
-  ASSERT_TRUE(video.read(frame));
-  cv::resize(frame, face, cv::Size(256, 256), 0, 0, cv::INTER_AREA);
+  const cv::Mat face = TalkingHeadFace();
+  ASSERT_FALSE(face.empty());
   options.redetect_interval = 1;
   options.repair.enabled = false;
   FaceTracker tracker(options);
