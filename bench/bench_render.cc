@@ -45,7 +45,7 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
   cv::Mat image;
   AvatarTimings t;
   for (int i = 0; i < std::min(options.warmup, 5); ++i) renderer.Render(MovingHead(*model, i, skin_colour), &image, &t);
-  SampleStats total, head, sample, surface, mlp, composite, upsample, convert, rays, samples;
+  SampleStats total, head, sample, surface, texture, mlp, composite, upsample, convert, rays, samples;
   const long faults_before = MinorFaults();
   for (int i = 0; i < frames; ++i) {
     if (!renderer.Render(MovingHead(*model, i, skin_colour), &image, &t))
@@ -54,6 +54,7 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
     head.Add(t.head_model_ms);
     sample.Add(t.sample_ms);
     surface.Add(t.surface_ms);
+    texture.Add(t.texture_ms);
     mlp.Add(t.mlp_ms);
     composite.Add(t.composite_ms);
     upsample.Add(t.upsample_ms);
@@ -68,10 +69,10 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
   out["ms_median"] = total.Median();
   out["ms_p95"] = total.Percentile(95);
   out["fps_median"] = 1000.0 / total.Median();
-  out["stage_ms_median"] = {{"head_model", head.Median()},     {"sample", sample.Median()},
-                            {"surface", surface.Median()},     {"mlp", mlp.Median()},
-                            {"composite", composite.Median()}, {"upsample", upsample.Median()},
-                            {"convert", convert.Median()}};
+  out["stage_ms_median"] = {{"head_model", head.Median()},   {"sample", sample.Median()},
+                            {"surface", surface.Median()},   {"texture", texture.Median()},
+                            {"mlp", mlp.Median()},           {"composite", composite.Median()},
+                            {"upsample", upsample.Median()}, {"convert", convert.Median()}};
   out["rays_median"] = rays.Median();
   out["samples_median"] = samples.Median();
   out["minor_page_faults_per_frame"] = static_cast<double>(MinorFaults() - faults_before) / frames;

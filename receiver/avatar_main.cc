@@ -104,6 +104,7 @@ int Render(const RenderArgs& a) {
                             {{"head_model", s.head_model_ms.Median()},
                              {"sample", s.sample_ms.Median()},
                              {"surface", s.surface_ms.Median()},
+                             {"texture", s.texture_ms.Median()},
                              {"mlp", s.mlp_ms.Median()},
                              {"composite", s.composite_ms.Median()},
                              {"upsample", s.upsample_ms.Median()},

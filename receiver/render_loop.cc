@@ -113,6 +113,7 @@ RenderLoopStats RunRenderLoop(const AvatarPicker& pick, FrameParamsSource& sourc
         stats.head_model_ms.Add(t.head_model_ms);
         stats.sample_ms.Add(t.sample_ms);
         stats.surface_ms.Add(t.surface_ms);
+        stats.texture_ms.Add(t.texture_ms);
         stats.mlp_ms.Add(t.mlp_ms);
         stats.composite_ms.Add(t.composite_ms);
         stats.upsample_ms.Add(t.upsample_ms);

@@ -77,8 +77,8 @@ struct RenderLoopStats {
   // A receiver runs for days: each keeps a bounded random subset of its samples.
   static constexpr size_t kKept = 100000;
   SampleStats frame_ms{kKept};  // render + show per frame
-  SampleStats render_ms{kKept}, head_model_ms{kKept}, sample_ms{kKept}, surface_ms{kKept}, mlp_ms{kKept},
-      composite_ms{kKept}, upsample_ms{kKept}, show_ms{kKept};
+  SampleStats render_ms{kKept}, head_model_ms{kKept}, sample_ms{kKept}, surface_ms{kKept}, texture_ms{kKept},
+      mlp_ms{kKept}, composite_ms{kKept}, upsample_ms{kKept}, show_ms{kKept};
   // Glass to glass: shown minus the capture time of what is shown (the jitter
   // buffer interpolates capture times too). Same-host clocks only: values
   // beyond a minute (other hosts' clocks) are left out.

@@ -41,6 +41,7 @@ struct AvatarTimings {
   double head_model_ms = 0;  // head-model forward pass and transform to the camera
   double sample_ms = 0;      // rasterising at feature resolution and choosing rays/depths
   double surface_ms = 0;     // the output-size raster and matte bound (beside the network when threads > 1)
+  double texture_ms = 0;     // the surface texture looked up there (beside the network too)
   double mlp_ms = 0;         // the network over every sample
   double composite_ms = 0;   // volume rendering into the feature map
   double upsample_ms = 0;    // the 2D neural renderer

@@ -1,10 +1,14 @@
 // The neural avatar's networks.
 #include "common/avatar/avatar_model.h"
 
+#include <ATen/Parallel.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "common/avatar/triplane_lookup.h"
 
@@ -278,8 +282,29 @@ torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const 
       throw std::invalid_argument("SurfaceTexture: a rigid texture needs the posed points of the canonical ones");
     features = features + LookUp(rigid_planes_, posed);
   }
-  if (blended()) features = features + LookUp(BlendedPlanes(expression), canonical);
-  return features;
+  if (!blended()) return features;
+  if (channels_last_ && !torch::GradMode::is_enabled() && features.is_contiguous() &&
+      features.scalar_type() == torch::kFloat) {
+    const torch::Tensor& texels = BlendTexels();
+    const torch::Tensor weights = BlendWeights(expression).to(torch::kFloat).contiguous();
+    const torch::Tensor at = (canonical / extent_).clamp(-1, 1).to(torch::kFloat).contiguous();
+    AddBlendedLookUp({texels.data_ptr<float>(), blend_resolution_, texels.size(1), texels.size(2)},
+                     weights.data_ptr<float>(), at.data_ptr<float>(), at.size(0), features.data_ptr<float>());
+    return features;
+  }
+  return features + LookUp(BlendedPlanes(expression), canonical);
+}
+
+const torch::Tensor& SurfaceTextureImpl::BlendTexels() {
+  if (blend_texels_.defined() && blend_texels_version_ == static_cast<int64_t>(blend_._version()) &&
+      blend_texels_source_ == blend_.data_ptr())
+    return blend_texels_;
+  torch::NoGradGuard no_grad;
+  const int64_t rows = blend_.size(0), c = planes_.size(1);
+  blend_texels_ = blend_.detach().to(torch::kFloat).view({rows, -1, c}).permute({1, 0, 2}).contiguous();
+  blend_texels_version_ = static_cast<int64_t>(blend_._version());
+  blend_texels_source_ = blend_.data_ptr();
+  return blend_texels_;
 }
 
 torch::Tensor SurfaceTextureImpl::BlendedPlanes(const torch::Tensor& expression) const {
@@ -364,6 +389,89 @@ NeuralRendererImpl::NeuralRendererImpl(const AvatarConfig& config) {
   }
 }
 
+namespace {
+
+// Four floats side by side (GCC's and Clang's vector extension, on any
+// target): the branch's layers four outputs at a time.
+using Float4 = float __attribute__((vector_size(16)));
+
+// Points [0, count): features x (count, kIn) through the branch into rows
+// y[at[i]]. a (kIn, kHidden) and ab: the first layer, FiLM folded in; c
+// (kHidden, kOut) and cb: the second; each row in Float4s.
+template <int kIn, int kHidden, int kOut>
+void BranchPoints(const float* __restrict x, const int64_t* __restrict at, int64_t count, const Float4* __restrict a,
+                  const Float4* __restrict ab, const Float4* __restrict c, const Float4* __restrict cb,
+                  float* __restrict y) {
+  static_assert(kHidden % 4 == 0 && kOut % 4 == 0);
+  constexpr int kH = kHidden / 4, kO = kOut / 4;
+  for (int64_t i = 0; i < count; ++i) {
+    Float4 h[kH], o[kO];
+    for (int j = 0; j < kH; ++j) h[j] = ab[j];
+    for (int k = 0; k < kIn; ++k) {
+      const float s = x[i * kIn + k];
+      const Float4 v = {s, s, s, s};
+      for (int j = 0; j < kH; ++j) h[j] += v * a[k * kH + j];
+    }
+    for (int j = 0; j < kH; ++j) h[j] = h[j] > 0 ? h[j] : h[j] * 0.2f;  // LeakyReLU(0.2), without branches
+    for (int m = 0; m < kO; ++m) o[m] = cb[m];
+    for (int j = 0; j < kHidden; ++j) {
+      const float s = h[j / 4][j % 4];
+      const Float4 v = {s, s, s, s};
+      for (int m = 0; m < kO; ++m) o[m] += v * c[j * kO + m];
+    }
+    std::memcpy(y + at[i] * kOut, o, sizeof(o));
+  }
+}
+
+// Inference: the surface branch of each point (P, Cs) written to its row of
+// `rows` (H W, C3) in one pass, where libtorch makes a tensor per layer, per
+// FiLM operation and for the scatter. w1 (hidden, Cs), w2 (C3, hidden);
+// scale and shift (1, hidden), or undefined when unconditioned; every other
+// row is `background` (1, C3). Undefined for a branch of other sizes than the
+// shipped 8 -> 16 -> 8.
+torch::Tensor SurfaceBranchRows(const torch::Tensor& features, const torch::Tensor& pixels, int64_t num_rows,
+                                const torch::Tensor& background, const torch::Tensor& w1, const torch::Tensor& b1,
+                                const torch::Tensor& scale, const torch::Tensor& shift, const torch::Tensor& w2,
+                                const torch::Tensor& b2) {
+  constexpr int kIn = 8, kHidden = 16, kOut = 8;
+  const int64_t p = features.size(0);
+  if (w1.size(1) != kIn || w1.size(0) != kHidden || w2.size(0) != kOut || w2.size(1) != kHidden) return {};
+  if (features.dim() != 2 || features.size(1) != kIn || pixels.numel() != p)
+    throw std::invalid_argument("SurfaceTerm: features, pixels and the branch do not match");
+  const auto floats = [](const torch::Tensor& t) { return t.detach().to(torch::kFloat).contiguous(); };
+  // Transposed, so that a layer's outputs lie side by side; FiLM folded into
+  // the first layer: (W1 x + b1) * s + t = (W1 s) x + (b1 s + t).
+  torch::Tensor a = floats(w1.t()), ab = floats(b1);
+  if (scale.defined()) {
+    a = floats(a * scale.view({1, kHidden}));
+    ab = floats(ab * scale.view({kHidden}) + shift.view({kHidden}));
+  }
+  const torch::Tensor c = floats(w2.t()), cb = floats(b2), f = floats(features),
+                      index = pixels.to(torch::kLong).contiguous();
+  // Float4 copies, aligned as the vector type needs.
+  std::vector<Float4> packed((kIn * kHidden + kHidden + kHidden * kOut + kOut) / 4);
+  Float4* pa = packed.data();
+  Float4* pab = pa + kIn * kHidden / 4;
+  Float4* pc = pab + kHidden / 4;
+  Float4* pcb = pc + kHidden * kOut / 4;
+  std::memcpy(pa, a.data_ptr<float>(), kIn * kHidden * sizeof(float));
+  std::memcpy(pab, ab.data_ptr<float>(), kHidden * sizeof(float));
+  std::memcpy(pc, c.data_ptr<float>(), kHidden * kOut * sizeof(float));
+  std::memcpy(pcb, cb.data_ptr<float>(), kOut * sizeof(float));
+  const int64_t* at = index.data_ptr<int64_t>();
+  for (int64_t i = 0; i < p; ++i)
+    if (at[i] < 0 || at[i] >= num_rows) throw std::invalid_argument("SurfaceTerm: a pixel outside the image");
+  torch::Tensor rows = background.to(torch::kFloat).expand({num_rows, kOut}).contiguous();
+  const float* x = f.data_ptr<float>();
+  float* y = rows.data_ptr<float>();
+  at::parallel_for(0, p, 1024, [&](int64_t begin, int64_t end) {
+    BranchPoints<kIn, kHidden, kOut>(x + begin * kIn, at + begin, end - begin, pa, pab, pc, pcb, y);
+  });
+  return rows;
+}
+
+}  // namespace
+
 torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height,
                                               int width, const torch::Tensor& motion) {
   if (!surface_out_) throw std::logic_error("SurfaceTerm: this renderer has no surface branch");
@@ -385,6 +493,12 @@ torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, con
   };
   const int64_t channels = surface_out_->weight.size(0), in = surface_hidden_->weight.size(1);
   const torch::Tensor background = branch(torch::zeros({1, in}));  // (1, C3)
+  if (channels_last_ && !torch::GradMode::is_enabled()) {
+    const torch::Tensor rows = SurfaceBranchRows(features, pixels, static_cast<int64_t>(height) * width, background,
+                                                 surface_hidden_->weight.flatten(1), surface_hidden_->bias, scale,
+                                                 shift, surface_out_->weight.flatten(1), surface_out_->bias);
+    if (rows.defined()) return rows.view({1, height, width, channels}).permute({0, 3, 1, 2});
+  }
   torch::Tensor rows = background.expand({static_cast<int64_t>(height) * width, channels});
   if (features.size(0) > 0) rows = rows.index_copy(0, pixels, branch(features));
   if (channels_last_) return rows.view({1, height, width, channels}).permute({0, 3, 1, 2});  // rows are pixels

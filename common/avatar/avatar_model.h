@@ -115,8 +115,10 @@ class SurfaceTextureImpl : public torch::nn::Module {
   torch::Tensor BlendWeights(const torch::Tensor& expression) const;
   // Inference: keeps the planes texel after texel (channels-last), so that a
   // lookup without gradients reads a texel's channels side by side
-  // (LookUpTriplanes) instead of grid_sample's walk channel after channel.
-  // The same features up to float rounding; training is unchanged.
+  // (LookUpTriplanes) instead of grid_sample's walk channel after channel,
+  // and blends only the texels of the expression blendshapes the points read
+  // (AddBlendedLookUp). The same features up to float rounding; training is
+  // unchanged.
   void UseChannelsLast();
 
  private:
@@ -131,6 +133,12 @@ class SurfaceTextureImpl : public torch::nn::Module {
   int64_t num_expression_ = 0;
   // With surface_blend_components (buffers, in the file): (E), (K, E), (K), (K).
   torch::Tensor blend_mean_, blend_directions_, blend_low_, blend_high_;
+  // Inference: blend_ as (3 * B * B, E or K, C), each texel's rows side by
+  // side; remade when blend_ has changed since (its version counter).
+  torch::Tensor blend_texels_;
+  int64_t blend_texels_version_ = -1;
+  const void* blend_texels_source_ = nullptr;
+  const torch::Tensor& BlendTexels();
   torch::Tensor BlendedPlanes(const torch::Tensor& expression) const;  // -> (3, C, B, B), channels-last strides
   torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& points) const;
 };

@@ -20,6 +20,9 @@ struct AvatarOutput {
   torch::Tensor coverage;     // with a matte: (1, 1, H, W) in [0, 1], the head's share of each pixel
   torch::Tensor feature_map;  // (1, F, h, w)
   torch::Tensor opacity;      // (1, 1, h, w)
+  // With a surface texture: (P, Cs), the texture's features at each of the
+  // surface's covered output pixels (RunAvatarSurfaceFeatures).
+  torch::Tensor surface_features;
 };
 
 // (1, 3, H, W) RGB in [0, 1] <-> H x W BGR bytes (CV_8UC3); `out` is reused.
@@ -54,8 +57,14 @@ AvatarOutput RunAvatar(AvatarModules& modules, const AvatarFrameInputs& inputs, 
 // placement of `inputs` (what PrepareAvatarRays makes).
 void RunAvatarFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
                        AvatarTimings* timings = nullptr);
+// The surface texture's features at the surface's covered pixels (nothing
+// without a texture): needs the surface (PrepareAvatarSurface) and the
+// conditioning, not the feature map, so it may run beside RunAvatarFeatures.
+void RunAvatarSurfaceFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                              AvatarTimings* timings = nullptr);
 // The image (and coverage) from out's feature map: needs the surface and the
-// bound too (PrepareAvatarSurface).
+// bound too (PrepareAvatarSurface); the surface's features when
+// RunAvatarSurfaceFeatures has not looked them up.
 void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
                          AvatarTimings* timings = nullptr);
 
@@ -83,7 +92,8 @@ void PrepareAvatarSurface(const AvatarConfig& config, const HeadModel& model, co
 
 // What the receiver shows for `frame`: PrepareAvatarFrame, RunAvatar, then
 // 8-bit BGR in *image_bgr (reused). With `parallel`, the head model's pass
-// runs as two tasks, then the surface preparation as one task beside the network.
+// runs as two tasks, then the surface preparation and its texture lookup as
+// one task beside the network.
 // A frame that carries the camera's skin colour (FrameParams::skin_colour)
 // has its picture matched to it (MatchSkinColour).
 void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const HeadModel& model,

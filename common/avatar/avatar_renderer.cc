@@ -135,40 +135,52 @@ void RunAvatarFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, 
   }
 }
 
+void RunAvatarSurfaceFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
+                              AvatarTimings* timings) {
+  if (!modules.surface) return;
+  Stopwatch watch;
+  const SurfaceBatch& surface = inputs.surface;
+  const int64_t n = surface.num_pixels();
+  const AvatarConfig& config = modules.cnerf->config();
+  const torch::Tensor canonical = torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
+  torch::Tensor posed;
+  if (config.needs_posed_points()) {
+    if (surface.posed.size() != surface.canonical.size())
+      throw std::invalid_argument(
+          "RunAvatarSurfaceFeatures: the rigid texture and the displacement need the surface's posed points");
+    posed = torch::from_blob(const_cast<float*>(surface.posed.data()), {n, 3}, torch::kFloat);
+  }
+  // The blendshapes weighted by what the networks are told (within the avatar's span).
+  const torch::Tensor expression =
+      modules.surface->blended()
+          ? inputs.conditioning.geometry.narrow(1, config.expression_offset(), config.num_expression)
+          : torch::Tensor();
+  torch::Tensor features =
+      n > 0 ? modules.surface->forward(canonical, modules.surface->rigid() ? posed : torch::Tensor(), expression)
+            : torch::zeros({0, config.surface_features});
+  if (config.surface_displacement)
+    features =
+        torch::cat({features, n > 0 ? (posed - canonical) * kSurfaceDisplacementScale : torch::zeros({0, 3})}, 1);
+  out->surface_features = features;
+  if (timings) timings->texture_ms += watch.ElapsedMs();
+}
+
 void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs, AvatarOutput* out,
                          AvatarTimings* timings) {
+  if (modules.surface && !out->surface_features.defined()) RunAvatarSurfaceFeatures(modules, inputs, out, timings);
   Stopwatch watch;
   const AvatarConditioning& conditioning = inputs.conditioning;
   torch::Tensor surface_term;
   if (modules.surface) {
     const SurfaceBatch& surface = inputs.surface;
-    const int64_t n = surface.num_pixels();
-    const torch::Tensor canonical =
-        torch::from_blob(const_cast<float*>(surface.canonical.data()), {n, 3}, torch::kFloat);
-    const torch::Tensor pixels =
-        torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {n}, torch::kInt).to(torch::kLong);
     const AvatarConfig& config = modules.cnerf->config();
-    torch::Tensor posed;
-    if (config.needs_posed_points()) {
-      if (surface.posed.size() != surface.canonical.size())
-        throw std::invalid_argument(
-            "RunAvatarUpsampling: the rigid texture and the displacement need the surface's posed points");
-      posed = torch::from_blob(const_cast<float*>(surface.posed.data()), {n, 3}, torch::kFloat);
-    }
-    // The blendshapes weighted by what the networks are told (within the avatar's span).
-    const torch::Tensor expression =
-        modules.surface->blended() ? conditioning.geometry.narrow(1, config.expression_offset(), config.num_expression)
-                                   : torch::Tensor();
-    torch::Tensor features =
-        n > 0 ? modules.surface->forward(canonical, modules.surface->rigid() ? posed : torch::Tensor(), expression)
-              : torch::zeros({0, config.surface_features});
-    if (config.surface_displacement)
-      features =
-          torch::cat({features, n > 0 ? (posed - canonical) * kSurfaceDisplacementScale : torch::zeros({0, 3})}, 1);
+    const torch::Tensor pixels =
+        torch::from_blob(const_cast<int32_t*>(surface.pixel.data()), {surface.num_pixels()}, torch::kInt)
+            .to(torch::kLong);
     const torch::Tensor motion = config.surface_conditioned
                                      ? conditioning.geometry.narrow(1, config.num_shape, config.motion_dim())
                                      : torch::Tensor();
-    surface_term = modules.renderer->SurfaceTerm(features, pixels, surface.height, surface.width, motion);
+    surface_term = modules.renderer->SurfaceTerm(out->surface_features, pixels, surface.height, surface.width, motion);
   }
   if (!modules.cnerf->config().has_matte()) {
     out->image = modules.renderer->forward(out->feature_map, surface_term);
@@ -266,10 +278,14 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
                        const ParallelTasks* parallel) {
   PrepareAvatarRays(config, model, identity, subject, frame, sampler, nullptr, buffers, timings, parallel);
   // The network needs only the rays; the output-size raster and the matte
-  // bound only the upsampling: with `parallel`, the pool's other thread draws
-  // them meanwhile (the network's operations then run on one thread).
+  // bound, and the texture looked up there, only the upsampling: with
+  // `parallel`, the pool's other thread does them meanwhile (each task's
+  // operations then run on one thread).
   AvatarOutput out;
-  auto surface = [&] { PrepareAvatarSurface(config, model, identity, subject, sampler, buffers, timings); };
+  auto surface = [&] {
+    PrepareAvatarSurface(config, model, identity, subject, sampler, buffers, timings);
+    RunAvatarSurfaceFeatures(modules, *buffers, &out, timings);
+  };
   auto features = [&] { RunAvatarFeatures(modules, *buffers, &out, timings); };
   if (parallel && *parallel) {
     (*parallel)(2, [&](int k) { k == 0 ? features() : surface(); });

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "common/avatar/avatar_pipeline.h"
+#include "common/avatar/triplane_lookup.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
@@ -744,6 +745,59 @@ TEST(SurfaceTexture, TheTexelMajorLookupReadsWhatGridSampleReads) {
   }
 }
 
+// The receiver's blended lookup blends only the texels the points read: what
+// it adds is what blending every texel and looking the sum up gives — inside
+// the planes, on their edges, beyond them, and for a point that is not a
+// number — and the features already there are kept.
+TEST(SurfaceTexture, TheReceiverBlendsOnlyTheTexelsItReads) {
+  for (const int channels : {8, 5}) {
+    const int64_t r = 16, k = 6;
+    const torch::Tensor shapes = torch::rand({3 * r * r, k, channels}) * 2 - 1;  // texel, component, channel
+    const torch::Tensor weights = torch::rand({k}) * 2 - 1;
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    // A patch of the planes, as a face covers, and points on and beyond their edges.
+    const torch::Tensor points =
+        torch::cat({torch::rand({500, 3}) * 0.5 - 0.1,
+                    torch::tensor({-1.f, -1.f, -1.f, 1.f, 1.f, 1.f, 2.f, -3.f, 0.f, nan, 0.2f, nan}).view({4, 3})})
+            .contiguous();
+    const torch::Tensor blended = (shapes * weights.view({1, k, 1})).sum(1).contiguous();  // texel-major planes
+    const int64_t n = points.size(0);
+    torch::Tensor expected = torch::empty({n, channels});
+    LookUpTriplanes({blended.data_ptr<float>(), r, channels}, points.data_ptr<float>(), n, expected.data_ptr<float>());
+    const torch::Tensor before = torch::rand({n, channels});
+    torch::Tensor features = before.clone();
+    AddBlendedLookUp({shapes.data_ptr<float>(), r, k, channels}, weights.data_ptr<float>(), points.data_ptr<float>(), n,
+                     features.data_ptr<float>());
+    EXPECT_TRUE(torch::isfinite(features).all().item<bool>()) << channels;
+    EXPECT_LT((features - before - expected).abs().max().item<float>(), 1e-5) << channels;
+    EXPECT_GT(expected.abs().max().item<float>(), 0.3f) << "random blendshapes add something";
+  }
+  EXPECT_THROW(AddBlendedLookUp({}, nullptr, nullptr, 0, nullptr), std::invalid_argument);
+}
+
+// Blendshapes changed after the switch to the receiver's layout (a load, a
+// training step) are what its lookup reads.
+TEST(SurfaceTexture, TheReceiversBlendshapesFollowTheirWeights) {
+  AvatarConfig c = TinyWithSurface();
+  c.surface_blend = 8;
+  SurfaceTexture texture(c);
+  const torch::Tensor canonical = (torch::rand({300, 3}) * 2 - 1) * 0.15;
+  const torch::Tensor psi = torch::rand({1, c.num_expression}) * 2 - 1;
+  texture->UseChannelsLast();
+  torch::NoGradGuard no_grad;
+  const torch::Tensor zero = texture->forward(canonical, {}, psi).clone();
+  texture->named_parameters()["blend"].uniform_(-1, 1);
+  const torch::Tensor changed = texture->forward(canonical, {}, psi);
+  EXPECT_GT((changed - zero).abs().max().item<float>(), 0.1f) << "the new weights are read";
+  // The same as the training path (grid_sample over every blended texel).
+  torch::Tensor expected;
+  {
+    torch::AutoGradMode grad(true);
+    expected = texture->forward(canonical, {}, psi).detach();
+  }
+  EXPECT_LT((changed - expected).abs().max().item<float>(), 1e-5);
+}
+
 // Adding a texture to an avatar without one (a fine-tune of a general model)
 // changes nothing it draws until training moves it; then the texture learns.
 TEST(SurfaceTexture, StartsAsTheAvatarWithoutItAndLearns) {
@@ -775,6 +829,39 @@ TEST(SurfaceTexture, StartsAsTheAvatarWithoutItAndLearns) {
     adam.step();
   }
   EXPECT_GT(with.modules().surface->parameters()[0].abs().max().item<float>(), 0.f);
+}
+
+// The receiver's surface branch (channels-last, no gradients) runs in one
+// pass over the covered pixels at the shipped sizes (8 -> 16 -> 8): the same
+// term as the layers one after the other, plain and conditioned, and as the
+// layers at other sizes; pixels outside the image are refused.
+TEST(SurfaceTexture, TheReceiversOnePassBranchDrawsWhatTheLayersDraw) {
+  for (const auto [conditioned, shipped] : {std::pair{false, true}, {true, true}, {true, false}}) {
+    AvatarConfig c = TinyWithSurface();
+    c.surface_conditioned = conditioned;
+    if (shipped) {
+      c.surface_features = 8;
+      c.renderer_channels.back() = 8;
+    }
+    NeuralRenderer net(c);
+    torch::manual_seed(3);
+    {
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->parameters()) p.uniform_(-0.5, 0.5);
+    }
+    const torch::Tensor features = torch::randn({300, c.surface_features});
+    const torch::Tensor pixels = torch::randperm(32 * 24).narrow(0, 0, 300);
+    const torch::Tensor motion = conditioned ? torch::randn({1, c.motion_dim()}) : torch::Tensor();
+    const torch::Tensor layers = net->SurfaceTerm(features, pixels, 32, 24, motion).detach();
+    net->UseChannelsLast();
+    torch::NoGradGuard no_grad;
+    const torch::Tensor one_pass = net->SurfaceTerm(features, pixels, 32, 24, motion);
+    ASSERT_EQ(one_pass.sizes(), layers.sizes());
+    EXPECT_TRUE(one_pass.is_contiguous(torch::MemoryFormat::ChannelsLast));
+    EXPECT_LT((one_pass - layers).abs().max().item<float>(), 1e-5) << conditioned << shipped;
+    EXPECT_GT((layers - layers.mean()).abs().max().item<float>(), 0.1f) << "a random branch draws something";
+    EXPECT_ANY_THROW(net->SurfaceTerm(features, torch::full({300}, 32 * 24, torch::kLong), 32, 24, motion));
+  }
 }
 
 // A conditioned branch starts as the plain one; once its FiLM weights move,
