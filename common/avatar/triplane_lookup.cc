@@ -20,13 +20,15 @@ struct Taps {
 // grid_sample's unnormalisation (align_corners false) and border clipping, in
 // its order of operations. Not a number reads the first texel rather than
 // memory outside the plane.
-float TexelPosition(float coordinate, int64_t resolution) {
+inline __attribute__((always_inline)) float TexelPosition(float coordinate, int64_t resolution) {
   if (std::isnan(coordinate)) return 0;
   const float half = static_cast<float>(resolution) / 2, last = static_cast<float>(resolution - 1);
   return std::clamp((coordinate + 1) * half - 0.5f, 0.f, last);
 }
 
-Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
+// Inlined: called per point and plane, where a call returns the taps
+// through memory.
+inline __attribute__((always_inline)) Taps PlaneTaps(float a, float b, int64_t resolution, int64_t channels) {
   const float ix = TexelPosition(a, resolution), iy = TexelPosition(b, resolution);
   // Truncation is the floor of these positions (never negative), without
   // floor's call into the maths library on a baseline x86-64 build.
