@@ -287,9 +287,9 @@ torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const 
       features.scalar_type() == torch::kFloat) {
     const torch::Tensor& texels = BlendTexels();
     const torch::Tensor weights = BlendWeights(expression).to(torch::kFloat).contiguous();
-    const torch::Tensor at = (canonical / extent_).clamp(-1, 1).to(torch::kFloat).contiguous();
+    const torch::Tensor unit = (canonical / extent_).clamp(-1, 1).to(torch::kFloat).contiguous();  // as LookUp
     AddBlendedLookUp({texels.data_ptr<float>(), blend_resolution_, texels.size(1), texels.size(2)},
-                     weights.data_ptr<float>(), at.data_ptr<float>(), at.size(0), features.data_ptr<float>());
+                     weights.data_ptr<float>(), unit.data_ptr<float>(), unit.size(0), features.data_ptr<float>());
     return features;
   }
   return features + LookUp(BlendedPlanes(expression), canonical);
@@ -396,12 +396,12 @@ namespace {
 using Float4 = float __attribute__((vector_size(16)));
 
 // Points [0, count): features x (count, kIn) through the branch into rows
-// y[at[i]]. a (kIn, kHidden) and ab: the first layer, FiLM folded in; c
+// y[row_of[i]]. a (kIn, kHidden) and ab: the first layer, FiLM folded in; c
 // (kHidden, kOut) and cb: the second; each row in Float4s.
 template <int kIn, int kHidden, int kOut>
-void BranchPoints(const float* __restrict x, const int64_t* __restrict at, int64_t count, const Float4* __restrict a,
-                  const Float4* __restrict ab, const Float4* __restrict c, const Float4* __restrict cb,
-                  float* __restrict y) {
+void BranchPoints(const float* __restrict x, const int64_t* __restrict row_of, int64_t count,
+                  const Float4* __restrict a, const Float4* __restrict ab, const Float4* __restrict c,
+                  const Float4* __restrict cb, float* __restrict y) {
   static_assert(kHidden % 4 == 0 && kOut % 4 == 0);
   constexpr int kH = kHidden / 4, kO = kOut / 4;
   for (int64_t i = 0; i < count; ++i) {
@@ -419,7 +419,7 @@ void BranchPoints(const float* __restrict x, const int64_t* __restrict at, int64
       const Float4 v = {s, s, s, s};
       for (int m = 0; m < kO; ++m) o[m] += v * c[j * kO + m];
     }
-    std::memcpy(y + at[i] * kOut, o, sizeof(o));
+    std::memcpy(y + row_of[i] * kOut, o, sizeof(o));
   }
 }
 
@@ -458,14 +458,14 @@ torch::Tensor SurfaceBranchRows(const torch::Tensor& features, const torch::Tens
   std::memcpy(pab, ab.data_ptr<float>(), kHidden * sizeof(float));
   std::memcpy(pc, c.data_ptr<float>(), kHidden * kOut * sizeof(float));
   std::memcpy(pcb, cb.data_ptr<float>(), kOut * sizeof(float));
-  const int64_t* at = index.data_ptr<int64_t>();
+  const int64_t* row_of = index.data_ptr<int64_t>();
   for (int64_t i = 0; i < p; ++i)
-    if (at[i] < 0 || at[i] >= num_rows) throw std::invalid_argument("SurfaceTerm: a pixel outside the image");
+    if (row_of[i] < 0 || row_of[i] >= num_rows) throw std::invalid_argument("SurfaceTerm: a pixel outside the image");
   torch::Tensor rows = background.to(torch::kFloat).expand({num_rows, kOut}).contiguous();
   const float* x = f.data_ptr<float>();
   float* y = rows.data_ptr<float>();
   at::parallel_for(0, p, 1024, [&](int64_t begin, int64_t end) {
-    BranchPoints<kIn, kHidden, kOut>(x + begin * kIn, at + begin, end - begin, pa, pab, pc, pcb, y);
+    BranchPoints<kIn, kHidden, kOut>(x + begin * kIn, row_of + begin, end - begin, pa, pab, pc, pcb, y);
   });
   return rows;
 }

@@ -105,7 +105,7 @@ void AddBlendedLookUp(const TexelMajorBlendshapes& shapes, const float* weights,
   std::vector<int32_t> list;
   for (int64_t t = 0; t < texels; ++t)
     if (touched[t]) list.push_back(static_cast<int32_t>(t));
-  // Untouched texels are never read: left uninitialised.
+  // Only touched texels are blended; the others, never read, keep zeros.
   std::vector<float> blended(texels * c);
   at::parallel_for(0, static_cast<int64_t>(list.size()), 64, [&](int64_t begin, int64_t end) {
     for (int64_t j = begin; j < end; ++j) {
