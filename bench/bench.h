@@ -18,7 +18,7 @@ struct BenchOptions {
   bool compare_headnerf = false;       // render: also run the HeadNeRF-sized configuration
   std::string avatar;                  // codec: measure the PSNR the codec costs with this avatar
   std::string video;                   // track: the video to track
-  std::string head_model = "builtin";  // track, train: head model (builtin or .npz)
+  std::string head_model = "builtin";  // track, train, render, ...: head model (builtin or .npz)
   std::string dataset;                 // train: a prepared dataset for the fine-tune figure; codec: its test split
   std::string recording;               // codec: a recording instead of the synthetic sequence
   int key_interval = 30;               // codec: key-frame interval

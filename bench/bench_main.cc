@@ -63,6 +63,9 @@ int main(int argc, char** argv) {
                     "an .hcavatar carrying a photometric anchor (prepared with one): also track as the sender does "
                     "with it, side by side");
   headmodel->add_option("--head-model", options.head_model, "also time this model .npz (builtin: only the built-in)");
+  render->add_option("--head-model", options.head_model,
+                     "builtin or a model .npz: the head the random avatars are made for (its expression count sets "
+                     "the texture blendshapes' cost)");
   auto* meshfit = app.add_subcommand("meshfit", "head model fitted to synthetic scans: weights vs uniform, topologies");
   meshfit->add_option("--trials", options.repeats, "scans per figure")->check(CLI::Range(1, 1000));
   meshfit->add_option("--json", options.json_path, "write the results to this JSON file");

@@ -5,7 +5,7 @@
 
 #include "bench/bench.h"
 #include "common/avatar/avatar_renderer.h"
-#include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
 
 namespace headcast::bench {
@@ -36,9 +36,9 @@ FrameParams MovingHead(const HeadModel& model, int i, bool skin_colour = false) 
   return p;
 }
 
-nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& config, int frames,
-                             AvatarRendererOptions renderer_options = {}, bool skin_colour = false) {
-  auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
+nlohmann::json MeasureConfig(const std::shared_ptr<const HeadModel>& model, const BenchOptions& options,
+                             const AvatarConfig& config, int frames, AvatarRendererOptions renderer_options = {},
+                             bool skin_colour = false) {
   Avatar avatar = Avatar::CreateRandom(config, *model, DefaultSubject(*model, config.output_size), 1);
   renderer_options.threads = options.threads;
   AvatarRenderer renderer(model, std::move(avatar), renderer_options);
@@ -85,10 +85,15 @@ nlohmann::json MeasureConfig(const BenchOptions& options, const AvatarConfig& co
 nlohmann::json RunRenderSuite(const BenchOptions& options) {
   nlohmann::json out;
   out["suite"] = "render";
-  out["what"] = "AvatarRenderer::Render on a random-initialised avatar (built-in head), one frame end to end, ms";
+  // A real head model's expression count sets what the texture's blendshapes
+  // and the head model's pass cost (ICT-FaceKit: 53 against the builtin's 13).
+  const auto model = std::make_shared<const HeadModel>(LoadHeadModelSpec(options.head_model));
+  out["what"] = "AvatarRenderer::Render on a random-initialised avatar, one frame end to end, ms";
+  out["head_model"] = model->data().name;
+  out["head_model_expressions"] = model->num_expression();
   out["resolution"] = options.resolution;
   const int frames = std::max(1, std::min(options.repeats, 1000));
-  const nlohmann::json ours = MeasureConfig(options, AvatarConfig::Default(options.resolution), frames);
+  const nlohmann::json ours = MeasureConfig(model, options, AvatarConfig::Default(options.resolution), frames);
   for (auto& [k, v] : ours.items()) out[k] = v;
   // A variant's timings, with `extra` fields that say what it is.
   auto timings = [](const nlohmann::json& m, nlohmann::json extra) {
@@ -98,62 +103,63 @@ nlohmann::json RunRenderSuite(const BenchOptions& options) {
   // The same frames with the other libtorch thread count, side by side.
   BenchOptions other = options;
   other.threads = options.threads == 1 ? 2 : 1;
-  out["other_thread_count"] =
-      timings(MeasureConfig(other, AvatarConfig::Default(options.resolution), frames), {{"threads", other.threads}});
+  out["other_thread_count"] = timings(MeasureConfig(model, other, AvatarConfig::Default(options.resolution), frames),
+                                      {{"threads", other.threads}});
   // The same frames with the surface texture a subject's avatar adds (its
   // raster at output resolution, texture look-up and per-pixel branch).
   AvatarConfig surface = AvatarConfig::Default(options.resolution);
   surface.surface_features = kSubjectSurfaceFeatures;
   out["with_surface"] =
-      timings(MeasureConfig(options, surface, frames), {{"surface_features", surface.surface_features}});
+      timings(MeasureConfig(model, options, surface, frames), {{"surface_features", surface.surface_features}});
   // And a subject's default avatar: the texture, its conditioned branch and
-  // expression blendshapes (as many as the builtin head's coefficients), and
+  // expression blendshapes (as many as the head model's coefficients), and
   // the bounded matte (its bound's dilations and polygon per frame, the
   // coverage's convolutions).
   AvatarConfig subject = AvatarConfig::Default(options.resolution);
   ApplySubjectDefaults(&subject);
   out["subject_default"] =
-      timings(MeasureConfig(options, subject, frames), {{"surface_features", subject.surface_features},
-                                                        {"surface_conditioned", subject.surface_conditioned},
-                                                        {"surface_blend", subject.surface_blend},
-                                                        {"matte", MatteModeName(subject.matte)}});
+      timings(MeasureConfig(model, options, subject, frames), {{"surface_features", subject.surface_features},
+                                                               {"surface_conditioned", subject.surface_conditioned},
+                                                               {"surface_blend", subject.surface_blend},
+                                                               {"matte", MatteModeName(subject.matte)}});
   // A subject's avatar with a two-level renderer: the feature map at output/4
   // (four times the rays, with the same reach beyond the silhouette) and half
   // the samples per ray.
   AvatarConfig two_levels = subject;
   ApplyTwoLevelRenderer(&two_levels);
   out["subject_two_levels"] =
-      timings(MeasureConfig(options, two_levels, frames), {{"renderer_channels", two_levels.renderer_channels},
-                                                           {"feature_size", two_levels.feature_size()},
-                                                           {"samples_per_ray", two_levels.samples_per_ray}});
+      timings(MeasureConfig(model, options, two_levels, frames), {{"renderer_channels", two_levels.renderer_channels},
+                                                                  {"feature_size", two_levels.feature_size()},
+                                                                  {"samples_per_ray", two_levels.samples_per_ray}});
   // The subject's default without the covered parts apart (the thesis's
   // head-frame samples keep them together), side by side: what the covered
   // faces' look-up and move cost per frame.
   AvatarConfig together = subject;
   together.covered_apart = false;
   out["subject_covered_together"] =
-      timings(MeasureConfig(options, together, frames), {{"covered_apart", together.covered_apart}});
+      timings(MeasureConfig(model, options, together, frames), {{"covered_apart", together.covered_apart}});
   // The subject's default with frames that carry the camera's skin colour, as
   // a default sender's do: the receiver measures its picture's skin and scales
   // the head to match (in the "convert" stage).
   out["subject_default_skin_colour"] =
-      timings(MeasureConfig(options, subject, frames, {}, true), {{"skin_colour", true}});
+      timings(MeasureConfig(model, options, subject, frames, {}, true), {{"skin_colour", true}});
   // The subject's default again with the convolutions on images in libtorch's
   // default layout (channels first), side by side: what channels-last buys.
   AvatarRendererOptions channels_first;
   channels_first.channels_last = false;
   out["subject_default_channels_first"] =
-      timings(MeasureConfig(options, subject, frames, channels_first), nlohmann::json::object());
+      timings(MeasureConfig(model, options, subject, frames, channels_first), nlohmann::json::object());
   if (options.threads > 1) {
     // And with the stages one after the other (AvatarBackendOptions::parallel_stages off).
     AvatarRendererOptions serial;
     serial.parallel_stages = false;
     out["subject_default_serial_stages"] =
-        timings(MeasureConfig(options, subject, frames, serial), nlohmann::json::object());
+        timings(MeasureConfig(model, options, subject, frames, serial), nlohmann::json::object());
   }
   if (options.compare_headnerf) {
     // The same pipeline at HeadNeRF's size (only defined at 256: 32x32 feature map).
-    out["headnerf_sized"] = MeasureConfig(options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));
+    out["headnerf_sized"] =
+        MeasureConfig(model, options, AvatarConfig::HeadNeRFSized(), std::max(1, std::min(frames, 3)));
     out["speedup_vs_headnerf_sized"] =
         out["headnerf_sized"]["ms_median"].get<double>() / ours["ms_median"].get<double>();
   }

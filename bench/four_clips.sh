@@ -80,7 +80,8 @@ done
 for r in 256 512; do
   [ "$render" = 1 ] || break
   step "render ${r}²"
-  run "render_$r.log" "$bin/headcast-bench" render --resolution $r --repeats 100 --json "$out/render_$r.json"
+  run "render_$r.log" "$bin/headcast-bench" render --resolution $r --repeats 100 --head-model "$model" \
+    --json "$out/render_$r.json"
 done
 
 "$python" - "$out" "$command" "$iterations" $clips <<'EOF'
@@ -125,6 +126,8 @@ for r in ("256", "512"):
     # Frames that carry a skin colour, as a default sender's do (the receiver then matches it).
     render[r] = {k: j["subject_default_skin_colour"][k] for k in ("fps_median", "ms_median", "ms_p95")}
     render[r]["threads"] = j["threads"]
+    render[r]["head_model"] = j.get("head_model", "builtin")
+    render[r]["expressions"] = j.get("head_model_expressions")
 result = {"command": command, "iterations": iterations, "rows": rows, "render_subject_default": render}
 json.dump(result, open(os.path.join(out, "four_clips.json"), "w"), indent=2)
 def f(v, fmt):
@@ -156,8 +159,8 @@ for x in rows:
     cell = lambda k: " / ".join(f((fit.get(k) or {}).get(r), ".4f") for r in regions)
     L.append(f"| {x['clip']} | {cell('truth_vs_fit_moving')} | {cell('avatar_vs_fit_moving')} |")
 L += [] if not render else ["", "Receiver: each clip's avatar in the table (`headcast-avatar render AVATAR --head-model ict.npz --display none --pacing none --threads 2 --synthetic 150`); "
-      "a random avatar of the default subject configuration (headcast-bench render, the builtin head's 13 expression coefficients: surface texture with its conditioned branch and expression blendshapes, bounded matte, frames carrying a skin colour to match): " +
-      "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads)"
+      "a random avatar of the default subject configuration (headcast-bench render --head-model ict.npz: surface texture with its conditioned branch and expression blendshapes, bounded matte, frames carrying a skin colour to match): " +
+      "; ".join(f"{r}²: {v['fps_median']:.1f} fps median, p95 {v['ms_p95']:.1f} ms ({v['threads']} threads, {v['head_model']}, {v['expressions']} expression coefficients)"
                 for r, v in render.items())]
 open(os.path.join(out, "four_clips.md"), "w").write("\n".join(L) + "\n")
 print("\n".join(L))
