@@ -80,6 +80,7 @@ HeadModel::HeadModel(HeadModelData data) : data_(std::move(data)) {
         pupils_[e] = i;
   }
   has_posedirs_ = data_.posedirs.size() > 0 && data_.posedirs.cwiseAbs().maxCoeff() > 0.f;
+  expression_rows_ = data_.expressiondirs;
 
   Eigen::Matrix<float, kNumLandmarks, 3, Eigen::RowMajor> rest;
   ComputeLandmarks(data_.v_template, PoseVector::Zero(), &rest);
@@ -239,7 +240,7 @@ void HeadModel::Forward(const HeadIdentity& identity, const Eigen::VectorXd& exp
     const int rows = 3 * (end - begin);
     Eigen::Map<Eigen::VectorXf> v(out->vertices.data() + 3 * begin, rows);
     v = identity.v_shaped.segment(3 * begin, rows);
-    if (e > 0) v.noalias() += data_.expressiondirs.block(3 * begin, 0, rows, e) * psi;
+    if (e > 0) v.noalias() += expression_rows_.block(3 * begin, 0, rows, e) * psi;
     if (has_posedirs_) v.noalias() += data_.posedirs.middleRows(3 * begin, rows) * feature;
     for (int i = begin; i < end; ++i) {
       Eigen::Matrix<float, 3, 4> T = Eigen::Matrix<float, 3, 4>::Zero();

@@ -158,6 +158,10 @@ class HeadModel {
   // Joint regressor applied to the bases, so joints cost 15 x (S or E) per frame.
   Eigen::Matrix<float, kNumHeadJoints * 3, Eigen::Dynamic> j_shapedirs_, j_expressiondirs_;
   Eigen::Matrix<float, kNumHeadJoints, 3, Eigen::RowMajor> j_template_;
+  // The expression basis row after row (3N x E): Forward's blend is then a dot
+  // product per coordinate that streams the basis once, where the
+  // column-major product walks the output E times.
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> expression_rows_;
   // Sparse skinning weights: for vertex i, entries [skin_begin_[i], skin_begin_[i+1]).
   std::vector<int> skin_begin_;
   std::vector<int> skin_joint_;
