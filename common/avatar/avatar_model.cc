@@ -276,23 +276,25 @@ void SurfaceTextureImpl::UseChannelsLast() {
 
 torch::Tensor SurfaceTextureImpl::forward(const torch::Tensor& canonical, const torch::Tensor& posed,
                                           const torch::Tensor& expression) {
-  torch::Tensor features = LookUp(planes_, canonical);
+  // The canonical points in the planes' [-1, 1], once for the texture and its blendshapes.
+  const torch::Tensor unit = UnitPoints(canonical);
+  torch::Tensor features = LookUp(planes_, unit);
   if (rigid()) {
     if (!posed.defined() || posed.sizes() != canonical.sizes())
       throw std::invalid_argument("SurfaceTexture: a rigid texture needs the posed points of the canonical ones");
-    features = features + LookUp(rigid_planes_, posed);
+    features = features + LookUp(rigid_planes_, UnitPoints(posed));
   }
   if (!blended()) return features;
   if (channels_last_ && !torch::GradMode::is_enabled() && features.is_contiguous() &&
       features.scalar_type() == torch::kFloat) {
     const torch::Tensor& texels = BlendTexels();
     const torch::Tensor weights = BlendWeights(expression).to(torch::kFloat).contiguous();
-    const torch::Tensor unit = (canonical / extent_).clamp(-1, 1).to(torch::kFloat).contiguous();  // as LookUp
+    const torch::Tensor at = unit.to(torch::kFloat).contiguous();
     AddBlendedLookUp({texels.data_ptr<float>(), blend_resolution_, texels.size(1), texels.size(2)},
-                     weights.data_ptr<float>(), unit.data_ptr<float>(), unit.size(0), features.data_ptr<float>());
+                     weights.data_ptr<float>(), at.data_ptr<float>(), at.size(0), features.data_ptr<float>());
     return features;
   }
-  return features + LookUp(BlendedPlanes(expression), canonical);
+  return features + LookUp(BlendedPlanes(expression), unit);
 }
 
 const torch::Tensor& SurfaceTextureImpl::BlendTexels() {
@@ -313,9 +315,12 @@ torch::Tensor SurfaceTextureImpl::BlendedPlanes(const torch::Tensor& expression)
   return torch::mm(BlendWeights(expression), blend_).view({3, b, b, c}).permute({0, 3, 1, 2});
 }
 
-torch::Tensor SurfaceTextureImpl::LookUp(const torch::Tensor& planes, const torch::Tensor& points) const {
-  const int64_t p = points.size(0);
-  const torch::Tensor u = (points / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
+torch::Tensor SurfaceTextureImpl::UnitPoints(const torch::Tensor& points) const {
+  return (points / extent_).clamp(-1, 1);  // grid_sample's [-1, 1]
+}
+
+torch::Tensor SurfaceTextureImpl::LookUp(const torch::Tensor& planes, const torch::Tensor& u) const {
+  const int64_t p = u.size(0);
   if (channels_last_ && !torch::GradMode::is_enabled() && planes.is_contiguous(torch::MemoryFormat::ChannelsLast)) {
     const torch::Tensor at = u.to(torch::kFloat).contiguous();
     torch::Tensor features = torch::empty({p, planes.size(1)}, at.options());

@@ -140,7 +140,8 @@ class SurfaceTextureImpl : public torch::nn::Module {
   const void* blend_texels_source_ = nullptr;
   const torch::Tensor& BlendTexels();
   torch::Tensor BlendedPlanes(const torch::Tensor& expression) const;  // -> (3, C, B, B), channels-last strides
-  torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& points) const;
+  torch::Tensor UnitPoints(const torch::Tensor& points) const;         // model-frame metres -> the planes' [-1, 1]
+  torch::Tensor LookUp(const torch::Tensor& planes, const torch::Tensor& u) const;  // u: UnitPoints
 };
 TORCH_MODULE(SurfaceTexture);
 
