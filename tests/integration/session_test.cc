@@ -110,8 +110,11 @@ class SessionTest : public ::testing::Test {
     for (int i = 0; i < 5; ++i) client.Submit(SyntheticTalkingHead(Model(), i));
     EXPECT_TRUE(WaitFor([&] { return collector_.Total() >= before + 5; }, 5));
   }
-  std::unique_ptr<ReceiverServer> server_;
+  // The collector outlives the server: a session may still be delivering
+  // frames while the server shuts down (a sender cancels its stream right
+  // after Bye, and the receiver drains what it already holds).
   Collector collector_;
+  std::unique_ptr<ReceiverServer> server_;
 };
 
 // Streams 120 frames (and two invalid ones) with `options` and checks that
