@@ -322,7 +322,8 @@ TEST_F(SessionTest, GarbageBytesOnTheStreamEndOnlyThatSession) {
   bool ok;
   call->StartCall(reinterpret_cast<void*>(1));
   ASSERT_TRUE(cq.Next(&tag, &ok));
-  grpc::Slice junk("\xff\xfe\x00 not a protobuf \x01\x02\x03", 24);
+  const char bytes[] = "\xff\xfe\x00 not a protobuf \x01\x02\x03";
+  grpc::Slice junk(bytes, sizeof bytes - 1);  // the bytes without the literal's closing zero
   grpc::ByteBuffer buffer(&junk, 1);
   call->Write(buffer, reinterpret_cast<void*>(2));
   ASSERT_TRUE(cq.Next(&tag, &ok));
