@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "common/avatar/shuffle_blur.h"
 #include "common/avatar/triplane_lookup.h"
 
 namespace headcast {
@@ -190,12 +191,24 @@ torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWi
   const int64_t h = x.size(2), w = x.size(3);
   const int64_t iy0 = std::max<int64_t>(cy0 - 2, 0), iy1 = std::min<int64_t>(cy1 + 2, h);
   const int64_t ix0 = std::max<int64_t>(cx0 - 2, 0), ix1 = std::min<int64_t>(cx1 + 2, w);
-  const torch::Tensor g = F::leaky_relu(global_->forward(x.slice(2, iy0, iy1).slice(3, ix0, ix1) * global_se_->Scale(x))
-                                            .slice(2, cy0 - iy0, cy1 - iy0)
-                                            .slice(3, cx0 - ix0, cx1 - ix0),
-                                        leaky);
-  const torch::Tensor l =
-      F::leaky_relu(Conv1x1(*local_, x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x)), leaky);
+  const torch::Tensor global = global_->forward(x.slice(2, iy0, iy1).slice(3, ix0, ix1) * global_se_->Scale(x))
+                                   .slice(2, cy0 - iy0, cy1 - iy0)
+                                   .slice(3, cx0 - ix0, cx1 - ix0);
+  const torch::Tensor local = Conv1x1(*local_, x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x));
+  if (!torch::GradMode::is_enabled() && x.size(0) == 1 && global.scalar_type() == torch::kFloat &&
+      local.scalar_type() == torch::kFloat && global.stride(1) == 1 && local.stride(1) == 1) {
+    // Inference on channels-last images: the rest in one pass (ShuffleBlur),
+    // not six libtorch operations each writing a picture.
+    torch::Tensor out = torch::empty({1, global.size(1) / 4, window.height(), window.width()},
+                                     global.options().memory_format(torch::MemoryFormat::ChannelsLast));
+    const auto view = [](const torch::Tensor& t) {
+      return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
+    };
+    ShuffleBlur(view(global), view(local), 0.2f, {cy0, cx0, height, width, window.y0, window.y1, window.x0, window.x1},
+                out.data_ptr<float>());
+    return out;
+  }
+  const torch::Tensor g = F::leaky_relu(global, leaky), l = F::leaky_relu(local, leaky);
   const torch::Tensor up =
       shuffle_->forward(g + l).slice(2, uy0 - 2 * cy0, uy1 - 2 * cy0).slice(3, ux0 - 2 * cx0, ux1 - 2 * cx0);
   // Anti-aliasing blur (depthwise binomial) against PixelShuffle's checkerboard,

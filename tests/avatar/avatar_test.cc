@@ -12,6 +12,7 @@
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
+#include "common/avatar/shuffle_blur.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
@@ -21,6 +22,8 @@
 
 namespace headcast {
 namespace {
+
+namespace F = torch::nn::functional;
 
 AvatarConfig Tiny() { return testing::TinyAvatarConfig(); }
 
@@ -218,6 +221,89 @@ TEST(NeuralRenderer, AWindowOrChannelsLastDrawTheSamePixels) {
   const torch::Tensor after = net->forward(x, term_last, &alpha_after);
   EXPECT_LT((after - before).abs().max().item<float>(), 1e-5);
   EXPECT_LT((alpha_after - alpha_before).abs().max().item<float>(), 1e-4);
+}
+
+// The receiver's path, channels-last without gradients, where each upsampling
+// block ends in one pass (ShuffleBlur): the pixels the layers draw.
+TEST(NeuralRenderer, TheReceiversOnePassUpsamplingDrawsWhatTheLayersDraw) {
+  AvatarConfig c = Tiny();
+  c.matte = MatteMode::kLearned;
+  NeuralRenderer net(c);
+  torch::manual_seed(7);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->parameters()) p.copy_(0.3 * torch::randn_like(p));
+  }
+  const torch::Tensor x = torch::randn({1, 8, 16, 16});
+  const std::vector<ImageWindow> windows = {ImageWindow{0, 128, 0, 128}, ImageWindow{0, 2, 126, 128},
+                                            ImageWindow{10, 64, 0, 50}, ImageWindow{2, 4, 6, 8}};
+  std::vector<torch::Tensor> layers, layers_alpha;
+  for (const ImageWindow& w : windows) {  // gradients on: libtorch's layers
+    layers_alpha.emplace_back();
+    layers.push_back(net->forward(x, {}, &layers_alpha.back(), &w).detach());
+    layers_alpha.back() = layers_alpha.back().detach();
+  }
+  net->UseChannelsLast();
+  torch::NoGradGuard no_grad;
+  for (size_t i = 0; i < windows.size(); ++i) {
+    torch::Tensor alpha;
+    const torch::Tensor one_pass = net->forward(x, {}, &alpha, &windows[i]);
+    EXPECT_LT((one_pass - layers[i]).abs().max().item<float>(), 1e-5) << i;
+    EXPECT_LT((alpha - layers_alpha[i]).abs().max().item<float>(), 1e-4) << i;
+  }
+}
+
+// ShuffleBlur against the layers it stands for: leaky ReLUs, sum, PixelShuffle,
+// edge-replicating pad and the binomial blur; on views into larger pictures,
+// for windows anywhere, from the branches' pixels the window needs or more.
+TEST(ShuffleBlur, IsTheUpsamplingBlocksTailInOnePass) {
+  torch::manual_seed(11);
+  const int64_t c = 4, h = 6, w = 7, height = 2 * h, width = 2 * w;
+  const auto last = torch::MemoryFormat::ChannelsLast;
+  const torch::Tensor global_picture = torch::randn({1, 4 * c, h + 2, w + 3}).contiguous(last);
+  const torch::Tensor local_picture = torch::randn({1, 4 * c, h + 3, w + 2}).contiguous(last);
+  const torch::Tensor global = global_picture.slice(2, 1, 1 + h).slice(3, 2, 2 + w);
+  const torch::Tensor local = local_picture.slice(2, 2, 2 + h).slice(3, 1, 1 + w);
+  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  const torch::Tensor shuffled = F::pixel_shuffle(F::leaky_relu(global, leaky) + F::leaky_relu(local, leaky), 2);
+  const torch::Tensor k1 = torch::tensor({1.f, 2.f, 1.f});
+  const torch::Tensor blur = (torch::outer(k1, k1) / 16).view({1, 1, 3, 3}).repeat({c, 1, 1, 1});
+  const torch::Tensor want = F::conv2d(F::pad(shuffled, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate)), blur,
+                                       F::Conv2dFuncOptions().groups(c));
+  const auto view = [](const torch::Tensor& t) {
+    return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
+  };
+  struct Case {
+    int64_t y0, y1, x0, x1;
+  };
+  for (const Case& k :
+       {Case{0, height, 0, width}, Case{0, 1, 0, 1}, Case{3, 8, 5, 6}, Case{11, 12, 13, 14}, Case{4, 10, 0, width}}) {
+    for (const bool just_enough : {false, true}) {
+      // All the branches' pixels, or only the rows and columns under the window and the blur's reach.
+      const int64_t r0 = just_enough ? std::max<int64_t>(k.y0 - 1, 0) / 2 : 0;
+      const int64_t r1 = just_enough ? (std::min(k.y1 + 1, height) + 1) / 2 : h;
+      const int64_t c0 = just_enough ? std::max<int64_t>(k.x0 - 1, 0) / 2 : 0;
+      const int64_t c1 = just_enough ? (std::min(k.x1 + 1, width) + 1) / 2 : w;
+      const torch::Tensor g = global.slice(2, r0, r1).slice(3, c0, c1), l = local.slice(2, r0, r1).slice(3, c0, c1);
+      std::vector<float> out((k.y1 - k.y0) * (k.x1 - k.x0) * c, -1.f);
+      ShuffleBlur(view(g), view(l), 0.2f, {r0, c0, height, width, k.y0, k.y1, k.x0, k.x1}, out.data());
+      const torch::Tensor got = torch::from_blob(out.data(), {1, k.y1 - k.y0, k.x1 - k.x0, c}).permute({0, 3, 1, 2});
+      const torch::Tensor expected = want.slice(2, k.y0, k.y1).slice(3, k.x0, k.x1);
+      EXPECT_LT((got - expected).abs().max().item<float>(), 1e-6) << k.y0 << " " << k.x0 << " " << just_enough;
+    }
+  }
+  // A window whose blur reaches beyond the pixels given, or branches that differ, are refused.
+  std::vector<float> out(64 * c);
+  const torch::Tensor top = global.slice(2, 0, 2);
+  EXPECT_THROW(ShuffleBlur(view(top), view(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 4, 0, 2}, out.data()),
+               std::invalid_argument);
+  EXPECT_NO_THROW(
+      ShuffleBlur(view(top), view(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 3, 0, 2}, out.data()));
+  EXPECT_THROW(
+      ShuffleBlur(view(global), view(local.slice(1, 0, 8)), 0.2f, {0, 0, height, width, 0, 2, 0, 2}, out.data()),
+      std::invalid_argument);
+  EXPECT_THROW(ShuffleBlur(view(global), view(local), 0.2f, {0, 0, height, width, 0, height + 2, 0, 2}, out.data()),
+               std::invalid_argument);
 }
 
 TEST(NeuralRenderer, TwoLevelsUpsampleFourTimesAndAWindowDrawsTheSamePixels) {
