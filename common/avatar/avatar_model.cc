@@ -117,14 +117,18 @@ SqueezeExcitationImpl::SqueezeExcitationImpl(int channels, int reduction) {
   up_ = register_module("up", torch::nn::Linear(hidden, channels));
 }
 
-torch::Tensor SqueezeExcitationImpl::Scale(const torch::Tensor& x) {
-  const torch::Tensor squeezed = x.mean({2, 3});  // (B, C)
-  return torch::sigmoid(up_->forward(torch::relu(down_->forward(squeezed)))).unsqueeze(2).unsqueeze(3);
+torch::Tensor SqueezeExcitationImpl::Scale(const torch::Tensor& x) { return ScaleOfMeans(x.mean({2, 3})); }
+
+torch::Tensor SqueezeExcitationImpl::ScaleOfMeans(const torch::Tensor& means) {
+  return torch::sigmoid(up_->forward(torch::relu(down_->forward(means)))).unsqueeze(2).unsqueeze(3);
 }
 
 torch::Tensor SqueezeExcitationImpl::forward(const torch::Tensor& x) { return x * Scale(x); }
 
 namespace {
+
+// The renderer's LeakyReLU slope, in libtorch's layers and in the one-pass kernels alike.
+constexpr float kLeakySlope = 0.2f;
 
 // A 1x1 convolution. Without gradients on a channels-last image, oneDNN's
 // kernel: on one thread libtorch sends a small batch's 1x1 convolutions
@@ -185,16 +189,19 @@ torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWi
   const int64_t uy0 = std::max<int64_t>(window.y0 - 1, 0), uy1 = std::min<int64_t>(window.y1 + 1, height);
   const int64_t ux0 = std::max<int64_t>(window.x0 - 1, 0), ux1 = std::min<int64_t>(window.x1 + 1, width);
   const int64_t cy0 = uy0 / 2, cy1 = (uy1 + 1) / 2, cx0 = ux0 / 2, cx1 = (ux1 + 1) / 2;
-  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(kLeakySlope);
   // The dilated 3x3 on the input pixels it reads, with its own zero padding:
   // right beyond the picture, and sliced off again where real pixels lay there.
   const int64_t h = x.size(2), w = x.size(3);
   const int64_t iy0 = std::max<int64_t>(cy0 - 2, 0), iy1 = std::min<int64_t>(cy1 + 2, h);
   const int64_t ix0 = std::max<int64_t>(cx0 - 2, 0), ix1 = std::min<int64_t>(cx1 + 2, w);
-  const torch::Tensor global = global_->forward(x.slice(2, iy0, iy1).slice(3, ix0, ix1) * global_se_->Scale(x))
-                                   .slice(2, cy0 - iy0, cy1 - iy0)
-                                   .slice(3, cx0 - ix0, cx1 - ix0);
-  const torch::Tensor local = Conv1x1(*local_, x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->Scale(x));
+  const torch::Tensor means = x.mean({2, 3});  // both squeezes average the same picture
+  const torch::Tensor global =
+      global_->forward(x.slice(2, iy0, iy1).slice(3, ix0, ix1) * global_se_->ScaleOfMeans(means))
+          .slice(2, cy0 - iy0, cy1 - iy0)
+          .slice(3, cx0 - ix0, cx1 - ix0);
+  const torch::Tensor local =
+      Conv1x1(*local_, x.slice(2, cy0, cy1).slice(3, cx0, cx1) * local_se_->ScaleOfMeans(means));
   if (!torch::GradMode::is_enabled() && x.size(0) == 1 && global.scalar_type() == torch::kFloat &&
       local.scalar_type() == torch::kFloat && global.stride(1) == 1 && local.stride(1) == 1) {
     // Inference on channels-last images: the rest in one pass (ShuffleBlur),
@@ -204,8 +211,8 @@ torch::Tensor UpsamplingBlockImpl::forward(const torch::Tensor& x, const ImageWi
     const auto view = [](const torch::Tensor& t) {
       return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
     };
-    ShuffleBlur(view(global), view(local), 0.2f, {cy0, cx0, height, width, window.y0, window.y1, window.x0, window.x1},
-                out.data_ptr<float>());
+    ShuffleBlur(view(global), view(local), kLeakySlope,
+                {cy0, cx0, height, width, window.y0, window.y1, window.x0, window.x1}, out.data_ptr<float>());
     return out;
   }
   const torch::Tensor g = F::leaky_relu(global, leaky), l = F::leaky_relu(local, leaky);
@@ -430,7 +437,7 @@ void BranchPoints(const float* __restrict x, const int64_t* __restrict row_of, i
       const Float4 v = {s, s, s, s};
       for (int j = 0; j < kH; ++j) h[j] += v * a[k * kH + j];
     }
-    for (int j = 0; j < kH; ++j) h[j] = h[j] > 0 ? h[j] : h[j] * 0.2f;  // LeakyReLU(0.2), without branches
+    for (int j = 0; j < kH; ++j) h[j] = h[j] > 0 ? h[j] : h[j] * kLeakySlope;  // LeakyReLU, without branches
     for (int m = 0; m < kO; ++m) o[m] = cb[m];
     for (int j = 0; j < kHidden; ++j) {
       const float s = h[j / 4][j % 4];
@@ -493,7 +500,7 @@ torch::Tensor SurfaceBranchRows(const torch::Tensor& features, const torch::Tens
 torch::Tensor NeuralRendererImpl::SurfaceTerm(const torch::Tensor& features, const torch::Tensor& pixels, int height,
                                               int width, const torch::Tensor& motion) {
   if (!surface_out_) throw std::logic_error("SurfaceTerm: this renderer has no surface branch");
-  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(0.2);
+  const auto leaky = F::LeakyReLUFuncOptions().negative_slope(kLeakySlope);
   torch::Tensor scale, shift;  // (1, hidden) each, once per frame
   if (surface_film_) {
     if (!motion.defined() || motion.dim() != 2 || motion.size(1) != surface_film_->weight.size(1))
@@ -558,7 +565,7 @@ torch::Tensor NeuralRendererImpl::forward(const torch::Tensor& feature_map, cons
                       pooled.contiguous(x.suggest_memory_format()));
     }
     x = F::leaky_relu(Conv1x1(*post_[k]->as<torch::nn::Conv2dImpl>(), x),
-                      F::LeakyReLUFuncOptions().negative_slope(0.2));
+                      F::LeakyReLUFuncOptions().negative_slope(kLeakySlope));
     rgb = rgb + Conv1x1(*to_rgb_[k]->as<torch::nn::Conv2dImpl>(), x);
     if (matte) alpha = UpsampleWindow(alpha, w) + Conv1x1(*to_alpha_[k]->as<torch::nn::Conv2dImpl>(), x);
   }

@@ -63,6 +63,8 @@ class SqueezeExcitationImpl : public torch::nn::Module {
   SqueezeExcitationImpl(int channels, int reduction = 4);
   torch::Tensor forward(const torch::Tensor& x);
   torch::Tensor Scale(const torch::Tensor& x);  // (B, C, 1, 1): what forward multiplies x by
+  // The same from x's channel means (B, C), when another block shares them.
+  torch::Tensor ScaleOfMeans(const torch::Tensor& means);
 
  private:
   torch::nn::Linear down_{nullptr}, up_{nullptr};
