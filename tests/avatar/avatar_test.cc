@@ -253,12 +253,8 @@ TEST(NeuralRenderer, TheReceiversOnePassUpsamplingDrawsWhatTheLayersDraw) {
   }
 }
 
-// ShuffleBlur against the layers it stands for: leaky ReLUs, sum, PixelShuffle,
-// edge-replicating pad and the binomial blur; on views into larger pictures,
-// for windows anywhere, from the branches' pixels the window needs or more.
-TEST(ShuffleBlur, IsTheUpsamplingBlocksTailInOnePass) {
-  torch::manual_seed(11);
-  const int64_t c = 4, h = 6, w = 7, height = 2 * h, width = 2 * w;
+void ShuffleBlurAgainstTheLayers(int64_t c) {
+  const int64_t h = 6, w = 7, height = 2 * h, width = 2 * w;
   const auto last = torch::MemoryFormat::ChannelsLast;
   const torch::Tensor global_picture = torch::randn({1, 4 * c, h + 2, w + 3}).contiguous(last);
   const torch::Tensor local_picture = torch::randn({1, 4 * c, h + 3, w + 2}).contiguous(last);
@@ -289,9 +285,26 @@ TEST(ShuffleBlur, IsTheUpsamplingBlocksTailInOnePass) {
       ShuffleBlur(view(g), view(l), 0.2f, {r0, c0, height, width, k.y0, k.y1, k.x0, k.x1}, out.data());
       const torch::Tensor got = torch::from_blob(out.data(), {1, k.y1 - k.y0, k.x1 - k.x0, c}).permute({0, 3, 1, 2});
       const torch::Tensor expected = want.slice(2, k.y0, k.y1).slice(3, k.x0, k.x1);
-      EXPECT_LT((got - expected).abs().max().item<float>(), 1e-6) << k.y0 << " " << k.x0 << " " << just_enough;
+      EXPECT_LT((got - expected).abs().max().item<float>(), 1e-6)
+          << c << " channels, " << k.y0 << " " << k.x0 << " " << just_enough;
     }
   }
+}
+
+// ShuffleBlur against the layers it stands for: leaky ReLUs, sum, PixelShuffle,
+// edge-replicating pad and the binomial blur; on views into larger pictures,
+// for windows anywhere, from the branches' pixels the window needs or more.
+TEST(ShuffleBlur, IsTheUpsamplingBlocksTailInOnePass) {
+  torch::manual_seed(11);
+  for (const int64_t c : {4, 8, 12, 24})  // the kernel's unrolled widths and another
+    ShuffleBlurAgainstTheLayers(c);
+  const int64_t c = 4, h = 6, w = 7, height = 2 * h, width = 2 * w;
+  const auto last = torch::MemoryFormat::ChannelsLast;
+  const torch::Tensor global = torch::randn({1, 4 * c, h, w}).contiguous(last);
+  const torch::Tensor local = torch::randn({1, 4 * c, h, w}).contiguous(last);
+  const auto view = [](const torch::Tensor& t) {
+    return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
+  };
   // A window whose blur reaches beyond the pixels given, or branches that differ, are refused.
   std::vector<float> out(64 * c);
   const torch::Tensor top = global.slice(2, 0, 2);
