@@ -164,6 +164,12 @@ int Run(ReceiverFlags& f) {
   }
   ReceiverServer server(f.server, catalog);
   StreamTaps taps(f, *model, avatars.begin()->second->subject());
+  // The server stops before the taps go, however this ends: sessions hand
+  // frames to the taps until then (Shutdown waits for them; a second call is nothing).
+  struct ShutdownFirst {
+    ReceiverServer& server;
+    ~ShutdownFirst() { server.Shutdown(); }
+  } shutdown_first{server};
   if (taps.active()) server.SetFrameObserver([&](const std::string& id, const FrameParams& p) { taps(id, p); });
   server.Start();
   // Under systemd (Type=notify): ready once listening; the watchdog hears
