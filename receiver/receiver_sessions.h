@@ -110,7 +110,9 @@ class ReceiverSessions {
   ServerCounters counters() const;
   // Called with every decoded, valid frame (from the sessions' threads), e.g.
   // to record the stream. Set before the first session. An exception from it
-  // ends that session with kInternal.
+  // ends that session with kInternal. What it uses must outlive the sessions:
+  // they call it until the server has shut down (declare it before the server,
+  // or shut the server down before it goes).
   void SetFrameObserver(std::function<void(const std::string& session_id, const FrameParams&)> observer);
   // Sends a datagram to a peer (as TakeDatagram was told it); false if it could not.
   using DatagramReply = std::function<bool(const std::string& peer, const std::string& datagram)>;

@@ -253,6 +253,11 @@ TEST(NeuralRenderer, TheReceiversOnePassUpsamplingDrawsWhatTheLayersDraw) {
   }
 }
 
+// A (1, C, H, W) float tensor with its channels side by side, as the one-pass kernels read it.
+ChannelsLastView View(const torch::Tensor& t) {
+  return {t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
+}
+
 void ShuffleBlurAgainstTheLayers(int64_t c) {
   const int64_t h = 6, w = 7, height = 2 * h, width = 2 * w;
   const auto last = torch::MemoryFormat::ChannelsLast;
@@ -266,9 +271,6 @@ void ShuffleBlurAgainstTheLayers(int64_t c) {
   const torch::Tensor blur = (torch::outer(k1, k1) / 16).view({1, 1, 3, 3}).repeat({c, 1, 1, 1});
   const torch::Tensor want = F::conv2d(F::pad(shuffled, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate)), blur,
                                        F::Conv2dFuncOptions().groups(c));
-  const auto view = [](const torch::Tensor& t) {
-    return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
-  };
   struct Case {
     int64_t y0, y1, x0, x1;
   };
@@ -282,7 +284,7 @@ void ShuffleBlurAgainstTheLayers(int64_t c) {
       const int64_t c1 = just_enough ? (std::min(k.x1 + 1, width) + 1) / 2 : w;
       const torch::Tensor g = global.slice(2, r0, r1).slice(3, c0, c1), l = local.slice(2, r0, r1).slice(3, c0, c1);
       std::vector<float> out((k.y1 - k.y0) * (k.x1 - k.x0) * c, -1.f);
-      ShuffleBlur(view(g), view(l), 0.2f, {r0, c0, height, width, k.y0, k.y1, k.x0, k.x1}, out.data());
+      ShuffleBlur(View(g), View(l), 0.2f, {r0, c0, height, width, k.y0, k.y1, k.x0, k.x1}, out.data());
       const torch::Tensor got = torch::from_blob(out.data(), {1, k.y1 - k.y0, k.x1 - k.x0, c}).permute({0, 3, 1, 2});
       const torch::Tensor expected = want.slice(2, k.y0, k.y1).slice(3, k.x0, k.x1);
       EXPECT_LT((got - expected).abs().max().item<float>(), 1e-6)
@@ -302,20 +304,17 @@ TEST(ShuffleBlur, IsTheUpsamplingBlocksTailInOnePass) {
   const auto last = torch::MemoryFormat::ChannelsLast;
   const torch::Tensor global = torch::randn({1, 4 * c, h, w}).contiguous(last);
   const torch::Tensor local = torch::randn({1, 4 * c, h, w}).contiguous(last);
-  const auto view = [](const torch::Tensor& t) {
-    return ChannelsLastView{t.data_ptr<float>(), t.size(2), t.size(3), t.size(1), t.stride(2), t.stride(3)};
-  };
   // A window whose blur reaches beyond the pixels given, or branches that differ, are refused.
   std::vector<float> out(64 * c);
   const torch::Tensor top = global.slice(2, 0, 2);
-  EXPECT_THROW(ShuffleBlur(view(top), view(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 4, 0, 2}, out.data()),
+  EXPECT_THROW(ShuffleBlur(View(top), View(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 4, 0, 2}, out.data()),
                std::invalid_argument);
   EXPECT_NO_THROW(
-      ShuffleBlur(view(top), view(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 3, 0, 2}, out.data()));
+      ShuffleBlur(View(top), View(local.slice(2, 0, 2)), 0.2f, {0, 0, height, width, 2, 3, 0, 2}, out.data()));
   EXPECT_THROW(
-      ShuffleBlur(view(global), view(local.slice(1, 0, 8)), 0.2f, {0, 0, height, width, 0, 2, 0, 2}, out.data()),
+      ShuffleBlur(View(global), View(local.slice(1, 0, 8)), 0.2f, {0, 0, height, width, 0, 2, 0, 2}, out.data()),
       std::invalid_argument);
-  EXPECT_THROW(ShuffleBlur(view(global), view(local), 0.2f, {0, 0, height, width, 0, height + 2, 0, 2}, out.data()),
+  EXPECT_THROW(ShuffleBlur(View(global), View(local), 0.2f, {0, 0, height, width, 0, height + 2, 0, 2}, out.data()),
                std::invalid_argument);
 }
 
