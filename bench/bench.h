@@ -6,8 +6,22 @@
 #include <string>
 
 #include "common/core/timer.h"
+#include "training/refine_options.h"
 
 namespace headcast::bench {
+
+// refine: the held-out frames' conditioning fitted through the avatar.
+struct RefineBenchOptions {
+  std::string avatar;          // .hcavatar
+  std::string dataset;         // its person's prepared dataset (the held-out split)
+  int every = 10;              // per frame: every this many held-out frames
+  int iterations = 40;         // per frame: Adam steps from zero offsets
+  int causal_every = 10;       // causal: refine on every this many frames
+  int causal_iterations = 10;  // causal: steps each time
+  int refine_size = 0;         // the refinement's picture size (0: the avatar's own)
+  RefineOptions refine;
+  void Check() const;
+};
 
 struct BenchOptions {
   int repeats = 200;                   // timed runs per measurement
@@ -23,6 +37,7 @@ struct BenchOptions {
   std::string recording;               // codec: a recording instead of the synthetic sequence
   int key_interval = 30;               // codec: key-frame interval
   double codec_error_m = 2e-4;         // codec: the quantisation's vertex error per step
+  RefineBenchOptions refine;
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.
@@ -40,5 +55,6 @@ nlohmann::json RunTrackSuite(const BenchOptions& options);
 nlohmann::json RunMeshFitSuite(const BenchOptions& options);
 nlohmann::json RunRgbdSuite(const BenchOptions& options);
 nlohmann::json RunTrainSuite(const BenchOptions& options);
+nlohmann::json RunRefineSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -79,6 +79,22 @@ int main(int argc, char** argv) {
   train->add_option("--head-model", options.head_model, "builtin or a model .npz");
   train->add_option("--data", options.dataset, "a prepared dataset (headcast-train prep) for the fine-tune figure");
   train->add_option("--json", options.json_path, "write the results to this JSON file");
+  auto* refine = app.add_subcommand(
+      "refine", "held-out frames' conditioning fitted through the avatar to their own pixels: the PSNR it gives back");
+  refine->add_option("--avatar", options.refine.avatar, "an .hcavatar")->required();
+  refine->add_option("--data", options.refine.dataset, "its person's prepared dataset (the held-out split is used)")
+      ->required();
+  refine->add_option("--head-model", options.head_model, "the model .npz the avatar was made with");
+  refine->add_option("--every", options.refine.every, "per frame: every this many held-out frames");
+  refine->add_option("--iterations", options.refine.iterations, "per frame: Adam steps from zero offsets");
+  refine->add_option("--causal-every", options.refine.causal_every, "causal: refine on every this many frames");
+  refine->add_option("--causal-iterations", options.refine.causal_iterations, "causal: steps each time");
+  refine->add_option("--lr", options.refine.refine.learning_rate, "Adam's rate");
+  refine->add_option("--refine-size", options.refine.refine_size,
+                     "the refinement draws this size (its offsets scored at the avatar's own; 0: the avatar's)");
+  refine->add_option("--offset-weight", options.refine.refine.offset_weight, "weight of the offsets' sum of squares");
+  refine->add_option("--threads", options.threads, "libtorch threads")->check(CLI::Range(1, 64));
+  refine->add_option("--json", options.json_path, "write the results to this JSON file");
   codec->add_option("--recording", options.recording,
                     "a parameter recording (.hcrec) instead of the synthetic sequence");
   codec->add_option("--head-model", options.head_model, "builtin or the model .npz the recording was made with");
@@ -114,6 +130,7 @@ int main(int argc, char** argv) {
                             : meshfit->parsed() ? bench::RunMeshFitSuite(options)
                             : rgbd->parsed()    ? bench::RunRgbdSuite(options)
                             : train->parsed()   ? bench::RunTrainSuite(options)
+                            : refine->parsed()  ? bench::RunRefineSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

@@ -182,16 +182,9 @@ Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity
   Offsets o;
   o.geometry = torch::zeros({frames, config.conditioning_dim()}, torch::requires_grad());
   o.appearance = torch::zeros({frames, config.appearance_dim()}, torch::requires_grad());
-  o.geometry_mask = torch::ones({1, config.conditioning_dim()});
-  o.appearance_mask = torch::ones({1, config.appearance_dim()});
-  if (freeze_identity) {
-    o.geometry_mask.narrow(1, 0, config.num_shape).zero_();  // beta first
-    o.appearance_mask.narrow(1, config.appearance_dim() - config.num_texture, config.num_texture).zero_();  // tau last
-  }
-  // What the networks are not told of a frame's motion, a per-frame code
-  // must not tell them either: the training frames would be memorised there.
-  for (int i = config.num_shape; i < config.conditioning_dim(); ++i)
-    if (!config.Conditions(i)) o.geometry_mask[0][i] = 0;
+  const ConditioningMasks masks = OffsetMasks(config, freeze_identity);
+  o.geometry_mask = masks.geometry;
+  o.appearance_mask = masks.appearance;
   return o;
 }
 
@@ -684,6 +677,21 @@ EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const Prepa
       [&](int k, const cv::Mat& target, const cv::Mat& bgr) {
         if (render) render(positions[k], target, bgr);
       });
+}
+
+ConditioningMasks OffsetMasks(const AvatarConfig& config, bool freeze_identity) {
+  ConditioningMasks m;
+  m.geometry = torch::ones({1, config.conditioning_dim()});
+  m.appearance = torch::ones({1, config.appearance_dim()});
+  if (freeze_identity) {
+    m.geometry.narrow(1, 0, config.num_shape).zero_();                                                 // beta first
+    m.appearance.narrow(1, config.appearance_dim() - config.num_texture, config.num_texture).zero_();  // tau last
+  }
+  // What the networks are not told of a frame's motion, a per-frame code
+  // must not tell them either: the training frames would be memorised there.
+  for (int i = config.num_shape; i < config.conditioning_dim(); ++i)
+    if (!config.Conditions(i)) m.geometry[0][i] = 0;
+  return m;
 }
 
 Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n) {

@@ -217,6 +217,15 @@ EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const Subjec
                             const std::vector<FrameParams>& frames, const std::function<cv::Mat(int)>& target,
                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& each = nullptr);
 
+// Where a frame's conditioning may take an offset (1 where it may, 0 where
+// not), as (1, D) rows beside AvatarConditioning's: beta and tau stay the
+// subject's when `freeze_identity`, and nothing the networks are not told
+// (AvatarConfig::motion_conditioning) takes one either.
+struct ConditioningMasks {
+  torch::Tensor geometry, appearance;
+};
+ConditioningMasks OffsetMasks(const AvatarConfig& config, bool freeze_identity);
+
 // `v` truncated or padded with zeros to `n` values (parameters of another count).
 Eigen::VectorXf Resized(const Eigen::VectorXf& v, int n);
 

@@ -16,6 +16,7 @@
 #include "tests/testing/test_data.h"
 #include "tests/testing/tiny_avatar.h"
 #include "training/avatar_fit.h"
+#include "training/conditioning_refiner.h"
 #include "training/dataset.h"
 #include "training/image_losses.h"
 #include "training/interpolation.h"
@@ -195,6 +196,75 @@ TEST(Avatar, RuntimeSwitchesKeepTheWeights) {
               1e-3);
   c.mlp_width = 32;
   EXPECT_THROW(a.WithRuntimeSwitches(c), std::invalid_argument);
+}
+
+// The refiner fits offsets on a frame's conditioning, the networks frozen:
+// on a target the avatar drew with a known offset of its expression and
+// lighting, the picture comes closer to it; the weights, their flags and the
+// frame's inputs are as before; beta and tau take no offset.
+TEST(ConditioningRefiner, FitsTheFramesConditioningWithTheNetworksFrozen) {
+  const SubjectParams subject = DefaultSubject(Model(), 128);
+  Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), subject, 4);
+  {
+    // Weights drawn wider than the initialisation's, so that the codes move
+    // the picture of an untrained avatar.
+    torch::NoGradGuard no_grad;
+    torch::manual_seed(3);
+    for (torch::Tensor& p : avatar.modules().parameters()) p.add_(0.3 * torch::randn_like(p));
+  }
+  const AvatarConfig& c = avatar.config();
+  FrameParams frame;
+  frame.expression = Eigen::VectorXf::Zero(Model().num_expression());
+  frame.SetCamFromHead(FrontalCamFromHead(0.62));
+  RaySampler sampler(c);
+  AvatarFrameInputs in;
+  PrepareAvatarFrame(c, Model(), Model().MakeIdentity(subject.shape.cast<double>()), subject, frame, &sampler, nullptr,
+                     &in);
+  const AvatarConditioning told = in.conditioning;
+  torch::Tensor target;
+  {
+    torch::NoGradGuard no_grad;
+    AvatarFrameInputs moved = in;
+    moved.conditioning.geometry = told.geometry.clone();
+    moved.conditioning.geometry.narrow(1, c.expression_offset(), c.num_expression).add_(0.8);
+    moved.conditioning.appearance = told.appearance.clone();
+    moved.conditioning.appearance.narrow(1, 0, 3).add_(0.5);  // lambda's ambient term
+    target = RunAvatar(avatar.modules(), moved).image;
+  }
+  auto error = [&](const AvatarConditioning& conditioning) {
+    torch::NoGradGuard no_grad;
+    AvatarFrameInputs shown = in;
+    shown.conditioning = conditioning;
+    return torch::mse_loss(RunAvatar(avatar.modules(), shown).image, target).item<double>();
+  };
+  RefineOptions o;
+  o.learning_rate = 0.05;
+  o.offset_weight = 0;
+  ConditioningRefiner refiner(avatar, o);
+  const double before = error(refiner.Offset(told));
+  ASSERT_GT(before, 1e-6) << "the target differs from the told frame's picture";
+  const std::vector<torch::Tensor> weights = Copy(avatar.modules().parameters());
+  avatar.modules().parameters()[0].set_requires_grad(false);  // one weight frozen already: it stays so
+  refiner.Refine(&in, target, 30);
+  EXPECT_LT(error(refiner.Offset(told)), 0.5 * before);
+  EXPECT_GT(refiner.OffsetNorm(), 0);
+  const std::vector<torch::Tensor> after = avatar.modules().parameters();
+  ASSERT_EQ(after.size(), weights.size());
+  for (size_t i = 0; i < after.size(); ++i) {
+    EXPECT_TRUE(torch::equal(after[i], weights[i])) << "weight " << i;
+    EXPECT_EQ(after[i].requires_grad(), i != 0) << "weight " << i;
+  }
+  EXPECT_TRUE(torch::equal(in.conditioning.geometry, told.geometry));
+  EXPECT_TRUE(torch::equal(in.conditioning.appearance, told.appearance));
+  const AvatarConditioning offset = refiner.Offset(told);
+  EXPECT_TRUE(torch::equal(offset.geometry.narrow(1, 0, c.num_shape), told.geometry.narrow(1, 0, c.num_shape)));
+  EXPECT_TRUE(torch::equal(offset.appearance.narrow(1, c.appearance_dim() - c.num_texture, c.num_texture),
+                           told.appearance.narrow(1, c.appearance_dim() - c.num_texture, c.num_texture)));
+  refiner.Reset();
+  EXPECT_EQ(refiner.OffsetNorm(), 0);
+  EXPECT_THROW(refiner.Refine(&in, target.narrow(2, 0, 64), 1), std::invalid_argument);
+  o.learning_rate = 0;
+  EXPECT_THROW(ConditioningRefiner(avatar, o), std::invalid_argument);
 }
 
 TEST(MixSchedule, FollowsMethodEquation9) {

@@ -1,0 +1,203 @@
+// Benchmark suite "refine": how much of an avatar's error on a dataset's
+// held-out frames the conditioning could still take back. Offsets on each
+// frame's conditioning are fitted to its own pixels through the avatar, the
+// networks frozen (ConditioningRefiner), in two schedules:
+//  - per frame: every `every`-th held-out frame alone, `iterations` steps
+//    from zero offsets (an upper bound for what the tracker's motion and
+//    lighting codes miss, at that offset weight);
+//  - causal: the held-out frames in order, the running offsets refined on
+//    every `causal_every`-th frame for `causal_iterations` steps, each frame
+//    scored with the offsets as they were before it (what a sender refining
+//    in the background, behind the frames it sends, could give).
+// Scored as evaluation scores (the picture as the receiver shows it, its skin
+// colour matched to the frame's, against the masked target), before and
+// after in the same run.
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+
+#include "bench/bench.h"
+#include "common/avatar/compute_threads.h"
+#include "common/headmodel/head_model_io.h"
+#include "training/conditioning_refiner.h"
+#include "training/dataset.h"
+#include "training/image_losses.h"
+
+namespace headcast::bench {
+namespace {
+
+struct Scores {
+  double psnr = 0, ssim = 0, mse = 0, last_psnr = 0;
+  int count = 0;
+  void Add(const torch::Tensor& image, const torch::Tensor& target) {
+    const double m = torch::mse_loss(image, target).item<double>();
+    last_psnr = -10 * std::log10(std::max(m, 1e-12));
+    psnr += last_psnr;
+    ssim += Ssim(image, target).item<double>();
+    mse += m;
+    ++count;
+  }
+  nlohmann::json ToJson() const {
+    return {{"psnr_db", psnr / count}, {"ssim", ssim / count}, {"psnr_of_mean_mse_db", -10 * std::log10(mse / count)}};
+  }
+};
+
+// The `n` largest motion offsets, by name where the head model names its
+// expression coefficients (the joints as neck, jaw, left_eye, right_eye axes).
+nlohmann::json LargestOffsets(const ConditioningRefiner& refiner, const AvatarConfig& config, const HeadModel& model,
+                              int n) {
+  torch::NoGradGuard no_grad;
+  const torch::Tensor zero = torch::zeros({1, config.conditioning_dim()});
+  const torch::Tensor offsets = refiner.Offset({zero, torch::zeros({1, config.appearance_dim()})}).geometry[0];
+  const torch::Tensor order = std::get<1>(offsets.abs().topk(n));
+  static const char* joints[] = {"neck", "jaw", "left_eye", "right_eye"};
+  const std::vector<std::string>& names = model.data().expression_names;
+  nlohmann::json out = nlohmann::json::array();
+  for (int j = 0; j < n; ++j) {
+    const int i = order[j].item<int>();
+    const int e = i - config.expression_offset(), p = i - config.pose_offset();
+    const std::string name = e >= 0 ? (e < static_cast<int>(names.size()) ? names[e] : "psi" + std::to_string(e))
+                                    : std::string(joints[p / 3]) + "_" + "xyz"[p % 3];
+    out.push_back({name, offsets[i].item<double>()});
+  }
+  return out;
+}
+
+}  // namespace
+
+void RefineBenchOptions::Check() const {
+  OptionsCheck c("RefineBenchOptions");
+  c.NotEmpty("avatar", avatar).NotEmpty("dataset", dataset);
+  c.InRange("every", every, 1, 100000).InRange("iterations", iterations, 0, 100000);
+  c.That(refine_size == 0 || (refine_size >= 64 && refine_size % 32 == 0),
+         "refine_size must be 0 or a multiple of 32 from 64");
+  c.InRange("causal_every", causal_every, 1, 100000).InRange("causal_iterations", causal_iterations, 0, 100000);
+  c.ThrowIfErrors();
+  refine.Check();
+}
+
+nlohmann::json RunRefineSuite(const BenchOptions& o) {
+  const RefineBenchOptions& r = o.refine;
+  r.Check();
+  SetComputeThreads(o.threads);
+  const HeadModel model = LoadHeadModelSpec(o.head_model);
+  Avatar avatar = Avatar::Load(r.avatar, model);
+  const AvatarConfig& config = avatar.config();
+  const PreparedDataset data = PreparedDataset::Load(r.dataset, model, config.output_size, /*interpolated=*/false);
+  if (data.test().empty()) throw std::invalid_argument(r.dataset + ": the dataset has no held-out frames");
+  const SubjectParams& subject = avatar.subject();
+  const HeadIdentity identity = model.MakeIdentity(subject.shape.cast<double>());
+  RaySampler sampler(config);
+  // The refinement may draw a smaller picture than the one scored (a step
+  // costs about the picture's area); its offsets are then applied to the
+  // avatar's own size.
+  std::optional<Avatar> small;
+  if (r.refine_size > 0 && r.refine_size != config.output_size) {
+    AvatarConfig c = config;
+    c.output_size = r.refine_size;
+    small = avatar.WithRuntimeSwitches(c);
+  }
+  Avatar& fitted = small ? *small : avatar;
+  RaySampler fit_sampler(fitted.config());
+  ConditioningRefiner refiner(fitted, r.refine);
+  auto prepare = [&](int position, AvatarFrameInputs* in) {
+    const RealSample& s = data.At(position);
+    PrepareAvatarFrame(config, model, identity, subject, s.params, &sampler, nullptr, in);
+    return MaskedTarget(s.image_bgr, s.mask);
+  };
+  // The frame and its target at the refinement's size.
+  auto prepare_fit = [&](int position, const cv::Mat& target_bgr, AvatarFrameInputs* in) {
+    PrepareAvatarFrame(fitted.config(), model, identity, fitted.subject(), data.At(position).params, &fit_sampler,
+                       nullptr, in);
+    if (!small) return BgrToImageTensor(target_bgr);
+    cv::Mat resized;
+    cv::resize(target_bgr, resized, {r.refine_size, r.refine_size}, 0, 0, cv::INTER_AREA);
+    return BgrToImageTensor(resized);
+  };
+  // The picture as the receiver shows it (RenderAvatarFrame): 8-bit, its
+  // skin colour matched to the frame's when the frame carries one.
+  auto shown = [&](int position, const AvatarFrameInputs& in, bool offset) {
+    torch::NoGradGuard no_grad;
+    AvatarFrameInputs drawn = in;
+    if (offset) drawn.conditioning = refiner.Offset(in.conditioning);
+    const AvatarOutput out = RunAvatar(avatar.modules(), drawn);
+    cv::Mat bgr;
+    ImageTensorToBgr(out.image, &bgr);
+    const std::optional<Eigen::Vector3f>& skin = data.At(position).params.skin_colour;
+    if (skin) MatchSkinColour(out, *skin, ProjectLandmarks(in.posed, in.cam_from_head, subject.intrinsics), &bgr);
+    return BgrToImageTensor(bgr);
+  };
+  nlohmann::json out = {{"suite", "refine"},
+                        {"avatar", r.avatar},
+                        {"dataset", r.dataset},
+                        {"held_out_frames", data.test().size()},
+                        {"learning_rate", r.refine.learning_rate},
+                        {"offset_weight", r.refine.offset_weight},
+                        {"ssim_weight", r.refine.ssim_weight},
+                        {"output_size", config.output_size},
+                        {"refine_size", fitted.config().output_size}};
+  // Per frame.
+  {
+    Scores before, after;
+    SampleStats step_ms;
+    nlohmann::json frames = nlohmann::json::array();
+    double norms = 0;
+    for (size_t k = 0; k < data.test().size(); k += r.every) {
+      const int position = data.test()[k];
+      AvatarFrameInputs in, fit;
+      const cv::Mat target_bgr = prepare(position, &in);
+      const torch::Tensor target = BgrToImageTensor(target_bgr), fit_target = prepare_fit(position, target_bgr, &fit);
+      refiner.Reset();
+      before.Add(shown(position, in, false), target);
+      Stopwatch watch;
+      refiner.Refine(&fit, fit_target, r.iterations);
+      if (r.iterations > 0) step_ms.Add(watch.ElapsedMs() / r.iterations);
+      after.Add(shown(position, in, true), target);
+      norms += refiner.OffsetNorm();
+      frames.push_back({{"held_out_index", k},
+                        {"dataset_frame", position},
+                        {"psnr_before_db", before.last_psnr},
+                        {"psnr_after_db", after.last_psnr},
+                        {"largest_offsets", LargestOffsets(refiner, config, model, 6)}});
+    }
+    out["per_frame"] = {{"frames", before.count},
+                        {"every", r.every},
+                        {"iterations", r.iterations},
+                        {"before", before.ToJson()},
+                        {"after", after.ToJson()},
+                        {"offset_norm_mean", norms / before.count},
+                        {"ms_per_step_median", step_ms.count() > 0 ? step_ms.Median() : 0.0},
+                        {"frames_refined", frames}};
+  }
+  // Causal.
+  {
+    Scores before, after;
+    refiner.Reset();
+    double norms = 0;
+    for (size_t k = 0; k < data.test().size(); ++k) {
+      const int position = data.test()[k];
+      AvatarFrameInputs in;
+      const cv::Mat target_bgr = prepare(position, &in);
+      const torch::Tensor target = BgrToImageTensor(target_bgr);
+      before.Add(shown(position, in, false), target);
+      after.Add(shown(position, in, true), target);
+      norms += refiner.OffsetNorm();
+      if (k % r.causal_every == 0) {
+        AvatarFrameInputs fit;
+        const torch::Tensor fit_target = prepare_fit(position, target_bgr, &fit);
+        refiner.Refine(&fit, fit_target, r.causal_iterations);
+      }
+    }
+    out["causal"] = {{"frames", before.count},
+                     {"every", r.causal_every},
+                     {"iterations", r.causal_iterations},
+                     {"steps_per_frame", static_cast<double>(r.causal_iterations) / r.causal_every},
+                     {"before", before.ToJson()},
+                     {"after", after.ToJson()},
+                     {"offset_norm_mean", norms / before.count}};
+  }
+  out["threads"] = o.threads;
+  return out;
+}
+
+}  // namespace headcast::bench
