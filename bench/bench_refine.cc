@@ -85,7 +85,8 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
   const AvatarConfig& config = avatar.config();
   const PreparedDataset data = PreparedDataset::Load(r.dataset, model, config.output_size, /*interpolated=*/false);
   if (data.test().empty()) throw std::invalid_argument(r.dataset + ": the dataset has no held-out frames");
-  const SubjectParams& subject = avatar.subject();
+  // The dataset's person and camera, as evaluation draws its frames.
+  const SubjectParams& subject = data.subject();
   const HeadIdentity identity = model.MakeIdentity(subject.shape.cast<double>());
   RaySampler sampler(config);
   // The refinement may draw a smaller picture than the one scored (a step
@@ -98,6 +99,8 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
     small = avatar.WithRuntimeSwitches(c);
   }
   Avatar& fitted = small ? *small : avatar;
+  SubjectParams fit_subject = subject;
+  fit_subject.intrinsics = subject.intrinsics.Resized(fitted.config().output_size, fitted.config().output_size);
   RaySampler fit_sampler(fitted.config());
   ConditioningRefiner refiner(fitted, r.refine);
   auto prepare = [&](int position, AvatarFrameInputs* in) {
@@ -107,8 +110,8 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
   };
   // The frame and its target at the refinement's size.
   auto prepare_fit = [&](int position, const cv::Mat& target_bgr, AvatarFrameInputs* in) {
-    PrepareAvatarFrame(fitted.config(), model, identity, fitted.subject(), data.At(position).params, &fit_sampler,
-                       nullptr, in);
+    PrepareAvatarFrame(fitted.config(), model, identity, fit_subject, data.At(position).params, &fit_sampler, nullptr,
+                       in);
     if (!small) return BgrToImageTensor(target_bgr);
     cv::Mat resized;
     cv::resize(target_bgr, resized, {r.refine_size, r.refine_size}, 0, 0, cv::INTER_AREA);
