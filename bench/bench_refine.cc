@@ -13,11 +13,13 @@
 // colour matched to the frame's, against the masked target), before and
 // after in the same run.
 #include <cmath>
+#include <filesystem>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
 #include "bench/bench.h"
 #include "common/avatar/compute_threads.h"
+#include "common/core/image_io.h"
 #include "common/headmodel/head_model_io.h"
 #include "training/conditioning_refiner.h"
 #include "training/dataset.h"
@@ -79,6 +81,7 @@ void RefineBenchOptions::Check() const {
 nlohmann::json RunRefineSuite(const BenchOptions& o) {
   const RefineBenchOptions& r = o.refine;
   r.Check();
+  if (!r.frames_dir.empty()) std::filesystem::create_directories(r.frames_dir);
   SetComputeThreads(o.threads);
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   Avatar avatar = Avatar::Load(r.avatar, model);
@@ -151,11 +154,20 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
       const cv::Mat target_bgr = prepare(position, &in);
       const torch::Tensor target = BgrToImageTensor(target_bgr), fit_target = prepare_fit(position, target_bgr, &fit);
       refiner.Reset();
-      before.Add(shown(position, in, false), target);
+      const torch::Tensor drawn_before = shown(position, in, false);
+      before.Add(drawn_before, target);
       Stopwatch watch;
       refiner.Refine(&fit, fit_target, r.iterations);
       if (r.iterations > 0) step_ms.Add(watch.ElapsedMs() / r.iterations);
-      after.Add(shown(position, in, true), target);
+      const torch::Tensor drawn_after = shown(position, in, true);
+      after.Add(drawn_after, target);
+      if (!r.frames_dir.empty()) {
+        cv::Mat row, b, a;
+        ImageTensorToBgr(drawn_before, &b);
+        ImageTensorToBgr(drawn_after, &a);
+        cv::hconcat(std::vector<cv::Mat>{target_bgr, b, a}, row);
+        WriteImage(r.frames_dir + "/refined_" + std::to_string(k) + ".png", row);
+      }
       norms += refiner.OffsetNorm();
       frames.push_back({{"held_out_index", k},
                         {"dataset_frame", position},
