@@ -19,7 +19,7 @@ struct RefineBenchOptions {
   int causal_every = 10;       // causal: refine on every this many frames
   int causal_iterations = 10;  // causal: steps each time
   int refine_size = 0;         // the refinement's picture size (0: the avatar's own)
-  std::string frames_dir;      // per frame: truth | before | after PNGs here ("" = none)
+  std::string frames_dir;      // per frame: DIR/before, DIR/after as eval writes frames ("" = none)
   RefineOptions refine;
   void Check() const;
 };

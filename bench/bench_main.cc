@@ -94,7 +94,8 @@ int main(int argc, char** argv) {
                      "the refinement draws this size (its offsets scored at the avatar's own; 0: the avatar's)");
   refine->add_option("--offset-weight", options.refine.refine.offset_weight, "weight of the offsets' sum of squares");
   refine->add_option("--write-frames", options.refine.frames_dir,
-                     "per frame: write truth | before | after (held-out index in the name) to this folder");
+                     "per frame: the truth and the picture before and after, in DIR/before and DIR/after as eval "
+                     "--write-frames writes them");
   refine->add_option("--threads", options.threads, "libtorch threads")->check(CLI::Range(1, 64));
   refine->add_option("--json", options.json_path, "write the results to this JSON file");
   codec->add_option("--recording", options.recording,

@@ -81,7 +81,10 @@ void RefineBenchOptions::Check() const {
 nlohmann::json RunRefineSuite(const BenchOptions& o) {
   const RefineBenchOptions& r = o.refine;
   r.Check();
-  if (!r.frames_dir.empty()) std::filesystem::create_directories(r.frames_dir);
+  if (!r.frames_dir.empty()) {
+    std::filesystem::create_directories(r.frames_dir + "/before");
+    std::filesystem::create_directories(r.frames_dir + "/after");
+  }
   SetComputeThreads(o.threads);
   const HeadModel model = LoadHeadModelSpec(o.head_model);
   Avatar avatar = Avatar::Load(r.avatar, model);
@@ -162,11 +165,15 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
       const torch::Tensor drawn_after = shown(position, in, true);
       after.Add(drawn_after, target);
       if (!r.frames_dir.empty()) {
-        cv::Mat row, b, a;
-        ImageTensorToBgr(drawn_before, &b);
-        ImageTensorToBgr(drawn_after, &a);
-        cv::hconcat(std::vector<cv::Mat>{target_bgr, b, a}, row);
-        WriteImage(r.frames_dir + "/refined_" + std::to_string(k) + ".png", row);
+        // As headcast-train eval --write-frames lays them out, for bench/outline_error.py and its kin.
+        char name[32];
+        std::snprintf(name, sizeof name, "_%05zu.png", k);
+        for (const auto& [folder, drawn] : {std::pair{"/before/", drawn_before}, std::pair{"/after/", drawn_after}}) {
+          cv::Mat bgr;
+          ImageTensorToBgr(drawn, &bgr);
+          WriteImage(r.frames_dir + folder + "avatar" + name, bgr);
+          WriteImage(r.frames_dir + folder + "truth" + name, target_bgr);
+        }
       }
       norms += refiner.OffsetNorm();
       frames.push_back({{"held_out_index", k},
