@@ -107,12 +107,13 @@ same=$(json "$tmp/ev/eval.json" "abs(j['eval']['psnr_db'] - json.load(open('$tmp
 # headcast-bench refine scores the held-out frames as eval does (its "before" is eval's PSNR) and refuses
 # a folder that is no dataset.
 "$bin/headcast-bench" refine --avatar "$tmp/s.hcavatar" --data "$tmp/ds" --every 4 --iterations 3 --causal-every 2 \
-  --causal-iterations 1 --json "$tmp/refine.json" > /dev/null 2> "$tmp/refine.err"
+  --causal-iterations 1 --write-frames "$tmp/rf" --json "$tmp/refine.json" > /dev/null 2> "$tmp/refine.err"
 same=$(json "$tmp/refine.json" "abs(j['causal']['before']['psnr_db'] - json.load(open('$tmp/ev/eval.json'))['eval']['psnr_db']) < 1e-3 and j['per_frame']['frames'] == 2 and j['causal']['frames'] == 8 and all(0 < j[k]['after']['psnr_db'] < 100 for k in ('per_frame', 'causal')) and len(j['per_frame']['frames_refined'][0]['largest_offsets']) == 6")
 out=$("$bin/headcast-bench" refine --avatar "$tmp/s.hcavatar" --data "$tmp/no-dataset" 2>&1); rc=$?
-[ "$same" = True ] && [ $rc -ne 0 ] && echo "$out" | grep -q "no-dataset" &&
-  ok "bench refine: eval's PSNR before, 2 frames alone and 8 in order after; a missing dataset refused" ||
-  bad "bench refine: same=$same rc=$rc $(json "$tmp/refine.json" "(j['causal']['before'], j['per_frame']['frames'], j['per_frame']['after'])") eval $(json "$tmp/ev/eval.json" "j['eval']['psnr_db']") $out"
+written=$(ls "$tmp/rf/before" "$tmp/rf/after" | grep -c '_0000[04].png')
+[ "$same" = True ] && [ $rc -ne 0 ] && echo "$out" | grep -q "no-dataset" && [ "$written" = 8 ] &&
+  ok "bench refine: eval's PSNR before, 2 frames alone (written before and after) and 8 in order; a missing dataset refused" ||
+  bad "bench refine: same=$same rc=$rc written=$written $(json "$tmp/refine.json" "(j['causal']['before'], j['per_frame']['frames'], j['per_frame']['after'])") eval $(json "$tmp/ev/eval.json" "j['eval']['psnr_db']") $out"
 
 # Short videos: frames interpolated between consecutive training frames, used by subject unless told not to.
 "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/dsi" --resolutions 128 --test-frames 8 --no-calibrate \
