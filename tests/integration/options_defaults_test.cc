@@ -31,6 +31,7 @@
 #include "training/data_parallel.h"
 #include "training/dataset.h"
 #include "training/guided_recording.h"
+#include "training/refine_options.h"
 #include "training/runs.h"
 #include "training/synthetic_data.h"
 
@@ -103,6 +104,7 @@ std::vector<Case> Cases() {
       Plain<MixSchedule>("MixSchedule"),
       Plain<LossOptions>("LossOptions"),
       Plain<FitOptions>("FitOptions"),
+      Plain<RefineOptions>("RefineOptions"),
       Needs<PretrainOptions>("PretrainOptions", "out", [](PretrainOptions* o) { o->outputs.out = "general.hcavatar"; }),
       Needs<SubjectOptions>("SubjectOptions", "dataset",
                             [](SubjectOptions* o) {
