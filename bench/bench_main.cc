@@ -93,6 +93,8 @@ int main(int argc, char** argv) {
   refine->add_option("--refine-size", options.refine.refine_size,
                      "the refinement draws this size (its offsets scored at the avatar's own; 0: the avatar's)");
   refine->add_option("--offset-weight", options.refine.refine.offset_weight, "weight of the offsets' sum of squares");
+  refine->add_option("--codes", options.refine.refine.codes, "which codes take offsets")
+      ->check(CLI::IsMember({"all", "expression", "joints", "lighting"}));
   refine->add_option("--write-frames", options.refine.frames_dir,
                      "per frame: the truth and the picture before and after, in DIR/before and DIR/after as eval "
                      "--write-frames writes them");

@@ -143,6 +143,7 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
                         {"learning_rate", r.refine.learning_rate},
                         {"offset_weight", r.refine.offset_weight},
                         {"ssim_weight", r.refine.ssim_weight},
+                        {"codes", r.refine.codes},
                         {"output_size", config.output_size},
                         {"refine_size", fitted.config().output_size}};
   // Per frame.

@@ -11,7 +11,10 @@ namespace headcast {
 void RefineOptions::Check() const {
   OptionsCheck c("RefineOptions");
   c.Positive("learning_rate", learning_rate).NonNegative("offset_weight", offset_weight);
-  c.NonNegative("ssim_weight", ssim_weight).ThrowIfErrors();
+  c.NonNegative("ssim_weight", ssim_weight);
+  c.That(codes == "all" || codes == "expression" || codes == "joints" || codes == "lighting",
+         "codes must be all, expression, joints or lighting, not '" + codes + "'");
+  c.ThrowIfErrors();
 }
 
 ConditioningRefiner::ConditioningRefiner(Avatar& avatar, const RefineOptions& options)
@@ -19,6 +22,14 @@ ConditioningRefiner::ConditioningRefiner(Avatar& avatar, const RefineOptions& op
   options_.Check();
   // A subject's identity is the tracker's and the avatar's: beta and tau stay.
   masks_ = OffsetMasks(avatar.config(), /*freeze_identity=*/true);
+  const AvatarConfig& c = avatar.config();
+  if (options_.codes != "all") {
+    torch::Tensor keep = torch::zeros_like(masks_.geometry);
+    if (options_.codes == "expression") keep.narrow(1, c.expression_offset(), c.num_expression).fill_(1);
+    if (options_.codes == "joints") keep.narrow(1, c.pose_offset(), c.expression_offset() - c.pose_offset()).fill_(1);
+    masks_.geometry = masks_.geometry * keep;
+    if (options_.codes != "lighting") masks_.appearance = torch::zeros_like(masks_.appearance);
+  }
   Reset();
 }
 

@@ -2,6 +2,8 @@
 // so that option parsers need not include libtorch.
 #pragma once
 
+#include <string>
+
 namespace headcast {
 
 struct RefineOptions {
@@ -12,6 +14,9 @@ struct RefineOptions {
   // which says nothing of what the tracker's parameters miss.
   double offset_weight = 0.01;
   double ssim_weight = 0.1;  // 1 - SSIM beside the MSE, as in training
+  // Which codes take offsets: "all" (the motion and lighting codes), or only
+  // "expression" (the coefficients), "joints" (neck, jaw, eyes) or "lighting".
+  std::string codes = "all";
   void Check() const;
 };
 

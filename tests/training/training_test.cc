@@ -263,6 +263,18 @@ TEST(ConditioningRefiner, FitsTheFramesConditioningWithTheNetworksFrozen) {
   refiner.Reset();
   EXPECT_EQ(refiner.OffsetNorm(), 0);
   EXPECT_THROW(refiner.Refine(&in, target.narrow(2, 0, 64), 1), std::invalid_argument);
+  // Only the expression coefficients: the joints and the lighting keep the told codes.
+  o.codes = "expression";
+  ConditioningRefiner expression(avatar, o);
+  expression.Refine(&in, target, 5);
+  const AvatarConditioning moved = expression.Offset(told);
+  EXPECT_GT(expression.OffsetNorm(), 0);
+  EXPECT_TRUE(torch::equal(moved.geometry.narrow(1, 0, c.expression_offset()),
+                           told.geometry.narrow(1, 0, c.expression_offset())));
+  EXPECT_TRUE(torch::equal(moved.appearance, told.appearance));
+  o.codes = "colour";
+  EXPECT_THROW(ConditioningRefiner(avatar, o), std::invalid_argument);
+  o.codes = "all";
   o.learning_rate = 0;
   EXPECT_THROW(ConditioningRefiner(avatar, o), std::invalid_argument);
 }
