@@ -44,23 +44,28 @@ struct Scores {
   }
 };
 
-// The `n` largest motion offsets, by name where the head model names its
-// expression coefficients (the joints as neck, jaw, left_eye, right_eye axes).
+// The `n` largest motion offsets (at most the nonzero ones), by name where
+// the head model names its expression coefficients (the joints as neck, jaw,
+// left_eye, right_eye axes). Beta takes none (OffsetMasks), so only the motion
+// part of the conditioning is searched.
 nlohmann::json LargestOffsets(const ConditioningRefiner& refiner, const AvatarConfig& config, const HeadModel& model,
                               int n) {
   torch::NoGradGuard no_grad;
   const torch::Tensor zero = torch::zeros({1, config.conditioning_dim()});
-  const torch::Tensor offsets = refiner.Offset({zero, torch::zeros({1, config.appearance_dim()})}).geometry[0];
-  const torch::Tensor order = std::get<1>(offsets.abs().topk(n));
+  const torch::Tensor motion = refiner.Offset({zero, torch::zeros({1, config.appearance_dim()})})
+                                   .geometry[0]
+                                   .narrow(0, config.pose_offset(), config.motion_dim());
+  const torch::Tensor order = std::get<1>(motion.abs().topk(std::min<int64_t>(n, motion.size(0))));
   static const char* joints[] = {"neck", "jaw", "left_eye", "right_eye"};
   const std::vector<std::string>& names = model.data().expression_names;
   nlohmann::json out = nlohmann::json::array();
-  for (int j = 0; j < n; ++j) {
-    const int i = order[j].item<int>();
-    const int e = i - config.expression_offset(), p = i - config.pose_offset();
+  for (int64_t j = 0; j < order.size(0); ++j) {
+    const int p = order[j].item<int>(), e = p - (config.expression_offset() - config.pose_offset());
+    const double value = motion[p].item<double>();
+    if (value == 0) break;  // sorted by size: the rest are zero too
     const std::string name = e >= 0 ? (e < static_cast<int>(names.size()) ? names[e] : "psi" + std::to_string(e))
                                     : std::string(joints[p / 3]) + "_" + "xyz"[p % 3];
-    out.push_back({name, offsets[i].item<double>()});
+    out.push_back({name, value});
   }
   return out;
 }
