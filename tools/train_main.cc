@@ -202,6 +202,17 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
          "posed mesh carries all of it in every mode")
       ->default_str(MotionConditioningName(config->motion_conditioning))
       ->check(CLI::IsMember({"full", "no_expression", "neck"}));
+  app->add_option_function<std::string>(
+         "--hair-conditioning",
+         [config](const std::string& name) { config->hair_conditioning = ParseMotionConditioning(name); },
+         "what the CNeRF samples of the hair (over skin no expression moves, and beside it) are told of each "
+         "frame's motion: full (as every sample), no_expression or neck; told less, the hair follows the skull")
+      ->default_str(MotionConditioningName(config->hair_conditioning))
+      ->check(CLI::IsMember({"full", "no_expression", "neck"}));
+  app->add_option("--hair-reach", config->hair_reach,
+                  "metres per unit of an expression coefficient below which a face counts as the hair's "
+                  "(--hair-conditioning)")
+      ->capture_default_str();
 }
 
 // The outline: coverage predicted beside the RGB, bounded or not by the dataset's mask rules.

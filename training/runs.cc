@@ -157,6 +157,8 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     c.rigid_margin = o.config.rigid_margin;
     c.covered_apart = o.config.covered_apart;
     c.motion_conditioning = o.config.motion_conditioning;
+    c.hair_conditioning = o.config.hair_conditioning;
+    c.hair_reach = o.config.hair_reach;
     c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
     return init.WithRuntimeSwitches(c);
   }();
@@ -292,6 +294,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.rigid_margin = o.config.rigid_margin;
     c.covered_apart = o.config.covered_apart;
     c.motion_conditioning = o.config.motion_conditioning;
+    c.hair_conditioning = o.config.hair_conditioning;
+    c.hair_reach = o.config.hair_reach;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }

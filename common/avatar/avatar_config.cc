@@ -52,10 +52,10 @@ MotionConditioning ParseMotionConditioning(const std::string& name) {
   throw std::invalid_argument("unknown motion conditioning '" + name + "' (full, no_expression or neck)");
 }
 
-bool AvatarConfig::Conditions(int i) const {
+bool AvatarConfig::Tells(MotionConditioning mode, int i) const {
   if (i < pose_offset()) return true;
-  if (i >= expression_offset()) return motion_conditioning == MotionConditioning::kFull;
-  return motion_conditioning != MotionConditioning::kNeck || i < pose_offset() + 3;  // the neck is the first joint
+  if (i >= expression_offset()) return mode == MotionConditioning::kFull;
+  return mode != MotionConditioning::kNeck || i < pose_offset() + 3;  // the neck is the first joint
 }
 
 void AvatarConfig::Check() const {
@@ -103,6 +103,9 @@ void AvatarConfig::Check() const {
          "canonical_samples needs mesh-guided sampling (a triangle under every ray)");
   c.That(!rigid_margin || canonical_samples, "rigid_margin needs canonical_samples");
   c.That(!covered_apart || canonical_samples, "covered_apart needs canonical_samples");
+  c.InRange("hair_reach", hair_reach, 0.0, 0.05);
+  c.That(!has_hair_conditioning() || sampling == SamplingMode::kMeshGuided,
+         "hair_conditioning needs mesh-guided sampling (the triangle under each ray tells the hair)");
   c.That(!covered_apart || !surface_displacement,
          "covered_apart moves the covered parts' canonical points, which surface_displacement measures from");
   c.InRange("matte_core", matte_core, 0.0, 0.1);
@@ -161,7 +164,9 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"matte", MatteModeName(matte)},
                       {"matte_rules", matte_rules.ToJson()},
                       {"matte_core", matte_core},
-                      {"motion_conditioning", MotionConditioningName(motion_conditioning)}};
+                      {"motion_conditioning", MotionConditioningName(motion_conditioning)},
+                      {"hair_conditioning", MotionConditioningName(hair_conditioning)},
+                      {"hair_reach", hair_reach}};
   if (has_expression_span()) j["expression_span"] = {{"low", expression_low}, {"high", expression_high}};
   return j;
 }
@@ -211,6 +216,8 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
+    c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
+    c.hair_reach = j.value("hair_reach", c.hair_reach);
     if (j.contains("expression_span")) {
       c.expression_low = j.at("expression_span").at("low").get<std::vector<float>>();
       c.expression_high = j.at("expression_span").at("high").get<std::vector<float>>();

@@ -178,6 +178,19 @@ struct AvatarConfig : AvatarCommonConfig {
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;
+  // What the CNeRF samples of the hair are told of the motion, less than the
+  // rest (kFull: as every sample). The hair's samples are those of rays over
+  // skin that no expression coefficient moves (UnmovedFaces: the scalp, the
+  // back of the head, the ears) and of the rays beside the silhouette next to
+  // it. Told the expression, the networks can tie the hair's outline of each
+  // training frame to that frame's coefficients, and on a held-out frame its
+  // coefficients then move the hair where the person's did not; told less,
+  // the hair is a function of the skull's pose. Mesh-guided sampling only;
+  // a run-time switch.
+  MotionConditioning hair_conditioning = MotionConditioning::kFull;
+  // The hair's faces move less than this per unit of any expression
+  // coefficient (metres; HairFaces). A run-time switch.
+  double hair_reach = 0.003;
   // The expression coefficients the networks are told, each held between the
   // smallest and largest value it took on the subject's training frames; the
   // posed mesh (canonical samples, the surface texture, the matte's bound)
@@ -212,7 +225,10 @@ struct AvatarConfig : AvatarCommonConfig {
   int conditioning_dim() const { return expression_offset() + num_expression; }
   // Whether the motion conditioning tells the networks the conditioning's
   // element i (beta always; the joints and psi as the mode keeps them).
-  bool Conditions(int i) const;
+  bool Conditions(int i) const { return Tells(motion_conditioning, i); }
+  // Whether `mode` tells the networks the conditioning's element i.
+  bool Tells(MotionConditioning mode, int i) const;
+  bool has_hair_conditioning() const { return hair_conditioning != MotionConditioning::kFull; }
   int motion_dim() const { return 12 + num_expression; }   // the conditioning without beta: what changes per frame
   int appearance_dim() const { return 27 + num_texture; }  // lambda, tau
   int encoding_dim() const { return 3 + 6 * pe_frequencies; }

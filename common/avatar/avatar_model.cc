@@ -38,39 +38,49 @@ CNeRFImpl::CNeRFImpl(const AvatarConfig& config) : config_(config) {
   feature_ = register_module("feature", torch::nn::Linear(w, w));
   appearance_ = register_module("appearance", torch::nn::Linear(w + config.appearance_dim(), w / 2));
   out_ = register_module("out", torch::nn::Linear(w / 2, config.feature_channels));
+  std::vector<float> keeps(cond);
+  for (int i = 0; i < cond; ++i) keeps[i] = config.Tells(config.hair_conditioning, i) ? 1.f : 0.f;
+  hair_keeps_ = torch::tensor(keeps).view({1, cond});
 }
 
 torch::Tensor CNeRFImpl::ConditionedLinear(torch::nn::Linear layer, const torch::Tensor& h, const torch::Tensor& enc,
-                                           const torch::Tensor& cond) {
+                                           const torch::Tensor& cond, const torch::Tensor& hair) {
   const int64_t n = enc.size(0);
   const int64_t h_dim = h.defined() ? h.size(1) : 0, e_dim = enc.size(1), c_dim = cond.size(1);
+  // What the hair's samples are told less: cond - hair_cond, one row.
+  const torch::Tensor untold = hair.defined() ? cond * (1 - hair_keeps_) : torch::Tensor();
   if (!config_.precompute_conditioning) {
     std::vector<torch::Tensor> parts;
     if (h.defined()) parts.push_back(h);
     parts.push_back(enc);
-    parts.push_back(cond.expand({n, c_dim}));
+    parts.push_back(hair.defined() ? cond - hair.unsqueeze(1) * untold : cond.expand({n, c_dim}));
     return layer->forward(torch::cat(parts, 1));
   }
   // The conditioning is the same for every sample of a frame: its product with
-  // the weights is a per-frame bias (one row), not N rows.
+  // the weights is a per-frame bias (one row), not N rows; the hair's samples
+  // have that row less the product of what they are not told.
   const torch::Tensor& weight = layer->weight;  // (out, h + e + c)
-  const torch::Tensor bias = torch::addmm(layer->bias.unsqueeze(0), cond, weight.narrow(1, h_dim + e_dim, c_dim).t());
+  const torch::Tensor cond_weight = weight.narrow(1, h_dim + e_dim, c_dim).t();
+  const torch::Tensor bias = torch::addmm(layer->bias.unsqueeze(0), cond, cond_weight);
   torch::Tensor y = torch::addmm(bias, enc, weight.narrow(1, h_dim, e_dim).t());
   if (h.defined()) y = y.addmm(h, weight.narrow(1, 0, h_dim).t());
+  if (hair.defined()) y = y.addmm(hair.unsqueeze(1), torch::mm(untold, cond_weight), 1, -1);
   return y;
 }
 
-std::pair<torch::Tensor, torch::Tensor> CNeRFImpl::forward(const torch::Tensor& points,
-                                                           const AvatarConditioning& cond) {
+std::pair<torch::Tensor, torch::Tensor> CNeRFImpl::forward(const torch::Tensor& points, const AvatarConditioning& cond,
+                                                           const torch::Tensor& hair) {
+  if (hair.defined() && (hair.dim() != 1 || hair.size(0) != points.size(0)))
+    throw std::invalid_argument("CNeRF: the hair mask must have one value per sample");
   const torch::Tensor enc = PositionalEncoding(points, config_.pe_frequencies, config_.pe_scale);
   torch::Tensor h;
   for (int k = 0; k < config_.mlp_layers; ++k) {
     const auto& layer = layers_->ptr<torch::nn::LinearImpl>(k);
     torch::nn::Linear linear(layer);
     if (k == 0) {
-      h = ConditionedLinear(linear, torch::Tensor(), enc, cond.geometry);
+      h = ConditionedLinear(linear, torch::Tensor(), enc, cond.geometry, hair);
     } else if (k == config_.skip_layer) {
-      h = ConditionedLinear(linear, h, enc, cond.geometry);
+      h = ConditionedLinear(linear, h, enc, cond.geometry, hair);
     } else {
       h = linear->forward(h);
     }

@@ -22,8 +22,11 @@ torch::Tensor PositionalEncoding(const torch::Tensor& xyz, int frequencies, doub
 class CNeRFImpl : public torch::nn::Module {
  public:
   explicit CNeRFImpl(const AvatarConfig& config);
-  // points (N, 3) in the head frame -> density (N), features (N, F).
-  std::pair<torch::Tensor, torch::Tensor> forward(const torch::Tensor& points, const AvatarConditioning& cond);
+  // points (N, 3) in the head frame -> density (N), features (N, F). `hair`
+  // (N, 0 or 1), when defined: the samples told only what the config's
+  // hair_conditioning keeps of the geometry conditioning where it is 1.
+  std::pair<torch::Tensor, torch::Tensor> forward(const torch::Tensor& points, const AvatarConditioning& cond,
+                                                  const torch::Tensor& hair = {});
   // Stops gradients into the first n MLP layers (subject fine-tuning freezes 4).
   void FreezeFirstLayers(int n);
   const AvatarConfig& config() const { return config_; }
@@ -32,9 +35,10 @@ class CNeRFImpl : public torch::nn::Module {
   // y = [h, enc, cond] W^T + b, with the cond term either concatenated per
   // sample or (precompute) folded into the bias once per call.
   torch::Tensor ConditionedLinear(torch::nn::Linear layer, const torch::Tensor& h, const torch::Tensor& enc,
-                                  const torch::Tensor& cond);
+                                  const torch::Tensor& cond, const torch::Tensor& hair = {});
 
   AvatarConfig config_;
+  torch::Tensor hair_keeps_;  // (1, conditioning_dim): 1 where hair_conditioning tells the element
   torch::nn::ModuleList layers_;
   torch::nn::Linear density_{nullptr}, feature_{nullptr}, appearance_{nullptr}, out_{nullptr};
 };

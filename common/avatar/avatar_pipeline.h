@@ -35,6 +35,7 @@ struct AvatarFrameInputs {
   RayBatch rays;
   SurfaceBatch surface;             // empty unless the avatar has surface features or a bounded matte
   std::vector<float> to_canonical;  // with canonical_samples: 12 per ray (CanonicalTransforms)
+  std::vector<float> hair_rays;     // with hair_conditioning: 1 per ray (HairRays)
   cv::Mat matte_bound;              // with a bounded matte: H x W CV_8U, 255 where the head may show (MatteBound)
   cv::Mat matte_core;               // and with a core: 255 where it always shows (MatteCore)
   RigidTransform cam_from_head;

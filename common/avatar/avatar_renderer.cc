@@ -116,7 +116,10 @@ void RunAvatarFeatures(AvatarModules& modules, const AvatarFrameInputs& inputs, 
       const torch::Tensor a = to.narrow(1, 0, 9).view({r, 3, 3}), o = to.narrow(1, 9, 3);
       p_head = (torch::bmm(p_head.view({r, s, 3}), a.transpose(1, 2)) + o.unsqueeze(1)).view({r * s, 3});
     }
-    auto [density, features] = modules.cnerf->forward(p_head, conditioning);
+    torch::Tensor hair;  // per sample: its ray's
+    if (!inputs.hair_rays.empty())
+      hair = torch::from_blob(const_cast<float*>(inputs.hair_rays.data()), {r}, torch::kFloat).repeat_interleave(s);
+    auto [density, features] = modules.cnerf->forward(p_head, conditioning, hair);
     if (timings) timings->mlp_ms += watch.ElapsedMs();
     watch.Restart();
     const VolumeRenderResult vr =
@@ -239,6 +242,8 @@ void PrepareAvatarRays(const AvatarConfig& config, const HeadModel& model, const
   if (config.canonical_samples)
     CanonicalTransforms(out->rays, out->posed.vertices, model.data().faces, identity.v_shaped, &out->to_canonical,
                         config.covered_apart ? &sampler->Covered(identity.v_shaped, model.data().faces) : nullptr);
+  out->hair_rays.clear();
+  if (config.has_hair_conditioning()) HairRays(out->rays, sampler->Hair(model), &out->hair_rays);
   out->conditioning = MakeConditioning(config, subject, frame);
   if (timings) timings->sample_ms = watch.ElapsedMs();
 }

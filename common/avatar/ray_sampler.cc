@@ -186,6 +186,41 @@ int MoveCoveredPointsApart(const std::vector<uint8_t>& covered, SurfaceBatch* su
   return moved;
 }
 
+std::vector<uint8_t> HairFaces(const HeadModel& model, float reach) {
+  const HeadModelData& d = model.data();
+  const int n = model.num_vertices();
+  std::vector<uint8_t> still(n, 0);
+  for (int i = 0; i < n; ++i) {
+    float largest = 0;
+    for (int e = 0; e < model.num_expression(); ++e)
+      largest = std::max(largest, d.expressiondirs.block(3 * i, e, 3, 1).norm());
+    const float joints = d.weights(i, kJawJoint) + d.weights(i, kLeftEyeJoint) + d.weights(i, kRightEyeJoint);
+    still[i] = largest < reach && joints <= 0.01f;
+  }
+  std::vector<uint8_t> hair(d.faces.rows());
+  for (int f = 0; f < d.faces.rows(); ++f)
+    hair[f] = still[d.faces(f, 0)] && still[d.faces(f, 1)] && still[d.faces(f, 2)];
+  return hair;
+}
+
+void HairRays(const RayBatch& rays, const std::vector<uint8_t>& hair_faces, std::vector<float>* out) {
+  out->resize(rays.num_rays());
+  for (int r = 0; r < rays.num_rays(); ++r) {
+    const int f = rays.face[r];
+    if (f >= static_cast<int>(hair_faces.size()))
+      throw std::invalid_argument("HairRays: a ray's triangle is not the hair table's mesh's");
+    (*out)[r] = f < 0 || hair_faces[f] ? 1.f : 0.f;
+  }
+}
+
+const std::vector<uint8_t>& RaySampler::Hair(const HeadModel& model) {
+  if (hair_of_ != model.data().expressiondirs.data() || hair_.size() != static_cast<size_t>(model.num_faces())) {
+    hair_ = HairFaces(model, static_cast<float>(config_.hair_reach));
+    hair_of_ = model.data().expressiondirs.data();
+  }
+  return hair_;
+}
+
 const std::vector<uint8_t>& RaySampler::Covered(const Eigen::VectorXf& canonical, const RasterFaces& faces) {
   if (covered_of_.size() != canonical.size() || covered_of_ != canonical ||
       covered_.size() != static_cast<size_t>(faces.rows())) {

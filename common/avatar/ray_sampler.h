@@ -89,6 +89,16 @@ int MoveCoveredPointsApart(const std::vector<uint8_t>& covered, SurfaceBatch* su
 // wide-eyed frame shows it. Returns how many points moved.
 int FoldEyeballPoints(const HeadModel& model, const HeadIdentity& identity, SurfaceBatch* surface);
 
+// Per face of `model`, 1 where the hair may lie over it: no expression
+// coefficient moves any of its vertices by `reach` metres or more per unit,
+// and none is skinned to the jaw or an eye (the scalp, the back of the head,
+// the ears; the face, the jaw and the eyeballs are 0).
+std::vector<uint8_t> HairFaces(const HeadModel& model, float reach);
+
+// Per ray, 1 where its samples are the hair's (AvatarConfig::hair_conditioning):
+// its triangle is a hair face, or it has none (a rigid margin ray); else 0.
+void HairRays(const RayBatch& rays, const std::vector<uint8_t>& hair_faces, std::vector<float>* out);
+
 class RaySampler {
  public:
   explicit RaySampler(const AvatarConfig& config);
@@ -112,6 +122,9 @@ class RaySampler {
   // (shell_front + shell_back: how far a ray's samples reach), kept while
   // the canonical mesh stays the one they are of.
   const std::vector<uint8_t>& Covered(const Eigen::VectorXf& canonical_vertices, const RasterFaces& faces);
+  // HairFaces of `model` at the config's hair_reach, kept while the model
+  // (its expression basis and faces, which a program loads once) is the same.
+  const std::vector<uint8_t>& Hair(const HeadModel& model);
 
  private:
   void AddRay(const PinholeCamera& camera, int x, int y, float z_near, float z_far, int face, std::mt19937* rng,
@@ -132,6 +145,8 @@ class RaySampler {
   RowMatrixX3f canonical_normals_;
   Eigen::VectorXf covered_of_;
   std::vector<uint8_t> covered_;
+  const float* hair_of_ = nullptr;  // the expression basis HairFaces was made from
+  std::vector<uint8_t> hair_;
   std::vector<float> surface_depth_;
   std::vector<int32_t> surface_face_;
 };

@@ -688,6 +688,140 @@ TEST(MotionConditioning, TellsTheNetworksOnlyWhatItsModeKeeps) {
   }
 }
 
+// A face is the hair's when no expression coefficient alone, at one unit,
+// moves any of its corners by the reach (the head model posed, not its basis
+// read) and none is skinned to the jaw or an eye; the table has both kinds.
+TEST(HairConditioning, TheHairsFacesAreThoseNoExpressionMoves) {
+  const HeadModel& m = *Builtin();
+  const float reach = 0.003f;
+  const std::vector<uint8_t> hair = HairFaces(m, reach);
+  ASSERT_EQ(hair.size(), static_cast<size_t>(m.num_faces()));
+  const HeadIdentity identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  HeadModelOutput rest, moved;
+  m.Forward(identity, Eigen::VectorXd::Zero(m.num_expression()), PoseVector::Zero(), &rest);
+  Eigen::VectorXf largest = Eigen::VectorXf::Zero(m.num_vertices());
+  for (int e = 0; e < m.num_expression(); ++e) {
+    m.Forward(identity, Eigen::VectorXd::Unit(m.num_expression(), e), PoseVector::Zero(), &moved);
+    largest = largest.cwiseMax((moved.vertices - rest.vertices).rowwise().norm());
+  }
+  const auto& w = m.data().weights;
+  int hair_faces = 0, face_faces = 0;
+  for (int f = 0; f < m.num_faces(); ++f) {
+    bool still = true;
+    for (int k = 0; k < 3; ++k) {
+      const int v = m.data().faces(f, k);
+      still =
+          still && largest[v] < reach - 1e-5f && w(v, kJawJoint) + w(v, kLeftEyeJoint) + w(v, kRightEyeJoint) <= 0.01f;
+    }
+    if (largest[m.data().faces(f, 0)] > reach + 1e-5f) EXPECT_EQ(hair[f], 0) << "face " << f << " moves";
+    if (still) EXPECT_EQ(hair[f], 1) << "face " << f << " is still";
+    (hair[f] ? hair_faces : face_faces)++;
+  }
+  EXPECT_GT(hair_faces, m.num_faces() / 10) << "no hair: the test proves little";
+  EXPECT_GT(face_faces, m.num_faces() / 10) << "no face: the test proves little";
+  EXPECT_EQ(HairFaces(m, 0.f), std::vector<uint8_t>(hair.size(), 0)) << "no reach: no hair";
+  // However far the reach, what the jaw or an eye moves is the face's.
+  ASSERT_TRUE(m.JointIsArticulated(kJawJoint));
+  const std::vector<uint8_t> far = HairFaces(m, 1.f);
+  int jaw = 0;
+  for (int f = 0; f < m.num_faces(); ++f)
+    if (w(m.data().faces(f, 0), kJawJoint) > 0.5f) {
+      ++jaw;
+      EXPECT_EQ(far[f], 0) << "face " << f << " turns with the jaw";
+    }
+  EXPECT_GT(jaw, 0);
+}
+
+// Per ray: 1 over a hair face or without a triangle (a rigid margin), 0
+// elsewhere; a triangle beyond the table is refused.
+TEST(HairConditioning, TheHairsRaysAreThoseOverItsFacesOrBesideTheHead) {
+  RayBatch rays;
+  rays.pixel = {0, 1, 2};
+  rays.face = {0, 1, -1};
+  std::vector<float> hair;
+  HairRays(rays, {1, 0}, &hair);
+  EXPECT_EQ(hair, (std::vector<float>{1, 0, 1}));
+  rays.face[0] = 2;
+  EXPECT_THROW(HairRays(rays, {1, 0}, &hair), std::invalid_argument);
+}
+
+// The hair's samples are told what the mode keeps (here the neck alone), the
+// other samples everything: each draws what the network draws for its own
+// conditioning, a change of the expression or jaw leaves the hair's alone,
+// and the per-frame bias gives what concatenating every sample's gives.
+TEST(HairConditioning, TheHairsSamplesAreToldOnlyWhatItsModeKeeps) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.num_expression = Builtin()->num_expression();
+  c.hair_conditioning = MotionConditioning::kNeck;
+  torch::manual_seed(5);
+  CNeRF fast(c);
+  c.precompute_conditioning = false;
+  CNeRF slow(c);
+  {
+    torch::NoGradGuard no_grad;
+    auto src = fast->named_parameters();
+    for (auto& p : slow->named_parameters()) p.value().copy_(src[p.key()]);
+  }
+  torch::NoGradGuard no_grad;
+  const int64_t n = 40;
+  const torch::Tensor points = torch::randn({n, 3}) * 0.1;
+  const torch::Tensor hair = (torch::arange(n) % 3 == 0).to(torch::kFloat);
+  const AvatarConditioning cond{torch::randn({1, c.conditioning_dim()}), torch::randn({1, c.appearance_dim()})};
+  AvatarConditioning neck = cond;
+  neck.geometry = cond.geometry.clone();
+  neck.geometry.narrow(1, c.pose_offset() + 3, c.conditioning_dim() - c.pose_offset() - 3).zero_();
+  const auto [d, f] = fast->forward(points, cond, hair);
+  const auto [d_all, f_all] = fast->forward(points, cond);
+  const auto [d_neck, f_neck] = fast->forward(points, neck);
+  const torch::Tensor is_hair = hair.to(torch::kBool);
+  EXPECT_LT((f - torch::where(is_hair.unsqueeze(1), f_neck, f_all)).abs().max().item<float>(), 1e-5);
+  EXPECT_LT((d - torch::where(is_hair, d_neck, d_all)).abs().max().item<float>(), 1e-5);
+  EXPECT_GT((f_neck - f_all).abs().max().item<float>(), 1e-3) << "the motion changed nothing: the test proves little";
+  const auto [d_slow, f_slow] = slow->forward(points, cond, hair);
+  EXPECT_LT((f - f_slow).abs().max().item<float>(), 1e-5);
+  EXPECT_LT((d - d_slow).abs().max().item<float>(), 1e-5);
+  EXPECT_THROW(fast->forward(points, cond, hair.narrow(0, 0, n - 1)), std::invalid_argument);
+
+  // It travels in the file; files from before have none; it needs mesh-guided sampling.
+  EXPECT_EQ(AvatarConfig::FromJson(c.ToJson()).hair_conditioning, MotionConditioning::kNeck);
+  nlohmann::json old = c.ToJson();
+  old.erase("hair_conditioning");
+  old.erase("hair_reach");
+  EXPECT_EQ(AvatarConfig::FromJson(old).hair_conditioning, MotionConditioning::kFull);
+  EXPECT_EQ(AvatarConfig::FromJson(old).hair_reach, AvatarConfig().hair_reach);
+  c.sampling = SamplingMode::kUniform;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+  c.sampling = SamplingMode::kMeshGuided;
+  c.hair_reach = -0.01;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+}
+
+// A frame's preparation marks its hair rays only when the avatar asks: off,
+// none; on, the rays over the scalp and beside the head.
+TEST(HairConditioning, TheFramesPreparationMarksTheHairsRays) {
+  const HeadModel& m = *Builtin();
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.canonical_samples = true;
+  const SubjectParams subject = DefaultSubject(m, c.output_size);
+  const HeadIdentity identity = m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape()));
+  AvatarFrameInputs inputs;
+  RaySampler plain(c);
+  PrepareAvatarRays(c, m, identity, subject, Expressive(), &plain, nullptr, &inputs);
+  EXPECT_TRUE(inputs.hair_rays.empty());
+  c.hair_conditioning = MotionConditioning::kNoExpression;
+  RaySampler sampler(c);
+  PrepareAvatarRays(c, m, identity, subject, Expressive(), &sampler, nullptr, &inputs);
+  ASSERT_EQ(inputs.hair_rays.size(), static_cast<size_t>(inputs.rays.num_rays()));
+  const std::vector<uint8_t> hair = HairFaces(m, static_cast<float>(c.hair_reach));
+  int marked = 0;
+  for (int r = 0; r < inputs.rays.num_rays(); ++r) {
+    EXPECT_EQ(inputs.hair_rays[r], hair[inputs.rays.face[r]] ? 1.f : 0.f);
+    marked += inputs.hair_rays[r] > 0;
+  }
+  EXPECT_GT(marked, 0);
+  EXPECT_LT(marked, inputs.rays.num_rays());
+}
+
 TEST(SurfaceTexture, SamplesItsPlanesAtCanonicalPoints) {
   AvatarConfig c = TinyWithSurface();
   SurfaceTexture texture(c);
