@@ -32,15 +32,15 @@ struct Scores {
   double psnr = 0, ssim = 0, mse = 0, last_psnr = 0;
   int count = 0;
   void Add(const torch::Tensor& image, const torch::Tensor& target) {
-    const double m = torch::mse_loss(image, target).item<double>();
-    last_psnr = -10 * std::log10(std::max(m, 1e-12));
-    psnr += last_psnr;
-    ssim += Ssim(image, target).item<double>();
-    mse += m;
+    const ImageScore s = ScoreImage(image, target);
+    last_psnr = s.psnr;
+    psnr += s.psnr;
+    ssim += s.ssim;
+    mse += s.mse;
     ++count;
   }
   nlohmann::json ToJson() const {
-    return {{"psnr_db", psnr / count}, {"ssim", ssim / count}, {"psnr_of_mean_mse_db", -10 * std::log10(mse / count)}};
+    return {{"psnr_db", psnr / count}, {"ssim", ssim / count}, {"psnr_of_mean_mse_db", PsnrOfMse(mse / count)}};
   }
 };
 

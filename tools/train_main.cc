@@ -209,6 +209,9 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
          "frame's motion: full (as every sample), no_expression or neck; told less, the hair follows the skull")
       ->default_str(MotionConditioningName(config->hair_conditioning))
       ->check(CLI::IsMember({"full", "no_expression", "neck"}));
+  app->add_flag("--view-rotation,!--no-view-rotation", config->view_rotation,
+                "tell the networks the head's rotation as the camera sees it (in the neck's place): how it is "
+                "turned to the camera and the light");
   app->add_option("--hair-reach", config->hair_reach,
                   "metres per unit of an expression coefficient below which a face counts as the hair's "
                   "(--hair-conditioning)")

@@ -600,11 +600,10 @@ class ShownFrames {
 
 // Adds the figures of the shown picture against its target to `r`.
 void Score(const cv::Mat& shown_bgr, const cv::Mat& target_bgr, EvalResult* r) {
-  const torch::Tensor shown = BgrToImageTensor(shown_bgr), target = BgrToImageTensor(target_bgr);
-  const double mse = torch::mse_loss(shown, target).item<double>();
-  r->psnr.push_back(10 * std::log10(1.0 / std::max(mse, 1e-12)));
-  r->ssim.push_back(Ssim(shown, target).item<double>());
-  r->mse_mean += mse;
+  const ImageScore s = ScoreImage(BgrToImageTensor(shown_bgr), BgrToImageTensor(target_bgr));
+  r->psnr.push_back(s.psnr);
+  r->ssim.push_back(s.ssim);
+  r->mse_mean += s.mse;
 }
 
 void Finish(const SampleStats& ms, EvalResult* r) {

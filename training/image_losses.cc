@@ -66,9 +66,16 @@ torch::Tensor SsimFullWindow(const torch::Tensor& a, const torch::Tensor& b) {
   return SsimFromMoments(blur(a), blur(b), blur(a * a), blur(b * b), blur(a * b));
 }
 
-double Psnr(const torch::Tensor& a, const torch::Tensor& b) {
-  const double mse = torch::mse_loss(a, b).item<double>();
-  return 10 * std::log10(1.0 / std::max(mse, 1e-12));
+double PsnrOfMse(double mse) { return 10 * std::log10(1.0 / std::max(mse, 1e-12)); }
+
+double Psnr(const torch::Tensor& a, const torch::Tensor& b) { return PsnrOfMse(torch::mse_loss(a, b).item<double>()); }
+
+ImageScore ScoreImage(const torch::Tensor& image, const torch::Tensor& target) {
+  ImageScore s;
+  s.mse = torch::mse_loss(image, target).item<double>();
+  s.psnr = PsnrOfMse(s.mse);
+  s.ssim = Ssim(image, target).item<double>();
+  return s;
 }
 
 struct PerceptualLoss::Impl {

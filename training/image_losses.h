@@ -22,6 +22,14 @@ torch::Tensor SsimFullWindow(const torch::Tensor& a, const torch::Tensor& b);
 
 // PSNR in dB of two images in [0, 1].
 double Psnr(const torch::Tensor& a, const torch::Tensor& b);
+double PsnrOfMse(double mse);
+
+// The figures of a picture against its target (images in [0, 1]): what
+// evaluation and the benchmarks report per frame.
+struct ImageScore {
+  double mse = 0, psnr = 0, ssim = 0;
+};
+ImageScore ScoreImage(const torch::Tensor& image, const torch::Tensor& target);
 
 // Distances between a network's features of two images (METHOD §4's VGG16
 // term). The file is a TorchScript module (torch.jit.save) whose forward takes

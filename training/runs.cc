@@ -159,6 +159,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     c.motion_conditioning = o.config.motion_conditioning;
     c.hair_conditioning = o.config.hair_conditioning;
     c.hair_reach = o.config.hair_reach;
+    c.view_rotation = o.config.view_rotation;
     c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
     return init.WithRuntimeSwitches(c);
   }();
@@ -296,6 +297,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.motion_conditioning = o.config.motion_conditioning;
     c.hair_conditioning = o.config.hair_conditioning;
     c.hair_reach = o.config.hair_reach;
+    c.view_rotation = o.config.view_rotation;
     if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }

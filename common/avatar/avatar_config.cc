@@ -166,7 +166,8 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"matte_core", matte_core},
                       {"motion_conditioning", MotionConditioningName(motion_conditioning)},
                       {"hair_conditioning", MotionConditioningName(hair_conditioning)},
-                      {"hair_reach", hair_reach}};
+                      {"hair_reach", hair_reach},
+                      {"view_rotation", view_rotation}};
   if (has_expression_span()) j["expression_span"] = {{"low", expression_low}, {"high", expression_high}};
   return j;
 }
@@ -218,6 +219,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
     c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
     c.hair_reach = j.value("hair_reach", c.hair_reach);
+    c.view_rotation = j.value("view_rotation", false);
     if (j.contains("expression_span")) {
       c.expression_low = j.at("expression_span").at("low").get<std::vector<float>>();
       c.expression_high = j.at("expression_span").at("high").get<std::vector<float>>();

@@ -188,6 +188,15 @@ struct AvatarConfig : AvatarCommonConfig {
   // the hair is a function of the skull's pose. Mesh-guided sampling only;
   // a run-time switch.
   MotionConditioning hair_conditioning = MotionConditioning::kFull;
+  // The networks are also told the head's rotation as the camera sees it
+  // (ViewRotation: a frontal view is zero), composed with the neck's in the
+  // neck's place of the conditioning. Tracks that put the head's rotation in
+  // the camera transform leave the neck zero, so the networks knew nothing of
+  // how the head is turned to the camera and the light: hair that hangs as the
+  // head tilts, the shading a fixed light casts on a turned face and the
+  // glasses' highlights could only be drawn from codes that happened to go
+  // with them. false: the neck alone (the thesis's avatar). A run-time switch.
+  bool view_rotation = false;
   // The hair's faces move less than this per unit of any expression
   // coefficient (metres; HairFaces). A run-time switch.
   double hair_reach = 0.003;

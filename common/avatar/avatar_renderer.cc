@@ -8,6 +8,7 @@
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
 #include "common/core/options.h"
+#include "common/core/rotation.h"
 #include "common/core/timer.h"
 #include "common/headmodel/head_render.h"
 #include "common/headmodel/skin_colour.h"
@@ -17,7 +18,12 @@ namespace headcast {
 AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& subject, const FrameParams& frame) {
   std::vector<float> g(c.conditioning_dim(), 0.f), a(c.appearance_dim(), 0.f);
   for (int i = 0; i < std::min<int>(c.num_shape, subject.shape.size()); ++i) g[i] = subject.shape[i];
-  const Eigen::Vector3f* pose[] = {&frame.neck, &frame.jaw, &frame.left_eye, &frame.right_eye};
+  const Eigen::Vector3f neck = c.view_rotation
+                                   ? MatrixToAxisAngle(AxisAngleToMatrix(ViewRotation(frame.CamFromHead().rotation)) *
+                                                       AxisAngleToMatrix(frame.neck.cast<double>()))
+                                         .cast<float>()
+                                   : frame.neck;
+  const Eigen::Vector3f* pose[] = {&neck, &frame.jaw, &frame.left_eye, &frame.right_eye};
   for (int j = 0; j < 4; ++j)
     for (int k = 0; k < 3; ++k) g[c.pose_offset() + 3 * j + k] = (*pose[j])[k];
   for (int i = 0; i < std::min<int>(c.num_expression, frame.expression.size()); ++i)

@@ -8,6 +8,7 @@
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/triplane_lookup.h"
+#include "common/core/rotation.h"
 #include "common/core/zip_archive.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
@@ -686,6 +687,40 @@ TEST(MotionConditioning, TellsTheNetworksOnlyWhatItsModeKeeps) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("full, no_expression or neck"), std::string::npos) << e.what();
   }
+}
+
+// With the view's rotation told, the neck's place holds the head's rotation
+// as the camera sees it composed with the neck's: zero for a frontal view
+// and no neck, the neck's own for a frontal view, the view's for a turned
+// head without one; off, the neck alone. It travels in the file.
+TEST(MotionConditioning, TheViewsRotationIsToldInTheNecksPlace) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.num_expression = Builtin()->num_expression();
+  const SubjectParams subject = DefaultSubject(*Builtin(), c.output_size);
+  const int neck = c.pose_offset();
+  auto told = [&](const FrameParams& f) {
+    const torch::Tensor g = MakeConditioning(c, subject, f).geometry;
+    return Eigen::Vector3d(g[0][neck].item<float>(), g[0][neck + 1].item<float>(), g[0][neck + 2].item<float>());
+  };
+  FrameParams frontal = Expressive();  // a frontal camera, the neck turned
+  FrameParams turned = Expressive();
+  turned.neck.setZero();
+  turned.SetCamFromHead(FrontalCamFromHead(0.62, 20, -10));
+  const Eigen::Vector3d view = ViewRotation(turned.CamFromHead().rotation);
+  ASSERT_GT(view.norm(), 0.3);
+  EXPECT_LT((told(turned)).norm(), 1e-6) << "off: the neck alone";
+  c.view_rotation = true;
+  EXPECT_LT((told(turned) - view).norm(), 1e-5);
+  EXPECT_LT((told(frontal) - frontal.neck.cast<double>()).norm(), 1e-5);
+  FrameParams both = turned;
+  both.neck = Eigen::Vector3f(0, 0.2f, 0);
+  const Eigen::Vector3d composed =
+      MatrixToAxisAngle(AxisAngleToMatrix(view) * AxisAngleToMatrix(both.neck.cast<double>()));
+  EXPECT_LT((told(both) - composed).norm(), 1e-5);
+  EXPECT_TRUE(AvatarConfig::FromJson(c.ToJson()).view_rotation);
+  nlohmann::json old = c.ToJson();
+  old.erase("view_rotation");
+  EXPECT_FALSE(AvatarConfig::FromJson(old).view_rotation);
 }
 
 // A face is the hair's when no expression coefficient alone, at one unit,
