@@ -137,6 +137,14 @@ std::vector<CLI::Option*> AddArchitectureFlags(CLI::App* app, AvatarConfig* conf
 
 // The surface texture (METHOD's baseline has none): for a new avatar, or
 // added to a general model without one in a fine-tune.
+// A MotionConditioning option: full, no_expression or neck.
+void AddMotionConditioning(CLI::App* app, const std::string& name, MotionConditioning* mode, const std::string& help) {
+  app->add_option_function<std::string>(
+         name, [mode](const std::string& value) { *mode = ParseMotionConditioning(value); }, help)
+      ->default_str(MotionConditioningName(*mode))
+      ->check(CLI::IsMember({"full", "no_expression", "neck"}));
+}
+
 void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_option("--surface-features", config->surface_features,
                   "channels of the learned texture on the head model's surface (0: none, the thesis's avatar)")
@@ -194,21 +202,14 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--covered-apart,!--no-covered-apart", config->covered_apart,
                 "with canonical samples: the parts the neutral head covers (the mouth's inside, the eyeballs under "
                 "the lids) looked up at a place of their own, not just behind the lips and lids");
-  app->add_option_function<std::string>(
-         "--motion-conditioning",
-         [config](const std::string& name) { config->motion_conditioning = ParseMotionConditioning(name); },
-         "what of each frame's motion the networks are told: full (neck, jaw, eyes, expression; the thesis's "
-         "avatar), no_expression (the expression coefficients left out) or neck (the neck's rotation only); the "
-         "posed mesh carries all of it in every mode")
-      ->default_str(MotionConditioningName(config->motion_conditioning))
-      ->check(CLI::IsMember({"full", "no_expression", "neck"}));
-  app->add_option_function<std::string>(
-         "--hair-conditioning",
-         [config](const std::string& name) { config->hair_conditioning = ParseMotionConditioning(name); },
-         "what the CNeRF samples of the hair (over skin no expression moves, and beside it) are told of each "
-         "frame's motion: full (as every sample), no_expression or neck; told less, the hair follows the skull")
-      ->default_str(MotionConditioningName(config->hair_conditioning))
-      ->check(CLI::IsMember({"full", "no_expression", "neck"}));
+  AddMotionConditioning(app, "--motion-conditioning", &config->motion_conditioning,
+                        "what of each frame's motion the networks are told: full (neck, jaw, eyes, expression; the "
+                        "thesis's avatar), no_expression (the expression coefficients left out) or neck (the neck's "
+                        "rotation only); the posed mesh carries all of it in every mode");
+  AddMotionConditioning(app, "--hair-conditioning", &config->hair_conditioning,
+                        "what the CNeRF samples of the hair (over skin no expression moves, and beside it) are told "
+                        "of each frame's motion: full (as every sample), no_expression or neck; told less, the hair "
+                        "follows the skull");
   app->add_flag("--view-rotation,!--no-view-rotation", config->view_rotation,
                 "tell the networks the head's rotation as the camera sees it (in the neck's place): how it is "
                 "turned to the camera and the light");

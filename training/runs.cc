@@ -141,6 +141,22 @@ void PretrainOptions::Check() const {
   fit.Check();
 }
 
+namespace {
+
+// The run-time switches of how CNeRF samples are placed and what they are
+// told: the run's choice, whatever the avatar it starts from had.
+void TakeSampleSwitches(const AvatarConfig& from, AvatarConfig* to) {
+  to->canonical_samples = from.canonical_samples;
+  to->rigid_margin = from.rigid_margin;
+  to->covered_apart = from.covered_apart;
+  to->motion_conditioning = from.motion_conditioning;
+  to->hair_conditioning = from.hair_conditioning;
+  to->hair_reach = from.hair_reach;
+  to->view_rotation = from.view_rotation;
+}
+
+}  // namespace
+
 nlohmann::json RunPretrain(PretrainOptions o) {
   o.Check();
   const HeadModel model = LoadHeadModelSpec(o.head_model);
@@ -153,13 +169,7 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     const Avatar init = Avatar::Load(o.init, model);
     AvatarConfig c = init.config();
     c.output_size = o.resolution;
-    c.canonical_samples = o.config.canonical_samples;
-    c.rigid_margin = o.config.rigid_margin;
-    c.covered_apart = o.config.covered_apart;
-    c.motion_conditioning = o.config.motion_conditioning;
-    c.hair_conditioning = o.config.hair_conditioning;
-    c.hair_reach = o.config.hair_reach;
-    c.view_rotation = o.config.view_rotation;
+    TakeSampleSwitches(o.config, &c);
     c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
     return init.WithRuntimeSwitches(c);
   }();
@@ -291,14 +301,8 @@ nlohmann::json RunSubject(SubjectOptions o) {
     Avatar general = Avatar::Load(o.general, model);
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
-    c.canonical_samples = o.config.canonical_samples;  // the subject's choice, whatever the general model's
-    c.rigid_margin = o.config.rigid_margin;
-    c.covered_apart = o.config.covered_apart;
-    c.motion_conditioning = o.config.motion_conditioning;
-    c.hair_conditioning = o.config.hair_conditioning;
-    c.hair_reach = o.config.hair_reach;
-    c.view_rotation = o.config.view_rotation;
-    if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
+    TakeSampleSwitches(o.config, &c);  // the subject's choice, whatever the general model's
+    if (o.config.has_surface()) {      // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }
     c.matte = o.config.matte;

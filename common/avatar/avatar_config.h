@@ -180,7 +180,7 @@ struct AvatarConfig : AvatarCommonConfig {
   MotionConditioning motion_conditioning = MotionConditioning::kFull;
   // What the CNeRF samples of the hair are told of the motion, less than the
   // rest (kFull: as every sample). The hair's samples are those of rays over
-  // skin that no expression coefficient moves (UnmovedFaces: the scalp, the
+  // skin that no expression coefficient moves (HairFaces: the scalp, the
   // back of the head, the ears) and of the rays beside the silhouette next to
   // it. Told the expression, the networks can tie the hair's outline of each
   // training frame to that frame's coefficients, and on a held-out frame its
