@@ -186,6 +186,11 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
                   "with --surface-blend: one set of planes per principal direction of the training frames' "
                   "expressions, the first N (0: one per coefficient)")
       ->capture_default_str();
+  app->add_flag("--identity-offsets", fit->identity_offsets,
+                "per-frame offsets on beta as the networks are told it, in a fine-tune too (the mesh keeps the "
+                "subject's)");
+  app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
+      ->capture_default_str();
   app->add_option("--surface-blend-lr", fit->blend_lr_scale,
                   "the texture's expression blendshapes' learning rate as a multiple of --lr")
       ->capture_default_str();
@@ -404,6 +409,11 @@ int main(int argc, char** argv) {
                     "(the mesh takes them as they are either way)");
   subject->add_flag("--expression-span-in-training", s.expression_span_in_training,
                     "hold the synthetic renders' expressions within the span in training too, as the receiver will");
+  subject
+      ->add_flag("--mean-offset,!--no-mean-offset", s.mean_offset,
+                 "keep the mean of the per-frame offsets learnt on the training frames as the avatar's "
+                 "conditioning bias (added to every frame's codes)")
+      ->capture_default_str();
   AddTrainingFlags(subject, &s.fit, &s.outputs, &processes);
 
   auto* eval = app.add_subcommand("eval", "evaluate an avatar on a dataset's test split; videos");

@@ -53,6 +53,7 @@ void FitOptions::Check() const {
       .InRange("warmup_steps", warmup_steps, 0, 100000000)
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .InRange("blend_lr_scale", blend_lr_scale, 0.0, 1000.0)
+      .InRange("offset_lr_scale", offset_lr_scale, 0.0, 1000.0)
       .That(blend_decay >= 0 && blend_decay * learning_rate * blend_lr_scale < 1,
             "blend_decay is >= 0 and shrinks the blendshapes by less than all of them a step "
             "(blend_decay * learning_rate * blend_lr_scale < 1)")
@@ -178,11 +179,12 @@ struct Offsets {
   bool enabled() const { return geometry.defined(); }
 };
 
-Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity) {
+Offsets MakeOffsets(const AvatarConfig& config, int frames, bool freeze_identity, bool identity_offsets) {
   Offsets o;
   o.geometry = torch::zeros({frames, config.conditioning_dim()}, torch::requires_grad());
   o.appearance = torch::zeros({frames, config.appearance_dim()}, torch::requires_grad());
   const ConditioningMasks masks = OffsetMasks(config, freeze_identity);
+  if (identity_offsets) masks.geometry.narrow(1, 0, config.num_shape).fill_(1);
   o.geometry_mask = masks.geometry;
   o.appearance_mask = masks.appearance;
   return o;
@@ -399,15 +401,29 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   if (options.anchor_weight > 0)
     for (const torch::Tensor& p : params) anchors.push_back(p.detach().clone());
   Offsets offsets;
-  if (!real.empty() && options.learn_offsets && options.loss.offset_weight > 0) {
-    offsets = MakeOffsets(config, real.offset_rows(), options.freeze_identity);
+  const bool offsets_apart = options.offset_lr_scale != 1;
+  if (!real.empty() && options.learn_offsets && options.loss.offset_weight > 0)
+    offsets = MakeOffsets(config, real.offset_rows(), options.freeze_identity, options.identity_offsets);
+  if (offsets.enabled() && !offsets_apart) {
     params.push_back(offsets.geometry);
     params.push_back(offsets.appearance);
   }
   std::vector<torch::optim::OptimizerParamGroup> groups = {torch::optim::OptimizerParamGroup(params)};
-  if (!surface_params.empty()) groups.emplace_back(surface_params);
-  if (!blend_params.empty()) groups.emplace_back(blend_params);
-  const double group_scale[] = {1.0, options.surface_lr_scale, options.blend_lr_scale};
+  std::vector<double> group_scale = {1.0};
+  if (!surface_params.empty()) {
+    groups.emplace_back(surface_params);
+    group_scale.push_back(options.surface_lr_scale);
+  }
+  if (!blend_params.empty()) {
+    groups.emplace_back(blend_params);
+    group_scale.push_back(options.blend_lr_scale);
+  }
+  if (offsets.enabled() && offsets_apart) {
+    groups.emplace_back(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance});
+    group_scale.push_back(options.offset_lr_scale);
+    params.push_back(offsets.geometry);  // all-reduced with the rest
+    params.push_back(offsets.appearance);
+  }
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
   params.insert(params.end(), texture.begin(), texture.end());  // all of them, for the all-reduce
   std::unique_ptr<PerceptualLoss> vgg;
@@ -549,6 +565,21 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     }
   }
   if (average) average->Swap();  // the avatar keeps the average
+  if (offsets.enabled()) {       // over the training frames' rows (the others, held-out frames', stay zero)
+    torch::NoGradGuard no_grad;
+    std::vector<int64_t> trained;
+    for (const RealFrames::Frame& f : real.frames()) trained.push_back(f.offset_row);
+    const torch::Tensor rows_trained = torch::tensor(trained);
+    const auto mean_and_spread = [&](const torch::Tensor& rows, const torch::Tensor& mask, std::vector<float>* mean) {
+      const torch::Tensor masked = rows.detach().index_select(0, rows_trained) * mask, m = masked.mean(0);
+      mean->assign(m.data_ptr<float>(), m.data_ptr<float>() + m.numel());
+      return (masked - m).square().sum().item<double>();
+    };
+    const double spread = mean_and_spread(offsets.geometry, offsets.geometry_mask, &result.mean_offset_geometry) +
+                          mean_and_spread(offsets.appearance, offsets.appearance_mask, &result.mean_offset_appearance);
+    const double told = (offsets.geometry_mask.sum() + offsets.appearance_mask.sum()).item<double>();
+    result.offset_rms = std::sqrt(spread / std::max(1.0, told * static_cast<double>(trained.size())));
+  }
   if (writes && !surface_params.empty() && blend_params.size() == 1)
     LogBlendshapeSizes(surface_params, blend_params[0]);
   result.seconds = watch.ElapsedSeconds();

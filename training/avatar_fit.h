@@ -80,6 +80,12 @@ struct FitOptions {
   // thing to try against that (bench/results/fidelity_ablation.md: 1 was no
   // better than the texture's 20).
   double blend_lr_scale = 20;
+  // The per-frame offsets' rate over the networks' (their own group only
+  // when not 1, so checkpoints from before resume). A fine-tune visits each
+  // training frame a dozen times or so, and Adam moves each offset by about
+  // the rate at every visit whatever its gradient's size: at 1 the offsets
+  // end as a per-frame jitter of that many steps (bench/results/fidelity_ablation.md).
+  double offset_lr_scale = 1;
   // Decoupled weight decay of the blendshapes alone (AdamW's: each step shrinks
   // them by rate * blend_decay, rate being theirs): a blendshape the frames do
   // not keep pushing the same way fades, so one fitted to noise or to what
@@ -99,6 +105,13 @@ struct FitOptions {
   MixSchedule mix;               // used when both synthetic and real data are given
   bool learn_offsets = true;     // per-frame offsets on beta, theta, psi, tau, lambda of real frames
   bool freeze_identity = false;  // subject fine-tune: no offsets on beta and tau (frozen, METHOD §6)
+  // Per-frame offsets on beta as the networks are told it even with
+  // freeze_identity (the mesh's beta stays the subject's): a code of each
+  // training frame's own that the networks read as they read a person's
+  // shape, where what no code explains (the hair's outline as it fell, a
+  // mask's error) can go instead of into the expression's; the receiver
+  // tells them the subject's beta, the frames' average.
+  bool identity_offsets = false;
   // Standard deviation of Gaussian noise added to a real frame's expression
   // coefficients as the networks see them (not to the mesh): a few hundred
   // frames span few of psi's combinations, and an avatar that keys detail to
@@ -168,6 +181,11 @@ struct TrainResult {
   int first_step = 0;  // where this run started (after a resume)
   std::vector<StepInfo> steps;
   std::string perceptual;  // "vgg16 PATH" or "ssim"
+  // The real frames' learnt offsets (where OffsetMasks allows them) averaged
+  // over the frames, conditioning_dim() and appearance_dim() values; empty
+  // without offsets. `offset_rms`: their root mean square about that mean.
+  std::vector<float> mean_offset_geometry, mean_offset_appearance;
+  double offset_rms = 0;
   double seconds = 0;
   double samples_per_s = 0;
 };

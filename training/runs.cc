@@ -97,6 +97,8 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"surface_lr_scale", f.surface_lr_scale},
       {"blend_lr_scale", f.blend_lr_scale},
       {"blend_decay", f.blend_decay},
+      {"offset_lr_scale", f.offset_lr_scale},
+      {"identity_offsets", f.identity_offsets},
       {"weight_average", f.weight_average},
       {"region_weight", f.loss.regions.weight},
       {"seconds", r.seconds},
@@ -112,6 +114,12 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
     j["roll_max_degrees"] = f.roll_max_degrees;
     j["learned_offsets"] = f.learn_offsets;
     j["rare_expressions"] = f.rare_expressions.strength;
+  }
+  if (!r.mean_offset_geometry.empty()) {
+    double square = 0;
+    for (const std::vector<float>* m : {&r.mean_offset_geometry, &r.mean_offset_appearance})
+      for (float v : *m) square += double{v} * v;
+    j["offsets"] = {{"mean_norm", std::sqrt(square)}, {"rms_about_mean", r.offset_rms}};
   }
   return j;
 }
@@ -170,7 +178,8 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     AvatarConfig c = init.config();
     c.output_size = o.resolution;
     TakeSampleSwitches(o.config, &c);
-    c.ClearExpressionSpan();  // a person's span (an avatar as the start) is not a general model's
+    c.ClearExpressionSpan();  // a person's span and bias (an avatar as the start) are not a general model's
+    c.ClearConditioningBias();
     return init.WithRuntimeSwitches(c);
   }();
   o.synthetic.image_size = o.resolution;
@@ -248,6 +257,21 @@ Avatar WithExpressionSpan(const Avatar& avatar, const PreparedDataset* data) {
   return avatar.WithRuntimeSwitches(c);
 }
 
+// The avatar with the mean of the offsets its fit learnt added to its
+// conditioning bias (AvatarConfig::bias_geometry/appearance); unchanged
+// when the fit learnt none.
+Avatar WithMeanOffset(const Avatar& avatar, const TrainResult& fitted) {
+  if (fitted.mean_offset_geometry.empty()) return avatar.WithRuntimeSwitches(avatar.config());
+  AvatarConfig c = avatar.config();
+  if (!c.has_conditioning_bias()) {
+    c.bias_geometry.assign(c.conditioning_dim(), 0.f);
+    c.bias_appearance.assign(c.appearance_dim(), 0.f);
+  }
+  for (size_t i = 0; i < c.bias_geometry.size(); ++i) c.bias_geometry[i] += fitted.mean_offset_geometry.at(i);
+  for (size_t i = 0; i < c.bias_appearance.size(); ++i) c.bias_appearance[i] += fitted.mean_offset_appearance.at(i);
+  return avatar.WithRuntimeSwitches(c);
+}
+
 }  // namespace
 
 FitOptions SubjectFitDefaults() {
@@ -309,6 +333,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.matte_rules = o.config.matte_rules;
     c.matte_core = o.config.matte_core;
     c.ClearExpressionSpan();  // another subject's, if the start is an avatar
+    c.ClearConditioningBias();
     return general.WithRuntimeSwitches(c);
   }();
   if (o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
@@ -347,6 +372,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
   // Set after training by default: what the networks learnt is unchanged by it.
   if (o.expression_span && !o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
+  if (o.mean_offset) avatar = WithMeanOffset(avatar, fitted);
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
   for (int k = 0; k < 4; ++k) {

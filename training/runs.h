@@ -69,6 +69,9 @@ struct SubjectOptions {
   // within it) while their mesh takes them as they are (the real frames lie
   // within it). Off: training unchanged by the span.
   bool expression_span_in_training = false;
+  // The mean of the per-frame offsets the fine-tune learnt kept as the
+  // avatar's conditioning bias (AvatarConfig::bias_geometry/appearance).
+  bool mean_offset = false;
   AvatarConfig config;  // architecture when from_scratch
   FitOptions fit = SubjectFitDefaults();
   RunOutputs outputs;

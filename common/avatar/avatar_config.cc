@@ -118,6 +118,16 @@ void AvatarConfig::Check() const {
     c.That(std::isfinite(expression_low[i]) && std::isfinite(expression_high[i]) &&
                expression_low[i] <= expression_high[i],
            "expression span " + std::to_string(i) + " must be finite with low <= high");
+  c.That(bias_geometry.empty() == bias_appearance.empty(), "bias_geometry and bias_appearance come together");
+  c.That(bias_geometry.empty() || static_cast<int>(bias_geometry.size()) == conditioning_dim(),
+         "conditioning bias has " + std::to_string(bias_geometry.size()) + " geometry values, the avatar " +
+             std::to_string(conditioning_dim()));
+  c.That(bias_appearance.empty() || static_cast<int>(bias_appearance.size()) == appearance_dim(),
+         "conditioning bias has " + std::to_string(bias_appearance.size()) + " appearance values, the avatar " +
+             std::to_string(appearance_dim()));
+  for (const std::vector<float>* bias : {&bias_geometry, &bias_appearance})
+    for (float v : *bias)
+      c.That(std::isfinite(v) && std::abs(v) <= 10, "conditioning bias values must be finite, |v| <= 10");
   c.ThrowIfErrors();
   matte_rules.Check();
 }
@@ -169,6 +179,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"hair_reach", hair_reach},
                       {"view_rotation", view_rotation}};
   if (has_expression_span()) j["expression_span"] = {{"low", expression_low}, {"high", expression_high}};
+  if (has_conditioning_bias()) j["conditioning_bias"] = {{"geometry", bias_geometry}, {"appearance", bias_appearance}};
   return j;
 }
 
@@ -223,6 +234,10 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     if (j.contains("expression_span")) {
       c.expression_low = j.at("expression_span").at("low").get<std::vector<float>>();
       c.expression_high = j.at("expression_span").at("high").get<std::vector<float>>();
+    }
+    if (j.contains("conditioning_bias")) {
+      c.bias_geometry = j.at("conditioning_bias").at("geometry").get<std::vector<float>>();
+      c.bias_appearance = j.at("conditioning_bias").at("appearance").get<std::vector<float>>();
     }
   } catch (const nlohmann::json::exception& e) {
     throw std::invalid_argument(std::string("AvatarConfig: bad or missing field: ") + e.what());

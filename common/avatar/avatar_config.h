@@ -209,6 +209,15 @@ struct AvatarConfig : AvatarCommonConfig {
   // moves what they learnt. Empty: none (general models, files from before
   // it); otherwise num_expression values each, low <= high. A run-time switch.
   std::vector<float> expression_low, expression_high;
+  // Added to every frame's conditioning after the span and the motion
+  // conditioning have made it (MakeConditioning): the mean of the per-frame
+  // offsets a fine-tune learnt on its training frames (METHOD eq. 8). The
+  // networks were trained on the tracker's codes plus those offsets, so a
+  // frame they never saw, told its codes alone, is told less than the codes
+  // they learnt to answer by that mean. Empty: none (general models, files
+  // from before it); otherwise conditioning_dim() and appearance_dim()
+  // values. A run-time switch.
+  std::vector<float> bias_geometry, bias_appearance;
 
   bool has_surface() const { return surface_features > 0; }
   // The surface lookup needs each mesh pixel's posed point (SurfaceBatch::posed).
@@ -221,6 +230,11 @@ struct AvatarConfig : AvatarCommonConfig {
   void ClearExpressionSpan() {
     expression_low.clear();
     expression_high.clear();
+  }
+  bool has_conditioning_bias() const { return !bias_geometry.empty(); }
+  void ClearConditioningBias() {
+    bias_geometry.clear();
+    bias_appearance.clear();
   }
   // Coefficient i as the networks are told it (within the span, if any).
   float ToldExpression(int i, float value) const;

@@ -645,6 +645,58 @@ TEST(ExpressionSpan, TheNetworksAreToldExpressionsWithinItTheMeshTheFramesOwn) {
   EXPECT_THROW(AvatarConfig::FromJson(j), std::invalid_argument);
 }
 
+// A conditioning bias is added to what the networks are told, after the
+// span holds the expression and only where the motion conditioning tells
+// them anything; it travels in the file; files from before have none; one of
+// the wrong size or not finite is refused.
+TEST(ConditioningBias, IsAddedToWhatTheNetworksAreToldAndTravelsInTheFile) {
+  AvatarConfig c = testing::TinyAvatarConfig();
+  c.num_expression = Builtin()->num_expression();
+  const SubjectParams subject = DefaultSubject(*Builtin(), c.output_size);
+  const FrameParams f = Expressive();
+  const AvatarConditioning plain = MakeConditioning(c, subject, f);
+  AvatarConfig biased = c;
+  for (int i = 0; i < c.conditioning_dim(); ++i) biased.bias_geometry.push_back(0.01f * (i + 1));
+  for (int i = 0; i < c.appearance_dim(); ++i) biased.bias_appearance.push_back(-0.02f * (i + 1));
+  biased.Check();
+  const AvatarConditioning told = MakeConditioning(biased, subject, f);
+  for (int i = 0; i < c.conditioning_dim(); ++i)
+    EXPECT_NEAR(told.geometry[0][i].item<float>() - plain.geometry[0][i].item<float>(), 0.01f * (i + 1), 1e-6) << i;
+  for (int i = 0; i < c.appearance_dim(); ++i)
+    EXPECT_NEAR(told.appearance[0][i].item<float>() - plain.appearance[0][i].item<float>(), -0.02f * (i + 1), 1e-6)
+        << i;
+  // After the span: a coefficient held at its high is told high + bias.
+  const int psi = c.expression_offset();
+  biased.expression_low.assign(c.num_expression, -1.f);
+  biased.expression_high.assign(c.num_expression, 1.f);
+  ASSERT_GT(f.expression[0], 1.f);
+  EXPECT_NEAR(MakeConditioning(biased, subject, f).geometry[0][psi].item<float>(), 1.f + biased.bias_geometry[psi],
+              1e-6);
+  // Told only the neck: nothing else, bias or not.
+  biased.motion_conditioning = MotionConditioning::kNeck;
+  const torch::Tensor neck = MakeConditioning(biased, subject, f).geometry;
+  const int jaw = c.pose_offset() + 3;
+  EXPECT_EQ(neck.narrow(1, jaw, c.conditioning_dim() - jaw).abs().max().item<float>(), 0.f);
+  EXPECT_NEAR(neck[0][0].item<float>() - plain.geometry[0][0].item<float>(), 0.01f, 1e-6) << "beta is always told";
+
+  const AvatarConfig back = AvatarConfig::FromJson(biased.ToJson());
+  EXPECT_EQ(back.bias_geometry, biased.bias_geometry);
+  EXPECT_EQ(back.bias_appearance, biased.bias_appearance);
+  EXPECT_FALSE(AvatarConfig::FromJson(c.ToJson()).has_conditioning_bias()) << "files from before it";
+  AvatarConfig bad = biased;
+  bad.bias_geometry.pop_back();
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad = biased;
+  bad.bias_appearance.clear();
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  nlohmann::json j = biased.ToJson();
+  j["conditioning_bias"]["appearance"][4] = nullptr;  // a NaN written by a JSON library
+  EXPECT_THROW(AvatarConfig::FromJson(j), std::invalid_argument);
+  j = biased.ToJson();
+  j["conditioning_bias"]["geometry"][2] = 1e30;
+  EXPECT_THROW(AvatarConfig::FromJson(j), std::invalid_argument);
+}
+
 // What a mode leaves out of the conditioning is zero whatever the frame says;
 // what it keeps is the frame's. The mode travels in the file; a foreign name
 // is refused.

@@ -169,6 +169,17 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
 [ "$(config "$tmp/l.hcavatar" "['surface_levels']")" = 2 ] && [ "$(config "$tmp/i.hcavatar" "['surface_levels']")" = 1 ] &&
   [ "$(json "$tmp/l.json" "0 < j['fit']['final_loss'] < 10")" = True ] &&
   ok "subject --surface-levels 2: trained and kept" || bad "surface levels: $(tail -3 "$tmp/l.err")"
+# The offsets' mean kept as the avatar's conditioning bias (--mean-offset): its size is the one the run reports;
+# without the flag, none.
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --mean-offset --out "$tmp/m.hcavatar" --json "$tmp/m.json" > /dev/null 2> "$tmp/m.err"
+bias_norm=$("$python" -c "import json, math, zipfile
+b = json.loads(zipfile.ZipFile('$tmp/m.hcavatar').read('manifest.json'))['config']['conditioning_bias']
+print(math.sqrt(sum(v * v for v in b['geometry'] + b['appearance'])))" 2> /dev/null)
+[ -n "$bias_norm" ] && [ "$(json "$tmp/m.json" "0 < $bias_norm and abs(j['fit']['offsets']['mean_norm'] - $bias_norm) < 1e-4 * $bias_norm")" = True ] &&
+  [ "$(config "$tmp/i.hcavatar" ".get('conditioning_bias')")" = None ] &&
+  ok "subject --mean-offset: the offsets' mean kept as the conditioning bias; by default none" ||
+  bad "mean offset: bias norm '$bias_norm', $(json "$tmp/m.json" "j['fit'].get('offsets')") $(tail -3 "$tmp/m.err")"
 # The expression span: a subject records each coefficient's extremes over its training frames (all but the last 8),
 # --no-expression-span none; eval tells the networks within the avatar's span, none, or the dataset's.
 "$bin/headcast-rec" export "$tmp/dsi/params.hcrec" --out "$tmp/dsi_params.json" > /dev/null 2>&1

@@ -618,6 +618,26 @@ TEST(TrainAvatar, FineTunesOnRealFramesWithFrozenLayersOffsetsAndResume) {
   // Masked out of the conditioning, beta's offsets get no gradient.
   EXPECT_EQ(offsets[0].narrow(1, 0, c.num_shape).abs().max().item<double>(), 0.0);
   EXPECT_EQ(offsets[1].narrow(1, c.appearance_dim() - c.num_texture, c.num_texture).abs().max().item<double>(), 0.0);
+  // The fit reports their mean over the frames (what a subject run may keep as the avatar's conditioning bias).
+  ASSERT_EQ(r.mean_offset_geometry.size(), static_cast<size_t>(c.conditioning_dim()));
+  ASSERT_EQ(r.mean_offset_appearance.size(), static_cast<size_t>(c.appearance_dim()));
+  // Over the training frames' rows: the held-out frames' stay zero and count for nothing.
+  std::vector<int64_t> train_rows(real.train().begin(), real.train().end());
+  ASSERT_LT(train_rows.size(), static_cast<size_t>(offsets[0].size(0)));
+  const torch::Tensor rows = torch::tensor(train_rows);
+  EXPECT_EQ(offsets[0]
+                .index_select(0, torch::tensor(std::vector<int64_t>(real.test().begin(), real.test().end())))
+                .abs()
+                .max()
+                .item<double>(),
+            0.0);
+  for (int i = 0; i < c.conditioning_dim(); ++i)
+    EXPECT_NEAR(r.mean_offset_geometry[i], offsets[0].index_select(0, rows).select(1, i).mean().item<float>(), 1e-6)
+        << i;
+  for (int i = 0; i < c.appearance_dim(); ++i)
+    EXPECT_NEAR(r.mean_offset_appearance[i], offsets[1].index_select(0, rows).select(1, i).mean().item<float>(), 1e-6)
+        << i;
+  EXPECT_GT(r.offset_rms, 0);
 
   // Resume: 6 steps straight against 3 + 3, with augmentation, offsets and mixing.
   SyntheticDataOptions so;
@@ -682,6 +702,53 @@ TEST(TrainAvatar, OffsetsKeepOutOfWhatTheNetworksAreNotTold) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("expression_noise"), std::string::npos) << e.what();
   }
+}
+
+// The offsets' rate is their own: Adam moves each by about its rate at each
+// visit, so four times the rate leaves offsets several times larger, and a
+// rate of zero leaves them at zero while the networks still learn; a resume
+// with their own group continues exactly. With identity offsets, beta as the
+// networks are told it takes offsets too in a fine-tune.
+TEST(TrainAvatar, TheOffsetsRateIsTheirOwn) {
+  const std::string dir = WriteRenderedDataset("dataset_offset_rate", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  auto fit = [&](double scale, const std::string& checkpoints = "", bool resume = false,
+                 std::function<void(const StepInfo&)> progress = nullptr, bool identity_offsets = false) {
+    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+    FitOptions f;
+    f.iterations = 8;
+    f.batch = 2;
+    f.freeze_identity = true;
+    f.identity_offsets = identity_offsets;
+    f.offset_lr_scale = scale;
+    f.checkpoint_dir = checkpoints;
+    f.checkpoint_every = 4;
+    f.resume = resume;
+    return TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
+  };
+  const TrainResult one = fit(1), four = fit(4), none = fit(0);
+  ASSERT_GT(one.offset_rms, 0);
+  EXPECT_GT(four.offset_rms, 2 * one.offset_rms);
+  EXPECT_LT(four.offset_rms, 8 * one.offset_rms);
+  EXPECT_EQ(none.offset_rms, 0.0);
+  EXPECT_LT(none.steps.back().loss, none.steps.front().loss) << "the networks still learn";
+  const std::string dir_split = testing::TempDir("ckpt_offset_rate");
+  EXPECT_THROW(fit(4, dir_split, false, CrashAfter(4)), Crash);
+  const TrainResult rest = fit(4, dir_split, true);
+  ASSERT_EQ(rest.steps.size(), 4u);
+  for (int i = 0; i < 4; ++i)
+    EXPECT_NEAR(rest.steps[i].loss, four.steps[4 + i].loss, 1e-4 * four.steps[4 + i].loss) << "step " << 4 + i;
+  EXPECT_NEAR(rest.offset_rms, four.offset_rms, 1e-4 * four.offset_rms);
+
+  const int shape = Model().num_shape();  // CreateRandom fits the conditioning to the model
+  const TrainResult identity = fit(1, "", false, nullptr, true);
+  double beta_one = 0, beta_identity = 0;
+  for (int i = 0; i < shape; ++i) {
+    beta_one += std::abs(one.mean_offset_geometry.at(i));
+    beta_identity += std::abs(identity.mean_offset_geometry.at(i));
+  }
+  EXPECT_EQ(beta_one, 0.0) << "frozen identity: no offsets on beta";
+  EXPECT_GT(beta_identity, 0.0);
 }
 
 // Several people's datasets: every frame drawn with its own dataset's subject,
