@@ -65,6 +65,11 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--offset-weight", fit->loss.offset_weight, "weight of the per-frame offsets' squared norm")
       ->capture_default_str();
   app->add_flag("!--no-offsets", fit->learn_offsets, "no learnable per-frame offsets on real frames");
+  app->add_flag("--identity-offsets", fit->identity_offsets,
+                "per-frame offsets on beta as the networks are told it, in a fine-tune too (the mesh keeps the "
+                "subject's)");
+  app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
+      ->capture_default_str();
   app->add_option("--rare-expressions", fit->rare_expressions.strength,
                   "real frames drawn by how rare their expression is, weight (isolation / median)^S (0: uniformly)")
       ->capture_default_str();
@@ -185,11 +190,6 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_option("--surface-blend-components", config->surface_blend_components,
                   "with --surface-blend: one set of planes per principal direction of the training frames' "
                   "expressions, the first N (0: one per coefficient)")
-      ->capture_default_str();
-  app->add_flag("--identity-offsets", fit->identity_offsets,
-                "per-frame offsets on beta as the networks are told it, in a fine-tune too (the mesh keeps the "
-                "subject's)");
-  app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
       ->capture_default_str();
   app->add_option("--surface-blend-lr", fit->blend_lr_scale,
                   "the texture's expression blendshapes' learning rate as a multiple of --lr")

@@ -82,7 +82,7 @@ struct FitOptions {
   double blend_lr_scale = 20;
   // The per-frame offsets' rate over the networks' (their own group only
   // when not 1, so checkpoints from before resume). A fine-tune visits each
-  // training frame a dozen times or so, and Adam moves each offset by about
+  // training frame about two dozen times, and Adam moves each offset by about
   // the rate at every visit whatever its gradient's size: at 1 the offsets
   // end as a per-frame jitter of that many steps (bench/results/fidelity_ablation.md).
   double offset_lr_scale = 1;

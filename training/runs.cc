@@ -257,11 +257,9 @@ Avatar WithExpressionSpan(const Avatar& avatar, const PreparedDataset* data) {
   return avatar.WithRuntimeSwitches(c);
 }
 
-// The avatar with the mean of the offsets its fit learnt added to its
-// conditioning bias (AvatarConfig::bias_geometry/appearance); unchanged
-// when the fit learnt none.
+// The avatar with the mean of the offsets its fit learnt (`fitted` has
+// them) added to its conditioning bias (AvatarConfig::bias_geometry/appearance).
 Avatar WithMeanOffset(const Avatar& avatar, const TrainResult& fitted) {
-  if (fitted.mean_offset_geometry.empty()) return avatar.WithRuntimeSwitches(avatar.config());
   AvatarConfig c = avatar.config();
   if (!c.has_conditioning_bias()) {
     c.bias_geometry.assign(c.conditioning_dim(), 0.f);
@@ -372,7 +370,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   if (fit.distributed.rank != 0) return {{"rank", fit.distributed.rank}, {"written_by", "rank 0"}};
   // Set after training by default: what the networks learnt is unchanged by it.
   if (o.expression_span && !o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
-  if (o.mean_offset) avatar = WithMeanOffset(avatar, fitted);
+  if (o.mean_offset && !fitted.mean_offset_geometry.empty()) avatar = WithMeanOffset(avatar, fitted);
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
   for (int k = 0; k < 4; ++k) {

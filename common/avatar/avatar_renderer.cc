@@ -34,7 +34,7 @@ AvatarConditioning MakeConditioning(const AvatarConfig& c, const SubjectParams& 
   for (int i = 0; i < std::min<int>(c.num_texture, subject.texture.size()); ++i) a[27 + i] = subject.texture[i];
   if (c.has_conditioning_bias()) {
     for (int i = 0; i < c.conditioning_dim(); ++i)
-      if (i < c.num_shape || c.Conditions(i)) g[i] += c.bias_geometry[i];
+      if (c.Conditions(i)) g[i] += c.bias_geometry[i];  // beta always
     for (int i = 0; i < c.appearance_dim(); ++i) a[i] += c.bias_appearance[i];
   }
   return {torch::tensor(g).view({1, -1}), torch::tensor(a).view({1, -1})};
