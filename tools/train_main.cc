@@ -340,6 +340,11 @@ int main(int argc, char** argv) {
                    "rigid part (forehead, temples, crown) over the clip and every frame fitted again; each anchored "
                    "point's weight against a landmark (0: off)")
       ->capture_default_str();
+  prep->add_option("--outline-hold", p.outline_hold,
+                   "tracking, with the photometric anchor: the head's pitch also held to the top of the hair's "
+                   "outline in the head mask (the hair's thickness over the skull kept at its median over the clip); "
+                   "each held column's weight against a landmark (0: off)")
+      ->capture_default_str();
   prep->add_option("--landmark-filter", p.landmark_filter,
                    "tracking: the landmarks over time: off (as found), causal (the live tracker's filter, which "
                    "lags a moving face) or two-sided (filtered forwards and backwards: no lag)")

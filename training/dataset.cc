@@ -50,11 +50,13 @@ void PrepOptions::Check() const {
       .NonNegative("landmark_filter_beta", landmark_filter_beta)
       .InRange("pose_smoothing", pose_smoothing, 0.0, 100.0)
       .InRange("photometric_anchor", photometric_anchor, 0.0, 100.0)
+      .InRange("outline_hold", outline_hold, 0.0, 100.0)
       .That(std::find(kLandmarkFilterModes.begin(), kLandmarkFilterModes.end(), landmark_filter) !=
                 kLandmarkFilterModes.end(),
             "landmark_filter is causal, off or two-sided");
   expression_fit.CheckInto(&c);
   c.That(!(calibrate && !identity_from.empty()), "calibrate and identity_from exclude each other");
+  c.That(outline_hold == 0 || photometric_anchor > 0, "outline_hold needs the photometric anchor (its refits)");
   c.ThrowIfErrors();
 }
 
@@ -168,9 +170,11 @@ TrackedInput TrackInput(const PrepOptions& o, const HeadModel& model) {
     track.identity_source = o.identity_from;
   }
   track.anchor.weight = o.photometric_anchor;
+  track.outline.weight = o.outline_hold;
   if (IsLiveCameraSource(o.input) && o.photometric_anchor > 0) {
     spdlog::info("prep: no photometric anchor on a live camera (it cannot be read again)");
     track.anchor.weight = 0;
+    track.outline.weight = 0;
   }
   track.masks = true;
   track.mask.working_size = o.mask_working_size;
@@ -388,7 +392,8 @@ nlohmann::json PrepareDataset(const PrepOptions& o) {
         {"steady_masks", o.steady_masks},
         {"landmark_filter", o.landmark_filter},
         {"pose_smoothing", o.pose_smoothing},
-        {"photometric_anchor", o.photometric_anchor}}}};
+        {"photometric_anchor", o.photometric_anchor},
+        {"outline_hold", o.outline_hold}}}};
   // The references the frames were fitted to, for the avatar to carry to the sender.
   const nlohmann::json anchor = track_report.value("photometric_anchor", nlohmann::json::object());
   if (anchor.is_object() && anchor.contains("reference") && !anchor.at("reference").is_null())

@@ -100,6 +100,10 @@ struct PrepOptions {
   // frame fitted again (OfflineTrackOptions::anchor; recorded input, not a
   // live camera); weight 0: off. On by measurement (DEFAULTS.md).
   double photometric_anchor = 0.5;
+  // With the anchor: the head's pitch also held to the top of the hair's
+  // outline in its refits (OfflineTrackOptions::outline), each held column's
+  // weight against a landmark; 0: off.
+  double outline_hold = 0;
   // Short videos: K frames synthesised between each pair of consecutive
   // training frames (optical flow; parameters interpolated). Never in the test split.
   int interpolate = 0;

@@ -69,6 +69,13 @@ std::vector<int> RigidHeadVertices(const HeadModel& model,
 
 }  // namespace
 
+void RigidObservations::Append(const RigidObservations& more, double own_weight, double more_weight) {
+  if (weight.size() < head.size()) weight.resize(head.size(), own_weight);
+  head.insert(head.end(), more.head.begin(), more.head.end());
+  observed.insert(observed.end(), more.observed.begin(), more.observed.end());
+  for (size_t i = 0; i < more.head.size(); ++i) weight.push_back(i < more.weight.size() ? more.weight[i] : more_weight);
+}
+
 HeadFitter::HeadFitter(const HeadModel& model, const HeadFitterOptions& options) : model_(model), options_(options) {
   options.Check();
   num_expression_ =
@@ -386,11 +393,14 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
     problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
                              {rotation, translation, expression.data(), jaw});
   }
-  if (rigid && options_.rigid_flow_weight > 0)
-    for (size_t i = 0; i < rigid->head.size() && i < rigid->observed.size(); ++i)
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RigidPointResidual, 2, 3, 3>(new RigidPointResidual(
-                                   rigid->head[i], rigid->observed[i], cam, options_.rigid_flow_weight)),
+  if (rigid)
+    for (size_t i = 0; i < rigid->head.size() && i < rigid->observed.size(); ++i) {
+      const double weight = i < rigid->weight.size() ? rigid->weight[i] : options_.rigid_flow_weight;
+      if (!(weight > 0)) continue;
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RigidPointResidual, 2, 3, 3>(
+                                   new RigidPointResidual(rigid->head[i], rigid->observed[i], cam, weight)),
                                new ceres::HuberLoss(options_.huber_px), rotation, translation);
+    }
   AddExpressionPriors(&problem, expression.data());
   problem.AddResidualBlock(new PriorCost(3, std::sqrt(options_.jaw_prior)), nullptr, jaw);
   if (!model_.JointIsArticulated(kJawJoint)) problem.SetParameterBlockConstant(jaw);

@@ -26,6 +26,11 @@ struct EyeIrises;  // iris_locator.h
 struct RigidObservations {
   std::vector<Eigen::Vector3d> head;      // metres
   std::vector<Eigen::Vector2d> observed;  // pixels
+  // Per point its weight against a landmark; empty: every point
+  // HeadFitterOptions::rigid_flow_weight.
+  std::vector<double> weight;
+  // Appends `more`, their weights (or `more_weight` for each when it has none).
+  void Append(const RigidObservations& more, double own_weight, double more_weight);
 };
 
 // The values of HeadFitterOptions::eye_look_prior_shapes.

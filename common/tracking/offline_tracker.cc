@@ -208,9 +208,16 @@ void RefitHeld(FrameTracker& tracker, const PinholeCamera& camera, std::vector<H
 // twice a round. Returns the report's entry; *reference: the last round's references.
 nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o, const FrameSourceFactory& open,
                            const Eigen::VectorXd& identity, const PinholeCamera& camera,
-                           const std::map<uint64_t, FaceObservation>& faces, std::vector<FrameParams>* frames,
+                           const std::map<uint64_t, FaceObservation>& faces,
+                           const std::map<uint64_t, std::vector<int>>& mask_tops, std::vector<FrameParams>* frames,
                            std::optional<AnchorReference>* reference) {
   PhotometricAnchor anchor(model, identity, o.anchor);
+  std::optional<OutlineHold> outline;
+  if (o.outline.enabled()) outline.emplace(model, identity, o.outline);
+  auto tops = [&](const FrameParams& f) -> const std::vector<int>* {
+    const auto it = mask_tops.find(f.sequence);
+    return it == mask_tops.end() ? nullptr : &it->second;
+  };
   HeadFitterOptions fit_options = o.tracker.fit;
   fit_options.rigid_flow_weight = o.anchor.weight;
   HeadFitter fitter(model, fit_options);
@@ -238,14 +245,20 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
   };
   nlohmann::json rounds = nlohmann::json::array();
   for (int round = 0; round < o.anchor.rounds; ++round) {
-    each_frame(
-        [&](const cv::Mat& gray, FrameParams* f, const FaceObservation&, double) { anchor.Observe(gray, *f, camera); });
+    each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation&, double) {
+      anchor.Observe(gray, *f, camera);
+      if (outline && tops(*f)) outline->Observe(*tops(*f), *f, camera);
+    });
     const int referenced = anchor.Reference();
-    SampleStats shift, before, after;
+    const bool outlined = outline && outline->Reference();
+    SampleStats shift, before, after, held_columns;
     int refitted = 0, rejected = 0;
     each_frame([&](const cv::Mat& gray, FrameParams* f, const FaceObservation& face, double iod) {
       AnchorAlignment a;
-      const bool again = anchor.Refit(gray, face.landmarks, &face.irises, iod, camera, fitter, f, &a);
+      RigidObservations held;
+      if (outlined && tops(*f)) held = outline->Observations(*tops(*f), *f, camera);
+      if (outlined) held_columns.Add(static_cast<double>(held.head.size()));
+      const bool again = anchor.Refit(gray, face.landmarks, &face.irises, iod, camera, fitter, f, &a, &held);
       if (a.ok) {
         shift.Add(a.shift_px);
         before.Add(a.rms_before);
@@ -262,6 +275,12 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
                       {"shift_px_p95", shift.empty() ? 0.0 : shift.Percentile(95)},
                       {"grey_rms_before_median", before.empty() ? 0.0 : before.Median()},
                       {"grey_rms_after_median", after.empty() ? 0.0 : after.Median()}});
+    if (outline)
+      rounds.back()["outline"] = {{"held", outlined},
+                                  {"hair_thickness_mm", std::isnan(outline->observed_median())
+                                                            ? nlohmann::json(nullptr)
+                                                            : nlohmann::json(1e3 * outline->observed_median())},
+                                  {"columns_held_mean", held_columns.empty() ? 0.0 : held_columns.Mean()}};
   }
   nlohmann::json exported;  // null: no point referenced
   if (const AnchorReference last = anchor.Exported(); last.referenced() > 0) {
@@ -269,6 +288,7 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
     exported = last.ToJson();
   }
   return {{"options", o.anchor.ToJson()},
+          {"outline", o.outline.enabled() ? o.outline.ToJson() : nlohmann::json(nullptr)},
           {"points", anchor.num_points()},
           {"rounds", rounds},
           {"reference", exported},
@@ -298,6 +318,9 @@ void OfflineTrackOptions::Check() const {
          "the photometric anchor needs a recorded input (a live camera cannot be read again)");
   c.That(!(anchor.enabled() && anchor_reference), "the clip's own anchor and given references exclude each other");
   c.That(!anchor_reference || identity.size() > 0, "given anchor references need the identity they were made for");
+  outline.Check();
+  c.That(!outline.enabled() || (anchor.enabled() && masks),
+         "holding the hair's outline needs the photometric anchor (its refits) and masks");
   if (intrinsics) c.That(intrinsics->fx > 0 && intrinsics->fy > 0, "intrinsics need positive focal lengths");
   c.That(identity.size() == 0 || identity.allFinite(), "identity must be finite");
   c.ThrowIfErrors();
@@ -351,7 +374,8 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   int recovered = 0;  // frames where the followed box slipped and the detector found the face again
   // Frames whose region's landmarks disagreed with the flow, and were carried by it.
   std::array<int, kNumRepairRegions> disputes{}, repairs{};
-  std::map<uint64_t, FaceObservation> faces;  // what the photometric anchor fits again (RGB frames)
+  std::map<uint64_t, FaceObservation> faces;       // what the photometric anchor fits again (RGB frames)
+  std::map<uint64_t, std::vector<int>> mask_tops;  // with the outline held: each of them's mask's top row per column
   int disputed_frames = 0, repaired_frames = 0;
   Stopwatch watch;
   for (;;) {
@@ -428,6 +452,7 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
       if (sample || o.masks) {
         seen.mask = HeadMask(frame, t.face.raw, o.mask);
         if (sample) appearance_samples.push_back({frame.clone(), seen.mask, params, camera});
+        if (faces.count(params.sequence) && o.outline.enabled()) mask_tops[params.sequence] = MaskTopRows(seen.mask);
       }
       have_pupils = tracker.fitter().ProjectPupils(params, camera, &model_pupils[0], &model_pupils[1]);
       quality.Add(index, t.model_landmarks, t.face.raw);
@@ -447,7 +472,8 @@ OfflineTrack TrackFrames(const HeadModel& model, const OfflineTrackOptions& o, c
   out.frames_read = frames;
   nlohmann::json anchored;
   if (o.anchor.enabled() && !faces.empty())
-    anchored = AnchorTrack(model, o, open, tracker.identity(), camera, faces, &out.frames, &out.anchor_reference);
+    anchored =
+        AnchorTrack(model, o, open, tracker.identity(), camera, faces, mask_tops, &out.frames, &out.anchor_reference);
   SubjectParams& subject = out.subject;
   subject.shape = tracker.identity().cast<float>();
   subject.texture = Eigen::VectorXf::Zero(model.num_texture());

@@ -17,6 +17,7 @@
 #include "common/headmodel/params.h"
 #include "common/tracking/frame_tracker.h"
 #include "common/tracking/head_mask.h"
+#include "common/tracking/outline_hold.h"
 #include "common/tracking/photometric_anchor.h"
 
 namespace headcast {
@@ -47,6 +48,9 @@ struct OfflineTrackOptions {
   // held to its appearance over the clip and each frame fitted again
   // (photometric_anchor.h). Masks and the overlay are the first fits'.
   PhotometricAnchorOptions anchor;
+  // With the anchor and masks: the head's pitch also held to the top of the
+  // hair's outline in those refits (outline_hold.h).
+  OutlineHoldOptions outline;
   // Another way: each frame held to these references (an avatar's) as it is
   // fitted, in the one pass, as the live sender does (FrameTracker::SetAnchor).
   // Needs the identity they were made for.

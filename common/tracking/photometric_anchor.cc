@@ -284,12 +284,13 @@ AnchorAlignment PhotometricAnchor::Align(const cv::Mat& gray, const PinholeCamer
 
 bool PhotometricAnchor::Refit(const cv::Mat& gray, const Landmarks2d& landmarks, const EyeIrises* irises, double iod,
                               const PinholeCamera& camera, const HeadFitter& fitter, FrameParams* frame,
-                              AnchorAlignment* alignment) const {
+                              AnchorAlignment* alignment, const RigidObservations* more) const {
   FrameParams aligned = *frame;
   *alignment = Align(gray, camera, &aligned);
   if (alignment->ok && alignment->shift_px > options_.max_shift_iod * iod) alignment->ok = false;
   if (!alignment->ok) return false;
-  const RigidObservations rigid = Observations(aligned, camera, options_.fit_points);
+  RigidObservations rigid = Observations(aligned, camera, options_.fit_points);
+  if (more) rigid.Append(*more, options_.weight, options_.weight);
   FrameParams refit = *frame;
   if (!fitter.Fit(landmarks, camera, &refit, irises, &rigid).ok) return false;
   *frame = refit;

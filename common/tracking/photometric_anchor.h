@@ -63,10 +63,11 @@ class PhotometricAnchor {
   // fit_points aligned points holding the pose. *frame is left as it was when
   // the alignment fails or moves the points more than max_shift_iod eye
   // distances (`iod`, pixels; then *alignment is not ok) or the fit fails.
-  // Returns whether the frame was fitted again.
+  // `more` holds the pose beside the aligned points (their own weights: the
+  // hair's outline, OutlineHold). Returns whether the frame was fitted again.
   bool Refit(const cv::Mat& gray, const Landmarks2d& landmarks, const EyeIrises* irises, double iod,
-             const PinholeCamera& camera, const HeadFitter& fitter, FrameParams* frame,
-             AnchorAlignment* alignment) const;
+             const PinholeCamera& camera, const HeadFitter& fitter, FrameParams* frame, AnchorAlignment* alignment,
+             const RigidObservations* more = nullptr) const;
   // Up to `count` referenced points visible at `frame`'s pose, spread over
   // them, at its expression, with where that pose projects them: what
   // HeadFitter::Fit holds the pose to.

@@ -20,6 +20,7 @@
 #include "common/tracking/head_mask.h"
 #include "common/tracking/mesh_fitter.h"
 #include "common/tracking/offline_tracker.h"
+#include "common/tracking/outline_hold.h"
 #include "common/tracking/rgbd_fitter.h"
 #include "common/tracking/synthetic_scan.h"
 #include "receiver/display/display.h"
@@ -82,6 +83,7 @@ std::vector<Case> Cases() {
       Plain<MeshFitOptions>("MeshFitOptions"),
       Plain<BlackBoxFitOptions>("BlackBoxFitOptions"),
       Plain<HeadMaskOptions>("HeadMaskOptions"),
+      Plain<OutlineHoldOptions>("OutlineHoldOptions"),
       Plain<PinholeCamera>("PinholeCamera"),
       Plain<DisplayOptions>("DisplayOptions"),
       Plain<JitterBufferOptions>("JitterBufferOptions"),

@@ -14,23 +14,14 @@
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
 #include "common/raster/rasterizer.h"
+#include "tests/testing/frontal_head.h"
 
 namespace headcast {
 namespace {
 
-const HeadModel& Builtin() {
-  static const HeadModel m = MakeBuiltinHead();
-  return m;
-}
-
-const PinholeCamera kCamera = PinholeCamera::FromFovY(640, 480, 45);
-
-FrameParams Posed(double yaw_deg, double pitch_deg) {
-  FrameParams f;
-  f.expression = Eigen::VectorXf::Zero(Builtin().num_expression());
-  f.SetCamFromHead(FrontalCamFromHead(0.45, yaw_deg, pitch_deg, Builtin().rest_landmark_centroid()));
-  return f;
-}
+const HeadModel& Builtin() { return testing::BuiltinModel(); }
+const PinholeCamera& kCamera = testing::kFrontalCamera;
+FrameParams Posed(double yaw_deg, double pitch_deg) { return testing::FrontalPose(yaw_deg, pitch_deg); }
 
 // The head painted with blotches fixed to its rest surface (a skin with
 // freckles and a hairline), over a plain wall; BGR, 8 bits.

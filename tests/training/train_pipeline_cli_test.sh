@@ -42,6 +42,16 @@ EOF
   ok "prep --steady-masks 2: recorded, every mask within IoU $steady_iou of its own" ||
   bad "prep --steady-masks: iou=${steady_iou:-?} $(tail -2 "$tmp/prep3.err")"
 
+# The hair's outline in the anchor's refits (the colour frames alone: the anchor
+# needs a recorded RGB input). The rendered head has no hair and its head mask's
+# region cuts the skull, so the outline is seen but not held.
+"$bin/headcast-train" prep --input "$tmp/seq/rgb" --out "$tmp/ds_outline" --resolutions 128 --test-frames 8 \
+  --no-calibrate --outline-hold 1 > /dev/null 2> "$tmp/prep4.err" &&
+  [ "$(json "$tmp/ds_outline/dataset.json" "j['tracking']['outline_hold']")" = 1.0 ] &&
+  [ "$(json "$tmp/ds_outline/track_report.json" "[(r['outline']['held'], r['outline']['hair_thickness_mm'] < -5) for r in j['photometric_anchor']['rounds']]")" = "[(False, True), (False, True)]" ] &&
+  ok "prep --outline-hold 1: recorded; a mask top $(json "$tmp/ds_outline/track_report.json" "round(j['photometric_anchor']['rounds'][0]['outline']['hair_thickness_mm'])") mm off the skull's is not held" ||
+  bad "prep --outline-hold: $(tail -2 "$tmp/prep4.err")"
+
 "$bin/headcast-train" pretrain --resolution 128 --iterations 12 --batch 2 --eval 2 --out "$tmp/general.hcavatar" \
   > /dev/null 2>&1 && ok "pretrain (tiny)" || bad "pretrain"
 # Continued on real frames: the general model's own sizes, the dataset's training split.
@@ -257,6 +267,8 @@ EOF
 refused "video with no face" "no face" "$bin/headcast-train" prep --input "$tmp/black" --out "$tmp/x2" --no-calibrate
 refused "steady masks beyond the limit" "steady-masks must be in" \
   "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x4" --no-calibrate --steady-masks 9
+refused "the outline held without the photometric anchor" "outline-hold needs the photometric anchor" \
+  "$bin/headcast-train" prep --input "$tmp/seq/rgb" --out "$tmp/x5" --no-calibrate --photometric-anchor 0 --outline-hold 1
 refused "too few frames for the split" "test frames" \
   "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/x3" --no-calibrate --max-frames 10 --test-frames 8
 echo garbage > "$tmp/ckpt/$(cat "$tmp/ckpt/LATEST")/state.json"
