@@ -12,6 +12,7 @@
 #include "common/tracking/expression_fit.h"
 #include "common/tracking/iris_locator.h"
 #include "common/tracking/landmark_costs.h"
+#include "common/tracking/rigid_vertex.h"
 
 namespace headcast {
 
@@ -55,11 +56,7 @@ std::vector<int> RigidHeadVertices(const HeadModel& model,
   std::vector<int> candidates;
   for (int v = 0; v < model.num_vertices(); ++v) {
     if (d.v_template(v, 1) < brow_y + 0.01 || normals(v, 2) < 0.3) continue;
-    if (d.weights(v, kJawJoint) > 0 || d.weights(v, kLeftEyeJoint) > 0 || d.weights(v, kRightEyeJoint) > 0) continue;
-    double moved = 0;
-    for (int k = 0; k < model.num_expression(); ++k)
-      moved = std::max<double>(moved, d.expressiondirs.block(3 * v, k, 3, 1).norm());
-    if (moved <= 1e-3) candidates.push_back(v);
+    if (MovesOnlyWithTheSkull(model, v)) candidates.push_back(v);
   }
   if (static_cast<int>(candidates.size()) <= count) return candidates;
   std::vector<int> picked;

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "common/core/options.h"
+#include "common/tracking/rigid_vertex.h"
 
 namespace headcast {
 
@@ -40,19 +41,13 @@ OutlineHold::OutlineHold(const HeadModel& model, const Eigen::VectorXd& shape, c
       observed_median_(std::numeric_limits<double>::quiet_NaN()) {
   options.Check();
   const HeadIdentity identity = model.MakeIdentity(shape);
-  const HeadModelData& d = model.data();
   // Above the brows at rest (the brows' highest landmark plus a centimetre):
   // the skull's top, never the face.
   const HeadModelOutput rest = model.Forward(HeadModelParams{});
   const double brow_y = rest.landmarks.middleRows(17, 10).col(1).maxCoeff() + 0.01;
   for (int v = 0; v < model.num_vertices(); ++v) {
     const Eigen::Vector3d p = identity.v_shaped.segment<3>(3 * v).cast<double>();
-    if (p.y() < brow_y) continue;
-    if (d.weights(v, kJawJoint) > 0 || d.weights(v, kLeftEyeJoint) > 0 || d.weights(v, kRightEyeJoint) > 0) continue;
-    double moved = 0;
-    for (int k = 0; k < model.num_expression(); ++k)
-      moved = std::max<double>(moved, d.expressiondirs.block(3 * v, k, 3, 1).norm());
-    if (moved <= 1e-3) skull_.push_back(p);
+    if (p.y() >= brow_y && MovesOnlyWithTheSkull(model, v)) skull_.push_back(p);
   }
 }
 
