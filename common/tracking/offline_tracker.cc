@@ -280,6 +280,9 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
                                   {"hair_thickness_mm", std::isnan(outline->observed_median())
                                                             ? nlohmann::json(nullptr)
                                                             : nlohmann::json(1e3 * outline->observed_median())},
+                                  {"hair_thickness_spread_mm", std::isnan(outline->observed_spread())
+                                                                   ? nlohmann::json(nullptr)
+                                                                   : nlohmann::json(1e3 * outline->observed_spread())},
                                   {"columns_held_mean", held_columns.empty() ? 0.0 : held_columns.Mean()}};
   }
   nlohmann::json exported;  // null: no point referenced

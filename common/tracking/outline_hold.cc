@@ -38,7 +38,8 @@ std::vector<int> MaskTopRows(const cv::Mat& mask) {
 OutlineHold::OutlineHold(const HeadModel& model, const Eigen::VectorXd& shape, const OutlineHoldOptions& options)
     : options_(options),
       reference_(std::numeric_limits<double>::quiet_NaN()),
-      observed_median_(std::numeric_limits<double>::quiet_NaN()) {
+      observed_median_(std::numeric_limits<double>::quiet_NaN()),
+      observed_spread_(std::numeric_limits<double>::quiet_NaN()) {
   options.Check();
   const HeadIdentity identity = model.MakeIdentity(shape);
   // Above the brows at rest (the brows' highest landmark plus a centimetre):
@@ -113,6 +114,11 @@ bool OutlineHold::Reference(int min_frames) {
   const double none = std::numeric_limits<double>::quiet_NaN();
   const bool enough = static_cast<int>(seen_.size()) >= std::max(min_frames, 1);
   observed_median_ = enough ? Median(seen_) : none;
+  observed_spread_ = none;
+  if (enough) {
+    for (double& v : seen_) v = std::abs(v - observed_median_);
+    observed_spread_ = Median(seen_);
+  }
   seen_.clear();
   const bool usable = enough && observed_median_ >= kLowestThickness;
   reference_ = usable ? observed_median_ : none;

@@ -61,6 +61,10 @@ class OutlineHold {
   void SetReference(double offset) { reference_ = offset; }
   double reference() const { return reference_; }              // NaN: none
   double observed_median() const { return observed_median_; }  // the last Reference()'s median; NaN: none
+  // The last Reference()'s median absolute deviation of the frames' thickness
+  // about that median (metres; NaN: none): how far the outline moves on the
+  // skull over the clip (long hair that swings, a mask that takes the wall).
+  double observed_spread() const { return observed_spread_; }
 
   // The skull's top point of each held column at `frame`'s pose, observed in
   // its own column at the row the reference puts it below the mask's top;
@@ -83,7 +87,7 @@ class OutlineHold {
   OutlineHoldOptions options_;
   std::vector<Eigen::Vector3d> skull_;
   std::vector<double> seen_;
-  double reference_, observed_median_;
+  double reference_, observed_median_, observed_spread_;
 };
 
 }  // namespace headcast

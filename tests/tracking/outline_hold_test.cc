@@ -81,6 +81,20 @@ TEST(OutlineHold, TheReferenceIsTheHairsThickness) {
   EXPECT_GT(hold.reference(), 0.8 * kHair * px_m);
   EXPECT_LT(hold.reference(), 1.5 * kHair * px_m);
   EXPECT_DOUBLE_EQ(hold.observed_median(), hold.reference());
+  // Every frame shows the same 14 px (up to the rows' rounding): no spread.
+  EXPECT_LT(hold.observed_spread(), 0.15 * kHair * px_m);
+  EXPECT_GE(hold.observed_spread(), 0);
+
+  // Half the frames' hair 10 px thicker: the median absolute deviation is
+  // half those 10 px or all of them (at the crown's depth), as the median of an
+  // even count falls between the two or on one side.
+  for (const auto& p : {std::array<double, 2>{0, 0}, {10, 3}, {-12, -4}, {5, 6}, {-4, -6}, {2, -2}}) {
+    const FrameParams f = Posed(p[0], p[1]);
+    hold.Observe(HairTops(f, p[0] > 0 ? kHair + 10 : kHair), f, kCamera);
+  }
+  ASSERT_TRUE(hold.Reference(5));
+  EXPECT_GT(hold.observed_spread(), 0.35 * 10 * px_m);
+  EXPECT_LT(hold.observed_spread(), 1.5 * 10 * px_m);
 
   // A mask whose top lies 30 px below the skull's (its region cut the head):
   // seen, but no reference, so nothing is held.
