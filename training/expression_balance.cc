@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "common/core/median.h"
 #include "common/core/options.h"
 
 namespace headcast {
@@ -34,9 +35,7 @@ std::vector<double> RareExpressionWeights(const std::vector<Eigen::VectorXf>& ex
     std::nth_element(row.begin(), row.begin() + static_cast<std::ptrdiff_t>(k - 1), row.end());
     isolation[i] = row[k - 1];
   }
-  std::vector<double> sorted = isolation;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(n / 2), sorted.end());
-  const double median = sorted[n / 2];
+  const double median = Median(isolation);
   if (!(median > 0)) return w;  // most frames repeat one expression exactly: nothing to weigh by
   double sum = 0;
   for (size_t i = 0; i < n; ++i) {

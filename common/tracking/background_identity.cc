@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "common/core/median.h"
+
 namespace headcast {
 namespace {
 
@@ -24,8 +26,7 @@ Eigen::VectorXd MedianShape(const std::vector<Eigen::VectorXd>& shapes) {
   std::vector<double> v(shapes.size());
   for (Eigen::Index k = 0; k < n; ++k) {
     for (size_t i = 0; i < shapes.size(); ++i) v[i] = shapes[i][k];
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    median[k] = v[v.size() / 2];
+    median[k] = MedianInPlace(v);
   }
   return median;
 }

@@ -275,15 +275,16 @@ nlohmann::json AnchorTrack(const HeadModel& model, const OfflineTrackOptions& o,
                       {"shift_px_p95", shift.empty() ? 0.0 : shift.Percentile(95)},
                       {"grey_rms_before_median", before.empty() ? 0.0 : before.Median()},
                       {"grey_rms_after_median", after.empty() ? 0.0 : after.Median()}});
-    if (outline)
+    if (outline) {
+      // Metres to millimetres; NaN (too few frames to tell) as null.
+      const auto mm = [](double metres) {
+        return std::isnan(metres) ? nlohmann::json(nullptr) : nlohmann::json(1e3 * metres);
+      };
       rounds.back()["outline"] = {{"held", outlined},
-                                  {"hair_thickness_mm", std::isnan(outline->observed_median())
-                                                            ? nlohmann::json(nullptr)
-                                                            : nlohmann::json(1e3 * outline->observed_median())},
-                                  {"hair_thickness_spread_mm", std::isnan(outline->observed_spread())
-                                                                   ? nlohmann::json(nullptr)
-                                                                   : nlohmann::json(1e3 * outline->observed_spread())},
+                                  {"hair_thickness_mm", mm(outline->observed_median())},
+                                  {"hair_thickness_spread_mm", mm(outline->observed_spread())},
                                   {"columns_held_mean", held_columns.empty() ? 0.0 : held_columns.Mean()}};
+    }
   }
   nlohmann::json exported;  // null: no point referenced
   if (const AnchorReference last = anchor.Exported(); last.referenced() > 0) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "common/core/median.h"
 #include "common/core/options.h"
 #include "common/tracking/rigid_vertex.h"
 
@@ -94,19 +95,12 @@ std::vector<OutlineHold::Column> OutlineHold::TopColumns(const std::vector<int>&
   return columns;
 }
 
-namespace {
-double Median(std::vector<double> v) {
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-}  // namespace
-
 bool OutlineHold::Observe(const std::vector<int>& mask_top, const FrameParams& frame, const PinholeCamera& camera) {
   std::vector<double> offsets;
   for (const Column& c : TopColumns(mask_top, frame, camera))
     if (c.mask_top >= 0) offsets.push_back((c.pixel.y() - c.mask_top) * c.metres_per_px);
   if (offsets.empty()) return false;
-  seen_.push_back(Median(offsets));
+  seen_.push_back(MedianInPlace(offsets));
   return true;
 }
 

@@ -11,6 +11,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "common/core/median.h"
 #include "common/core/options.h"
 #include "common/core/rotation.h"
 #include "common/tracking/landmark_costs.h"
@@ -181,13 +182,11 @@ int PhotometricAnchor::Reference(double min_share) {
       s.clear();
       continue;
     }
-    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-    const float median = s[s.size() / 2];
+    const float median = MedianInPlace(s);
     // A point whose grey level comes and goes (hair falling over it, an
     // occluding ear, the outline) says nothing steady about the head's place.
     for (float& v : s) v = std::abs(v - median);
-    std::nth_element(s.begin(), s.begin() + s.size() / 2, s.end());
-    if (s[s.size() / 2] <= kMaxDeviation) {
+    if (MedianInPlace(s) <= kMaxDeviation) {
       reference_[i] = median;
       ++referenced;
     }

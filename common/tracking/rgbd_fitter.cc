@@ -5,6 +5,7 @@
 #include <cmath>
 #include <memory>
 
+#include "common/core/median.h"
 #include "common/core/options.h"
 #include "common/core/rotation.h"
 #include "common/headmodel/params.h"
@@ -39,8 +40,7 @@ float DepthAt(const cv::Mat& depth_m, const Eigen::Vector2d& pixel, int radius) 
       if (z > 0 && std::isfinite(z)) values.push_back(z);
     }
   if (values.empty()) return 0.f;
-  std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-  return values[values.size() / 2];
+  return MedianInPlace(values);
 }
 
 struct RgbdFitter::Impl {

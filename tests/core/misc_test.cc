@@ -16,6 +16,7 @@
 #include "common/core/check.h"
 #include "common/core/cli_flags.h"
 #include "common/core/image_io.h"
+#include "common/core/median.h"
 #include "common/core/options.h"
 #include "common/core/program.h"
 #include "common/core/service_notify.h"
@@ -126,6 +127,17 @@ TEST(SampleStats, Percentiles) {
   EXPECT_DOUBLE_EQ(s.Percentile(95), 96);
   EXPECT_DOUBLE_EQ(s.Percentile(0), 1);
   EXPECT_DOUBLE_EQ(s.Mean(), 51);
+}
+
+TEST(Median, TheUpperMiddleValueOrARefusal) {
+  std::vector<double> odd = {5, -1, 3, 9, 2};
+  EXPECT_DOUBLE_EQ(Median(odd), 3);
+  EXPECT_EQ(odd, (std::vector<double>{5, -1, 3, 9, 2}));  // Median works on a copy
+  std::vector<float> even = {4, 1, 3, 2};
+  EXPECT_FLOAT_EQ(MedianInPlace(even), 3);  // the upper of the two middle values
+  EXPECT_EQ(even.size(), 4u);
+  std::vector<int> none;
+  EXPECT_THROW(MedianInPlace(none), std::invalid_argument);
 }
 
 TEST(OptionsCheck, CollectsEveryError) {
