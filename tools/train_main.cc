@@ -132,9 +132,6 @@ std::vector<CLI::Option*> AddArchitectureFlags(CLI::App* app, AvatarConfig* conf
                  "2D renderer: feature channels, then the channels out of each x2 level (4 values, e.g. 48,24,12,8: a "
                  "feature map of output/8; 3 values, e.g. 48,24,8: two levels and a feature map of output/4)")
           ->delimiter(','),
-      app->add_option("--hair-margin", config->hair_margin_px,
-                      when + "feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
-          ->capture_default_str(),
       app->add_option("--samples-per-ray", config->samples_per_ray, when + "CNeRF samples per ray")
           ->capture_default_str(),
   };
@@ -370,7 +367,13 @@ int main(int argc, char** argv) {
   pretrain->add_option("--resolution", g.resolution, "output size")->check(CLI::IsMember({128, 256, 512}));
   pretrain->add_option("--neck-deg", neck_deg, "neck rotations drawn in +-DEG (METHOD uses up to 80)")
       ->capture_default_str();
-  const std::vector<CLI::Option*> pretrain_network = AddArchitectureFlags(pretrain, &g.config, "without --init: ");
+  std::vector<CLI::Option*> pretrain_network = AddArchitectureFlags(pretrain, &g.config, "without --init: ");
+  pretrain_network.push_back(
+      pretrain
+          ->add_option(
+              "--hair-margin", g.config.hair_margin_px,
+              "without --init: feature-map pixels beyond the head's silhouette that still get CNeRF rays (hair)")
+          ->capture_default_str());
   AddSurfaceFlags(pretrain, &g.config, &g.fit);
   AddMatteFlags(pretrain, &g.config, &g.fit);
   pretrain->add_option("--init", g.init, "continue from this .hcavatar");
@@ -395,6 +398,11 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({128, 256, 512}))
       ->capture_default_str();
   const std::vector<CLI::Option*> subject_network = AddArchitectureFlags(subject, &s.config, "with --from-scratch: ");
+  subject
+      ->add_option("--hair-margin", s.hair_margin,
+                   "feature-map pixels beyond the head's silhouette that still get CNeRF rays (the hair; -1: the "
+                   "general model's, or 2 from scratch)")
+      ->capture_default_str();
   AddSurfaceFlags(subject, &s.config, &s.fit);
   AddMatteFlags(subject, &s.config, &s.fit);
   subject->add_option(

@@ -289,6 +289,7 @@ void SubjectOptions::Check() const {
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
   c.That(!dataset.empty(), "dataset is required");
   c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
+  c.InRange("hair_margin", hair_margin, -1, 64);
   c.That(!expression_span_in_training || expression_span,
          "expression_span_in_training needs the span kept (not with --no-expression-span)");
   CheckRun(resolution, outputs, &c);
@@ -318,13 +319,15 @@ nlohmann::json RunSubject(SubjectOptions o) {
   Avatar avatar = [&] {
     if (o.from_scratch) {
       o.config.output_size = o.resolution;
+      if (o.hair_margin >= 0) o.config.hair_margin_px = o.hair_margin;
       return Avatar::CreateRandom(o.config, model, subject, o.fit.seed);
     }
     Avatar general = Avatar::Load(o.general, model);
     AvatarConfig c = general.config();
     c.output_size = o.resolution;
     TakeSampleSwitches(o.config, &c);  // the subject's choice, whatever the general model's
-    if (o.config.has_surface()) {      // the subject's own texture, added to a general model without one
+    if (o.hair_margin >= 0) c.hair_margin_px = o.hair_margin;
+    if (o.config.has_surface()) {  // the subject's own texture, added to a general model without one
       CopySurfaceTexture(o.config, &c);
     }
     c.matte = o.config.matte;

@@ -72,6 +72,10 @@ struct SubjectOptions {
   // The mean of the per-frame offsets the fine-tune learnt kept as the
   // avatar's conditioning bias (AvatarConfig::bias_geometry/appearance).
   bool mean_offset = false;
+  // Feature-map pixels beyond the head's silhouette that still get CNeRF rays
+  // (AvatarConfig::hair_margin_px): which rays are cast, not the networks'
+  // size, so a fine-tune may choose it. -1: the start's.
+  int hair_margin = -1;
   AvatarConfig config;  // architecture when from_scratch
   FitOptions fit = SubjectFitDefaults();
   RunOutputs outputs;

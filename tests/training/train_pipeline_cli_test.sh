@@ -144,7 +144,7 @@ interp=$(ls "$tmp/dsi/128/interp/images" 2>/dev/null | wc -l)
 # for both is refused.
 # --surface-features 0 --no-canonical-samples is the thesis's avatar.
 "$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
-  --eval 2 --surface-features 0 --no-canonical-samples --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
+  --eval 2 --surface-features 0 --no-canonical-samples --hair-margin 3 --out "$tmp/t.hcavatar" > /dev/null 2> "$tmp/t.err"
 config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('$1').read('manifest.json'))['config']$2)"; }
 [ "$(config "$tmp/general.hcavatar" "['canonical_samples']")" = False ] &&
   [ "$(config "$tmp/i.hcavatar" "['surface_conditioned']")" = True ] &&
@@ -159,6 +159,12 @@ config() { "$python" -c "import json,zipfile; print(json.loads(zipfile.ZipFile('
   [ "$(config "$tmp/t.hcavatar" "['covered_apart']")" = False ] &&
   ok "subject: conditioned texture, decayed blendshapes, canonical samples with the covered parts apart by default; the thesis's flags: none" ||
   bad "subject conditioning: $(tail -3 "$tmp/t.err")"
+# Which rays beside the silhouette are cast is a fine-tune's choice (not the network's size): the general model's
+# margin unless --hair-margin gives one.
+[ "$(config "$tmp/i.hcavatar" "['hair_margin_px']")" = "$(config "$tmp/general.hcavatar" "['hair_margin_px']")" ] &&
+  [ "$(config "$tmp/t.hcavatar" "['hair_margin_px']")" = 3 ] &&
+  ok "subject --hair-margin: the general model's margin by default, 3 when asked" ||
+  bad "hair margin: $(config "$tmp/i.hcavatar" "['hair_margin_px']") / $(config "$tmp/t.hcavatar" "['hair_margin_px']")"
 # A subject's optimiser: twice pretraining's rate, reached over a 200-step warm-up (pretraining: none).
 [ "$(json "$tmp/i.json" "j['fit']['learning_rate'] == 0.004 and j['fit']['warmup_steps'] == 200")" = True ] &&
   [ "$(json "$tmp/two.json" "j['fit']['learning_rate'] == 0.002 and j['fit']['warmup_steps'] == 0")" = True ] &&
