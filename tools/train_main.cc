@@ -427,6 +427,11 @@ int main(int argc, char** argv) {
                  "keep the mean of the per-frame offsets learnt on the training frames as the avatar's "
                  "conditioning bias (added to every frame's codes)")
       ->capture_default_str();
+  subject
+      ->add_option("--matte-scale", s.matte_scale,
+                   "the matte's coverage logit is multiplied by this where the avatar is drawn, written into the "
+                   "file after training (below 1: a softer outline; training draws at 1)")
+      ->capture_default_str();
   AddTrainingFlags(subject, &s.fit, &s.outputs, &processes);
 
   auto* eval = app.add_subcommand("eval", "evaluate an avatar on a dataset's test split; videos");
@@ -454,6 +459,10 @@ int main(int argc, char** argv) {
                    "frames say (none), or within the dataset's training frames' span (dataset: avatars made "
                    "before spans were kept)")
       ->check(CLI::IsMember({"avatar", "none", "dataset"}))
+      ->capture_default_str();
+  eval->add_option("--matte-scale", e.matte_scale,
+                   "draw with the matte's coverage logit multiplied by this instead of the avatar's scale (0: the "
+                   "avatar's)")
       ->capture_default_str();
 
   auto* compare = app.add_subcommand(

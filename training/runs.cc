@@ -178,8 +178,9 @@ nlohmann::json RunPretrain(PretrainOptions o) {
     AvatarConfig c = init.config();
     c.output_size = o.resolution;
     TakeSampleSwitches(o.config, &c);
-    c.ClearExpressionSpan();  // a person's span and bias (an avatar as the start) are not a general model's
+    c.ClearExpressionSpan();  // a person's span, bias and outline (an avatar as the start) are not a general model's
     c.ClearConditioningBias();
+    c.matte_scale = 1;
     return init.WithRuntimeSwitches(c);
   }();
   o.synthetic.image_size = o.resolution;
@@ -257,6 +258,13 @@ Avatar WithExpressionSpan(const Avatar& avatar, const PreparedDataset* data) {
   return avatar.WithRuntimeSwitches(c);
 }
 
+// The avatar drawn with its coverage logit scaled by `scale` (AvatarConfig::matte_scale).
+Avatar WithMatteScale(const Avatar& avatar, double scale) {
+  AvatarConfig c = avatar.config();
+  c.matte_scale = scale;
+  return avatar.WithRuntimeSwitches(c);
+}
+
 // The avatar with the mean of the offsets its fit learnt (`fitted` has
 // them) added to its conditioning bias (AvatarConfig::bias_geometry/appearance).
 Avatar WithMeanOffset(const Avatar& avatar, const TrainResult& fitted) {
@@ -289,7 +297,8 @@ void SubjectOptions::Check() const {
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
   c.That(!dataset.empty(), "dataset is required");
   c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
-  c.InRange("hair_margin", hair_margin, -1, 64);
+  c.InRange("hair_margin", hair_margin, -1, 64).InRange("matte_scale", matte_scale, 0.05, 4.0);
+  c.That(config.has_matte() || matte_scale == kSubjectMatteScale, "matte_scale needs a matte (not with matte none)");
   c.That(!expression_span_in_training || expression_span,
          "expression_span_in_training needs the span kept (not with --no-expression-span)");
   CheckRun(resolution, outputs, &c);
@@ -333,6 +342,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
     c.matte = o.config.matte;
     c.matte_rules = o.config.matte_rules;
     c.matte_core = o.config.matte_core;
+    c.matte_scale = 1;        // training draws the outline as the networks learn it
     c.ClearExpressionSpan();  // another subject's, if the start is an avatar
     c.ClearConditioningBias();
     return general.WithRuntimeSwitches(c);
@@ -374,6 +384,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
   // Set after training by default: what the networks learnt is unchanged by it.
   if (o.expression_span && !o.expression_span_in_training) avatar = WithExpressionSpan(avatar, &data);
   if (o.mean_offset && !fitted.mean_offset_geometry.empty()) avatar = WithMeanOffset(avatar, fitted);
+  if (avatar.config().has_matte()) avatar = WithMatteScale(avatar, o.matte_scale);
   const EvalResult eval = EvaluateOnDataset(avatar, model, data, eval_positions);
   std::vector<cv::Mat> rows;
   for (int k = 0; k < 4; ++k) {
@@ -402,6 +413,7 @@ nlohmann::json RunSubject(SubjectOptions o) {
                               : "the training frames' (the networks told no expression beyond it)"},
       {"train_frames", data.train().size() - data.interpolated()},
       {"interpolated_frames", data.interpolated()},
+      {"matte_scale", avatar.config().has_matte() ? nlohmann::json(avatar.config().matte_scale) : nullptr},
       {"fit", FitJson(fit, fitted, true)},
       {"eval", EvalJson(eval, data.test().empty() ? "training frames (no test split)"
                                                   : "test split: the last frames, never trained on")}};
@@ -429,6 +441,8 @@ void EvalOptions::Check() const {
   c.That(split == "test" || split == "train", "split must be test or train, not '" + split + "'");
   c.That(expression_span == "avatar" || expression_span == "none" || expression_span == "dataset",
          "expression_span must be avatar, none or dataset, not '" + expression_span + "'");
+  c.That(matte_scale == 0 || (matte_scale >= 0.05 && matte_scale <= 4),
+         "matte_scale must be 0 (the avatar's) or in [0.05, 4]");
   c.ThrowIfErrors();
 }
 
@@ -440,6 +454,10 @@ nlohmann::json RunEval(const EvalOptions& o) {
       PreparedDataset::Load(o.dataset, model, avatar.config().output_size, /*interpolated=*/false);
   if (o.expression_span != "avatar")
     avatar = WithExpressionSpan(avatar, o.expression_span == "dataset" ? &data : nullptr);
+  if (o.matte_scale > 0) {
+    if (!avatar.config().has_matte()) throw std::invalid_argument(o.avatar + " has no matte to scale (matte_scale)");
+    avatar = WithMatteScale(avatar, o.matte_scale);
+  }
   const bool on_test = o.split == "test" && !data.test().empty();
   std::vector<int> positions = on_test ? data.test() : data.train();
   if (o.max_frames > 0 && static_cast<int>(positions.size()) > o.max_frames) {
@@ -519,6 +537,10 @@ nlohmann::json RunEval(const EvalOptions& o) {
                             : o.expression_span == "dataset"
                                 ? "the dataset's training frames' (the networks told no expression beyond it)"
                                 : "the avatar's (the networks told no expression beyond it)"},
+        {"matte_scale", !avatar.config().has_matte()
+                            ? nlohmann::json(nullptr)
+                            : nlohmann::json{{"value", avatar.config().matte_scale},
+                                             {"from", o.matte_scale > 0 ? "--matte-scale" : "the avatar"}}},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",

@@ -76,6 +76,9 @@ struct SubjectOptions {
   // (AvatarConfig::hair_margin_px): which rays are cast, not the networks'
   // size, so a fine-tune may choose it. -1: the start's.
   int hair_margin = -1;
+  // The coverage logit's scale the avatar is drawn with (AvatarConfig::
+  // matte_scale), written into the file after training; training draws at 1.
+  double matte_scale = kSubjectMatteScale;
   AvatarConfig config;  // architecture when from_scratch
   FitOptions fit = SubjectFitDefaults();
   RunOutputs outputs;
@@ -106,6 +109,9 @@ struct EvalOptions {
   // span of the dataset's training frames (what a fine-tune on it records;
   // for avatars made before spans were kept).
   std::string expression_span = "avatar";
+  // The coverage logit's scale (AvatarConfig::matte_scale) instead of the
+  // avatar's; 0: the avatar's.
+  double matte_scale = 0;
   // Expression fidelity: dlib's landmarks on the avatar's frames against the
   // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
   bool landmarks = true;

@@ -108,7 +108,7 @@ void AvatarConfig::Check() const {
          "hair_conditioning needs mesh-guided sampling (the triangle under each ray tells the hair)");
   c.That(!covered_apart || !surface_displacement,
          "covered_apart moves the covered parts' canonical points, which surface_displacement measures from");
-  c.InRange("matte_core", matte_core, 0.0, 0.1);
+  c.InRange("matte_core", matte_core, 0.0, 0.1).InRange("matte_scale", matte_scale, 0.05, 4.0);
   c.That(expression_low.size() == expression_high.size(),
          "expression_low and expression_high must have as many values");
   c.That(expression_low.empty() || static_cast<int>(expression_low.size()) == num_expression,
@@ -174,6 +174,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"matte", MatteModeName(matte)},
                       {"matte_rules", matte_rules.ToJson()},
                       {"matte_core", matte_core},
+                      {"matte_scale", matte_scale},
                       {"motion_conditioning", MotionConditioningName(motion_conditioning)},
                       {"hair_conditioning", MotionConditioningName(hair_conditioning)},
                       {"hair_reach", hair_reach},
@@ -227,6 +228,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.matte = ParseMatteMode(j.value("matte", std::string("none")));
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);
+    c.matte_scale = j.value("matte_scale", 1.0);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
     c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
     c.hair_reach = j.value("hair_reach", c.hair_reach);

@@ -47,6 +47,8 @@ inline constexpr int kSubjectSurfaceBlend = 64;
 // values of about one, as it sees the texture's.
 inline constexpr float kSurfaceDisplacementScale = 100;
 inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
+// AvatarConfig::matte_scale a fine-tune writes (bench/DEFAULTS.md).
+inline constexpr double kSubjectMatteScale = 0.5;
 
 // The CNeRF backend's configuration: the shared part (output size,
 // conditioning sizes) and its own networks, sampling and speed switches.
@@ -175,6 +177,15 @@ struct AvatarConfig : AvatarCommonConfig {
   // rarely (a wide-open jaw); the learnt coverage draws the hair beyond them.
   // Off by default: within the run-to-run spread on talking_d9 and d10.
   double matte_core = 0;
+  // The coverage logit is multiplied by this where the picture is drawn
+  // (below 1: a softer outline); training always draws at 1, a fine-tune
+  // writes its choice into the file after it (SubjectOptions::matte_scale).
+  // A fine-tune learns each training frame's outline to the pixel, and its
+  // coverage turns from 0 to 1 within a pixel or two there; on a frame it
+  // never saw, where the hair's outline falls is uncertain by more than
+  // that, and an edge drawn as sharply at the wrong place costs more than a
+  // softer one. 1 in files from before it. A run-time switch.
+  double matte_scale = 1;
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;

@@ -207,7 +207,8 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
         inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
     torch::Tensor logit;
     const torch::Tensor rgb = modules.renderer->forward(out->feature_map, surface_term, &logit, &window);
-    torch::Tensor coverage = torch::sigmoid(logit);
+    const double scale = modules.cnerf->config().matte_scale;
+    torch::Tensor coverage = torch::sigmoid(scale == 1 ? logit : logit * scale);
     if (!inputs.matte_core.empty()) {
       const torch::Tensor core = MaskTensor(inputs.matte_core, window);
       coverage = core + (1 - core) * coverage;

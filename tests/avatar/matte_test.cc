@@ -422,6 +422,55 @@ TEST(Matte, CoverageLearnsTheMask) {
   EXPECT_LT(outside, 0.2f);
 }
 
+// The coverage is drawn as sigmoid(scale x logit): at 1 the picture it drew
+// before the scale existed, below 1 each pixel's coverage nearer a half by
+// exactly that; the file keeps the scale, files from before it draw at 1, and
+// a scale out of range or not a number is refused.
+TEST(Matte, TheScaleSoftensTheCoverageByItsLogit) {
+  const HeadModel& m = Builtin();
+  Avatar a = Avatar::CreateRandom(TinyWithMatte(MatteMode::kLearned), m, DefaultSubject(m, 128), 8);
+  {
+    torch::NoGradGuard no_grad;  // a coverage that varies over the picture, not the new matte's constant
+    for (auto& p : a.modules().renderer->named_parameters())
+      if (p.key().find("alpha") != std::string::npos) p.value().copy_(0.5 * torch::randn_like(p.value()));
+  }
+  AvatarConfig half = a.config();
+  half.matte_scale = 0.5;
+  Avatar soft = a.WithRuntimeSwitches(half);
+  auto coverage = [&](Avatar& avatar) {
+    avatar.modules().eval();
+    torch::NoGradGuard no_grad;
+    AvatarFrameInputs inputs;
+    RaySampler sampler(avatar.config());
+    PrepareAvatarFrame(avatar.config(), m, m.MakeIdentity(Eigen::VectorXd::Zero(m.num_shape())), avatar.subject(),
+                       Turned(), &sampler, nullptr, &inputs);
+    return RunAvatar(avatar.modules(), inputs).coverage.clone();
+  };
+  const torch::Tensor sharp = coverage(a), softer = coverage(soft);
+  const torch::Tensor within = sharp.gt(0.01) & sharp.lt(0.99);
+  ASSERT_GT(within.sum().item<int64_t>(), 1000) << "the coverage should vary over the picture";
+  const torch::Tensor expected = torch::sigmoid(0.5 * torch::logit(sharp));
+  EXPECT_LT(((softer - expected) * within).abs().max().item<float>(), 1e-4);
+  EXPECT_LT(((softer - 0.5).abs() - (sharp - 0.5).abs()).max().item<float>(), 1e-6) << "never further from a half";
+  EXPECT_GT((softer - sharp).abs().max().item<float>(), 0.05f);
+  // The file keeps it; a file from before it draws at 1.
+  const std::string dir = testing::TempDir("matte_scale");
+  soft.Save(dir + "/s.hcavatar");
+  EXPECT_EQ(Avatar::Load(dir + "/s.hcavatar", m).config().matte_scale, 0.5);
+  ZipEntries entries = ReadZip(dir + "/s.hcavatar");
+  nlohmann::json manifest = nlohmann::json::parse(entries["manifest.json"]);
+  manifest["config"].erase("matte_scale");
+  entries["manifest.json"] = manifest.dump();
+  WriteZip(dir + "/old.hcavatar", entries);
+  EXPECT_EQ(Avatar::Load(dir + "/old.hcavatar", m).config().matte_scale, 1);
+  for (double bad : {0.0, -1.0, 10.0, std::nan("")}) {
+    manifest["config"]["matte_scale"] = bad;
+    entries["manifest.json"] = manifest.dump();
+    WriteZip(dir + "/bad.hcavatar", entries);
+    EXPECT_THROW(Avatar::Load(dir + "/bad.hcavatar", m), std::runtime_error) << bad;
+  }
+}
+
 TEST(Matte, TheFileKeepsItAndOldFilesHaveNone) {
   const HeadModel& m = Builtin();
   const std::string dir = testing::TempDir("matte");

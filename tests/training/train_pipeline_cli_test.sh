@@ -233,6 +233,29 @@ said() {  # said AVATAR HOW: the first words of eval.json's expression_span
 spans="$(said i avatar) | $(said i none) | $(said ns dataset)"
 [ "$spans" = "the avatar's | none: the | the dataset's" ] &&
   ok "eval --expression-span avatar|none|dataset: said in eval.json" || bad "eval spans: '$spans'"
+# The matte's scale: a subject writes its default (the one --help shows) or --matte-scale's into the file and its
+# report; eval draws at the avatar's unless --matte-scale says otherwise, and says which; a scale out of range, or
+# one for an avatar without a matte, is refused.
+default_scale=$("$bin/headcast-train" subject --help | sed -n 's/.*--matte-scale FLOAT=\([0-9.]*\).*/\1/p')
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --eval 2 --matte-scale 0.8 --out "$tmp/ms.hcavatar" --json "$tmp/ms.json" > /dev/null 2> "$tmp/ms.err"
+"$bin/headcast-train" eval --avatar "$tmp/i.hcavatar" --data "$tmp/dsi" --out "$tmp/ems" --orbit-frames 0 \
+  --no-landmarks --matte-scale 0.7 > /dev/null 2>&1
+scales="$(config "$tmp/i.hcavatar" "['matte_scale'] == $default_scale") $(json "$tmp/i.json" "j['matte_scale'] == $default_scale")"
+scales+=" $(config "$tmp/ms.hcavatar" "['matte_scale']") $(json "$tmp/ms.json" "j['matte_scale']")"
+scales+=" $(json "$tmp/es_i_avatar/eval.json" "j['matte_scale']['value'] == $default_scale and j['matte_scale']['from']")"
+scales+=" $(json "$tmp/ems/eval.json" "(j['matte_scale']['value'], j['matte_scale']['from'])")"
+out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
+  --iterations 2 --matte-scale 0 --out "$tmp/ms0.hcavatar" 2>&1)
+refused_zero=$?
+out2=$("$bin/headcast-train" eval --avatar "$tmp/general.hcavatar" --data "$tmp/dsi" --out "$tmp/emg" --orbit-frames 0 \
+  --no-landmarks --matte-scale 0.5 2>&1)
+refused_plain=$?
+[ -n "$default_scale" ] && [ "$scales" = "True True 0.8 0.8 the avatar (0.7, '--matte-scale')" ] &&
+  [ "$(config "$tmp/general.hcavatar" "['matte']")" = none ] &&
+  [ $refused_zero -ne 0 ] && grep -qi "matte.scale" <<<"$out" && [ $refused_plain -ne 0 ] && grep -q "no matte" <<<"$out2" &&
+  ok "subject --matte-scale: the default ($default_scale) or the given scale kept; eval draws at it or at --matte-scale; bad scales refused" ||
+  bad "matte scale: '$default_scale' '$scales' $refused_zero '$(tail -1 <<<"$out")' $refused_plain '$(tail -1 <<<"$out2")' $(tail -2 "$tmp/ms.err")"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-levels 4 --out "$tmp/l4.hcavatar" 2>&1)
 [ $? -ne 0 ] && grep -q "surface-levels" <<<"$out" && ok "--surface-levels 4 refused" || bad "surface levels 4: $out"
