@@ -27,13 +27,12 @@ mkdir -p "$out"
 out=$(cd "$out" && pwd)
 # The call as the results record it: files by their names, not their machine paths.
 command="bench/matte_scale.sh OUT --head-model $(basename "$model") --scales \"$scales\" --validation $validation"
-for r in "${runs[@]}"; do
-  rest=${r#*=}
-  command+=" ${r%%=*}=$(basename "${rest%%:*}"):$(basename "${rest#*:}")"
-done
+tags=""
 for r in "${runs[@]}"; do
   tag=${r%%=*} rest=${r#*=}
   avatar=${rest%%:*} dataset=${rest#*:}
+  command+=" $tag=$(basename "$avatar"):$(basename "$dataset")"
+  tags+="$tag "
   for s in $scales; do
     echo "== $(date +%H:%M:%S) $tag: scale $s" >&2
     "$bin/headcast-train" eval --head-model "$model" --avatar "$avatar" --data "$dataset" \
@@ -41,8 +40,6 @@ for r in "${runs[@]}"; do
       { echo "$name: eval failed, see $out/eval_${tag}_$s.log" >&2; exit 1; }
   done
 done
-tags=""
-for r in "${runs[@]}"; do tags+="${r%%=*} "; done
 "$python" - "$out" "$validation" "$command" "$scales" $tags <<'PY'
 import csv, json, sys
 out, validation, command, scales, tags = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4].split(), sys.argv[5:]

@@ -297,18 +297,21 @@ void SubjectOptions::Check() const {
   c.That(general.empty() == from_scratch, "give a general model, or from_scratch (not both)");
   c.That(!dataset.empty(), "dataset is required");
   c.InRange("synthetic_start", synthetic_start, 0.0, 1.0).InRange("freeze_layers", freeze_layers, 0, 64);
-  c.InRange("hair_margin", hair_margin, -1, 64).InRange("matte_scale", matte_scale, 0.05, 4.0);
+  c.InRange("hair_margin", hair_margin, -1, 64);
   c.That(config.has_matte() || matte_scale == kSubjectMatteScale, "matte_scale needs a matte (not with matte none)");
   c.That(!expression_span_in_training || expression_span,
          "expression_span_in_training needs the span kept (not with --no-expression-span)");
   CheckRun(resolution, outputs, &c);
   c.ThrowIfErrors();
   fit.Check();
-  // The texture's options are the subject's own (added to the general model):
-  // the same rules as a whole configuration's (surface_conditioned needs a texture, ...).
-  AvatarConfig texture = AvatarConfig::Default(resolution);
-  CopySurfaceTexture(config, &texture);
-  texture.Check();
+  // The texture's options and the matte's scale are the subject's own (added
+  // to the general model): the same rules as a whole configuration's
+  // (surface_conditioned needs a texture, the scale's range, ...), checked
+  // before training rather than when the file is written after it.
+  AvatarConfig own = AvatarConfig::Default(resolution);
+  CopySurfaceTexture(config, &own);
+  own.matte_scale = matte_scale;
+  own.Check();
 }
 
 nlohmann::json RunSubject(SubjectOptions o) {
@@ -441,9 +444,12 @@ void EvalOptions::Check() const {
   c.That(split == "test" || split == "train", "split must be test or train, not '" + split + "'");
   c.That(expression_span == "avatar" || expression_span == "none" || expression_span == "dataset",
          "expression_span must be avatar, none or dataset, not '" + expression_span + "'");
-  c.That(matte_scale == 0 || (matte_scale >= 0.05 && matte_scale <= 4),
-         "matte_scale must be 0 (the avatar's) or in [0.05, 4]");
   c.ThrowIfErrors();
+  if (matte_scale != 0) {  // 0: the avatar's; any other, a scale an avatar may carry
+    AvatarConfig scaled = AvatarConfig::Default();
+    scaled.matte_scale = matte_scale;
+    scaled.Check();
+  }
 }
 
 nlohmann::json RunEval(const EvalOptions& o) {
