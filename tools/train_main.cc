@@ -70,6 +70,13 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
                 "subject's)");
   app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
       ->capture_default_str();
+  app->add_option("--frame-shift-rate", fit->frame_shift_rate,
+                  "each real training frame's picture moved by a learnt shift of its own before the loss, at this "
+                  "rate in pixels a step (0: off; the receiver draws with none)")
+      ->capture_default_str();
+  app->add_option("--frame-shift-weight", fit->loss.frame_shift_weight,
+                  "weight of a frame shift's squared length (pixels)")
+      ->capture_default_str();
   app->add_option("--rare-expressions", fit->rare_expressions.strength,
                   "real frames drawn by how rare their expression is, weight (isolation / median)^S (0: uniformly)")
       ->capture_default_str();

@@ -39,7 +39,7 @@ void LossOptions::Check() const {
   OptionsCheck c("LossOptions");
   c.NonNegative("mse_weight", mse_weight).NonNegative("perceptual_weight", perceptual_weight);
   c.NonNegative("ssim_weight", ssim_weight).NonNegative("offset_weight", offset_weight);
-  c.NonNegative("matte_weight", matte_weight);
+  c.NonNegative("matte_weight", matte_weight).NonNegative("frame_shift_weight", frame_shift_weight);
   c.ThrowIfErrors();
   regions.Check();
 }
@@ -54,6 +54,7 @@ void FitOptions::Check() const {
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .InRange("blend_lr_scale", blend_lr_scale, 0.0, 1000.0)
       .InRange("offset_lr_scale", offset_lr_scale, 0.0, 1000.0)
+      .InRange("frame_shift_rate", frame_shift_rate, 0.0, 10.0)
       .That(blend_decay >= 0 && blend_decay * learning_rate * blend_lr_scale < 1,
             "blend_decay is >= 0 and shrinks the blendshapes by less than all of them a step "
             "(blend_decay * learning_rate * blend_lr_scale < 1)")
@@ -262,7 +263,7 @@ std::mt19937 SampleRng(uint64_t seed, int step, int b) {
 namespace fs = std::filesystem;
 
 void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam,
-                    const Offsets& offsets, WeightAverage* average) {
+                    const Offsets& offsets, const torch::Tensor& shifts, WeightAverage* average) {
   const fs::path staging = dir / ("staging-" + std::to_string(next_step));
   fs::remove_all(staging);
   fs::create_directories(staging);
@@ -272,6 +273,7 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   archive.save_to((staging / "optimizer.pt").string());
   if (offsets.enabled())
     torch::save(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance}, (staging / "offsets.pt").string());
+  if (shifts.defined()) torch::save(std::vector<torch::Tensor>{shifts}, (staging / "shifts.pt").string());
   if (average) torch::save(average->average(), (staging / "average.pt").string());
   WriteFileAtomically((staging / "state.json").string(), nlohmann::json{{"next_step", next_step}}.dump() + "\n");
   // Everything on the disk before the checkpoint is named; the previous one
@@ -311,7 +313,7 @@ void CopyInto(const std::vector<torch::Tensor>& from, const std::vector<torch::T
 
 // Restores weights and optimiser state; returns the step to continue from (0 without a checkpoint).
 int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, torch::optim::Adam& adam,
-                   Offsets* offsets, WeightAverage* average) {
+                   Offsets* offsets, const torch::Tensor& shifts, WeightAverage* average) {
   std::ifstream latest(dir / "LATEST");
   if (!latest) return 0;
   std::string name;
@@ -332,6 +334,8 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
     if (offsets->enabled())
       CopyInto(load("offsets.pt"), {offsets->geometry, offsets->appearance},
                "the checkpoint's per-frame offsets are for another dataset");
+    if (shifts.defined())
+      CopyInto(load("shifts.pt"), {shifts}, "the checkpoint's per-frame shifts are for another dataset");
     if (average)  // a checkpoint made without averaging starts the average at its weights
       CopyInto(fs::exists(ckpt / "average.pt") ? load("average.pt") : to, average->average(),
                "the checkpoint's averaged weights differ from this avatar's networks");
@@ -408,6 +412,9 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     params.push_back(offsets.geometry);
     params.push_back(offsets.appearance);
   }
+  torch::Tensor shifts;  // (rows, 2) pixels, FitOptions::frame_shift_rate; rows as the offsets'
+  if (!real.empty() && options.frame_shift_rate > 0)
+    shifts = torch::zeros({real.offset_rows(), 2}, torch::requires_grad());
   std::vector<torch::optim::OptimizerParamGroup> groups = {torch::optim::OptimizerParamGroup(params)};
   std::vector<double> group_scale = {1.0};
   if (!surface_params.empty()) {
@@ -423,6 +430,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     group_scale.push_back(options.offset_lr_scale);
     params.push_back(offsets.geometry);  // all-reduced with the rest
     params.push_back(offsets.appearance);
+  }
+  if (shifts.defined()) {
+    groups.emplace_back(std::vector<torch::Tensor>{shifts});
+    group_scale.push_back(options.frame_shift_rate / options.learning_rate);
+    params.push_back(shifts);
   }
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
   params.insert(params.end(), texture.begin(), texture.end());  // all of them, for the all-reduce
@@ -440,7 +452,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   const bool writes = dp.rank == 0;
   if (writes && !options.checkpoint_dir.empty()) CheckCheckpointFolder(options.checkpoint_dir, options.resume);
   if (options.resume)
-    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, average.get());
+    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, shifts, average.get());
   if (!options.checkpoint_dir.empty() && writes) fs::create_directories(options.checkpoint_dir);
   std::unique_ptr<GradientAllReduce> group;
   if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);
@@ -509,21 +521,27 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         p.inputs.conditioning.geometry =
             p.inputs.conditioning.geometry + torch::constant_pad_nd(psi, {config.expression_offset(), 0});
       }
-      torch::Tensor offset_penalty = torch::zeros({});
+      torch::Tensor penalty = torch::zeros({});
       if (real_index >= 0 && offsets.enabled()) {
         const torch::Tensor g = offsets.geometry.narrow(0, real_index, 1) * offsets.geometry_mask;
         const torch::Tensor a = offsets.appearance.narrow(0, real_index, 1) * offsets.appearance_mask;
         p.inputs.conditioning.geometry = p.inputs.conditioning.geometry + g;
         p.inputs.conditioning.appearance = p.inputs.conditioning.appearance + a;
-        offset_penalty = w.offset_weight * (g.square().sum() + a.square().sum());
+        penalty = w.offset_weight * (g.square().sum() + a.square().sum());
       }
-      const AvatarOutput out = RunAvatar(modules, p.inputs);
+      AvatarOutput out = RunAvatar(modules, p.inputs);
+      if (real_index >= 0 && shifts.defined()) {
+        const torch::Tensor shift = shifts.narrow(0, real_index, 1);
+        out.image = ShiftImage(out.image, shift);
+        if (out.coverage.defined()) out.coverage = ShiftImage(out.coverage, shift);
+        penalty = penalty + w.frame_shift_weight * shift.square().sum();
+      }
       // Blind pixels take the output itself as their target: the MSE sees no
       // error there, SSIM and VGG only through windows reaching past them.
       const torch::Tensor target = p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
       const torch::Tensor mse = torch::mse_loss(out.image, target);
       const torch::Tensor weighted_mse = p.weight.defined() ? (p.weight * (out.image - target).square()).mean() : mse;
-      torch::Tensor loss = w.mse_weight * weighted_mse + offset_penalty;
+      torch::Tensor loss = w.mse_weight * weighted_mse + penalty;
       if (vgg)
         loss = loss + w.perceptual_weight * (*vgg)(out.image, target);
       else if (w.ssim_weight > 0)
@@ -556,7 +574,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     if (writes && !options.checkpoint_dir.empty() &&
         ((step + 1) % options.checkpoint_every == 0 || step + 1 == options.iterations)) {
       modules.eval();
-      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets, average.get());
+      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets, shifts, average.get());
     }
     if (progress) {
       if (average) average->Swap();  // the callback sees (and may evaluate) the average
@@ -565,11 +583,18 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     }
   }
   if (average) average->Swap();  // the avatar keeps the average
-  if (offsets.enabled()) {       // over the training frames' rows (the others, held-out frames', stay zero)
+  // Offsets and shifts over the training frames' rows (the others, held-out frames', stay zero).
+  std::vector<int64_t> trained;
+  for (const RealFrames::Frame& f : real.frames()) trained.push_back(f.offset_row);
+  const torch::Tensor rows_trained = torch::tensor(trained);
+  if (shifts.defined()) {
     torch::NoGradGuard no_grad;
-    std::vector<int64_t> trained;
-    for (const RealFrames::Frame& f : real.frames()) trained.push_back(f.offset_row);
-    const torch::Tensor rows_trained = torch::tensor(trained);
+    const torch::Tensor s = shifts.detach().index_select(0, rows_trained), m = s.mean(0);
+    for (int k = 0; k < 2; ++k) result.frame_shift_mean[k] = m[k].item<double>();
+    result.frame_shift_rms = (s - m).square().sum(1).mean().sqrt().item<double>();
+  }
+  if (offsets.enabled()) {
+    torch::NoGradGuard no_grad;
     const auto mean_and_spread = [&](const torch::Tensor& rows, const torch::Tensor& mask, std::vector<float>* mean) {
       const torch::Tensor masked = rows.detach().index_select(0, rows_trained) * mask, m = masked.mean(0);
       mean->assign(m.data_ptr<float>(), m.data_ptr<float>() + m.numel());

@@ -42,6 +42,8 @@ struct LossOptions {
   // sum_k w ||offset_k||^2 over the learnable per-frame offsets of real samples
   // (METHOD eq. 8); 0 on synthetic ones, which have exact parameters.
   double offset_weight = 1.0;
+  // w |shift|^2 (pixels) of a real frame's learnt shift (FitOptions::frame_shift_rate).
+  double frame_shift_weight = 1e-4;
   // The MSE weighted up around the fitted eyes, brows and mouth (their
   // projected landmarks): where expressions are read; weight 0: off.
   FaceRegionOptions regions;
@@ -86,6 +88,14 @@ struct FitOptions {
   // the rate at every visit whatever its gradient's size: at 1 the offsets
   // end as a per-frame jitter of that many steps (bench/results/fidelity_ablation.md).
   double offset_lr_scale = 1;
+  // Each real training frame's picture may be moved by a learnt shift of its
+  // own (pixels, x and y) before the loss: the fit places the head a pixel or
+  // two off the picture in many frames, and networks made to draw every frame
+  // where its fit says learn a blur of the misplaced detail, or tie the
+  // misplacement to the frame's codes. The shifts take it instead; the
+  // receiver draws with none. Their rate in pixels a step at the schedule's
+  // peak (warm-up and fall as the networks'). 0: off.
+  double frame_shift_rate = 0;
   // Decoupled weight decay of the blendshapes alone (AdamW's: each step shrinks
   // them by rate * blend_decay, rate being theirs): a blendshape the frames do
   // not keep pushing the same way fades, so one fitted to noise or to what
@@ -186,6 +196,10 @@ struct TrainResult {
   // without offsets. `offset_rms`: their root mean square about that mean.
   std::vector<float> mean_offset_geometry, mean_offset_appearance;
   double offset_rms = 0;
+  // With frame shifts: their mean (pixels, x and y) and root mean square
+  // length about it over the training frames.
+  double frame_shift_mean[2] = {0, 0};
+  double frame_shift_rms = 0;
   double seconds = 0;
   double samples_per_s = 0;
 };

@@ -126,4 +126,17 @@ torch::Tensor PerceptualLoss::operator()(const torch::Tensor& a, const torch::Te
   return loss;
 }
 
+torch::Tensor ShiftImage(const torch::Tensor& image, const torch::Tensor& shift) {
+  namespace F = torch::nn::functional;
+  const int64_t b = image.size(0), h = image.size(2), w = image.size(3);
+  // affine_grid's normalised coordinates span 2 over the picture (align_corners
+  // false); the content moves by +shift when each pixel samples -shift away.
+  const torch::Tensor to_unit = torch::tensor({-2.0f / static_cast<float>(w), -2.0f / static_cast<float>(h)});
+  const torch::Tensor eye = torch::tensor({1.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}).view({1, 2, 3});
+  const torch::Tensor theta = eye + torch::constant_pad_nd((shift * to_unit).view({b, 2, 1}), {2, 0});
+  const torch::Tensor grid = F::affine_grid(theta, {b, image.size(1), h, w}, false);
+  return F::grid_sample(
+      image, grid, F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(false));
+}
+
 }  // namespace headcast

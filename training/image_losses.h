@@ -20,6 +20,11 @@ torch::Tensor Ssim(const torch::Tensor& a, const torch::Tensor& b);
 // What Ssim is checked (tests) and timed (headcast-bench train) against.
 torch::Tensor SsimFullWindow(const torch::Tensor& a, const torch::Tensor& b);
 
+// `image` (B, C, H, W) with its content moved by `shift` pixels ((B, 2): x
+// right, y down), bilinear, the border's values carried in; differentiable in
+// both. A whole-picture shift stands in for a frame's small placement error.
+torch::Tensor ShiftImage(const torch::Tensor& image, const torch::Tensor& shift);
+
 // PSNR in dB of two images in [0, 1].
 double Psnr(const torch::Tensor& a, const torch::Tensor& b);
 double PsnrOfMse(double mse);

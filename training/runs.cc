@@ -115,6 +115,11 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
     j["learned_offsets"] = f.learn_offsets;
     j["rare_expressions"] = f.rare_expressions.strength;
   }
+  if (real && f.frame_shift_rate > 0)
+    j["frame_shift"] = {{"rate_px", f.frame_shift_rate},
+                        {"weight", f.loss.frame_shift_weight},
+                        {"mean_px", {r.frame_shift_mean[0], r.frame_shift_mean[1]}},
+                        {"rms_px_about_mean", r.frame_shift_rms}};
   if (!r.mean_offset_geometry.empty()) {
     double square = 0;
     for (const std::vector<float>* m : {&r.mean_offset_geometry, &r.mean_offset_appearance})

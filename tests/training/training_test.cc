@@ -351,6 +351,25 @@ TEST(ImageLosses, SeparableSsimEqualsTheFullWindowsValueAndGradient) {
   EXPECT_LT((x.grad() - y.grad()).abs().max().item<double>(), 1e-4 * y.grad().abs().max().item<double>());
 }
 
+// A whole-number shift moves the picture's content by exactly that many
+// pixels (x right, y down), the border's values carried in; a fractional one
+// is differentiable in the shift.
+TEST(ImageLosses, ShiftImageMovesTheContentByTheShift) {
+  torch::Tensor image = torch::zeros({1, 2, 12, 16});
+  image[0][0][5][7] = 1;
+  image[0][1][2][3] = 0.5;
+  const torch::Tensor moved = ShiftImage(image, torch::tensor({{3.0f, -2.0f}}));
+  EXPECT_NEAR(moved[0][0][3][10].item<double>(), 1.0, 1e-5);
+  EXPECT_NEAR(moved[0][1][0][6].item<double>(), 0.5, 1e-5);
+  EXPECT_NEAR(moved.sum().item<double>(), 1.5, 1e-4);
+  const torch::Tensor shift = torch::tensor({{0.25f, 0.0f}}).requires_grad_(true);
+  const torch::Tensor half = ShiftImage(image, shift);
+  EXPECT_NEAR(half[0][0][5][7].item<double>(), 0.75, 1e-5);
+  EXPECT_NEAR(half[0][0][5][8].item<double>(), 0.25, 1e-5);
+  half[0][0][5][8].backward();
+  EXPECT_NEAR(shift.grad()[0][0].item<double>(), 1.0, 1e-4);  // d(value at x = 8)/d(shift) of a unit pixel at 7
+}
+
 TEST(ImageLosses, PerceptualLossReadsATorchScriptFeatureNetwork) {
   const std::string dir = testing::TempDir("vgg");
   torch::jit::Module net("Features");
@@ -749,6 +768,53 @@ TEST(TrainAvatar, TheOffsetsRateIsTheirOwn) {
   }
   EXPECT_EQ(beta_one, 0.0) << "frozen identity: no offsets on beta";
   EXPECT_GT(beta_identity, 0.0);
+}
+
+// Frame shifts: each real training frame's picture moved by a learnt shift
+// of its own before the loss. Off, the run has none; on, the training frames'
+// shifts move and the held-out frames' stay zero; a resume continues exactly
+// (the checkpoint keeps them); the figures go to the fit report.
+TEST(TrainAvatar, FrameShiftsAreLearntPerTrainingFrame) {
+  const std::string dir = WriteRenderedDataset("dataset_frame_shift", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  auto fit = [&](double rate, const std::string& checkpoints = "", bool resume = false,
+                 std::function<void(const StepInfo&)> progress = nullptr) {
+    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+    FitOptions f;
+    f.iterations = 8;
+    f.batch = 2;
+    f.freeze_identity = true;
+    f.frame_shift_rate = rate;
+    f.checkpoint_dir = checkpoints;
+    f.checkpoint_every = 4;
+    f.resume = resume;
+    return TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
+  };
+  const TrainResult off = fit(0), on = fit(0.2);
+  EXPECT_EQ(off.frame_shift_rms, 0.0);
+  EXPECT_EQ(off.frame_shift_mean[0], 0.0);
+  ASSERT_GT(on.frame_shift_rms, 0.01);
+  // Adam moves a shift by about its rate at each visit: 16 draws over 4 frames.
+  EXPECT_LT(on.frame_shift_rms, 0.2 * 16);
+  const std::string checkpoints = testing::TempDir("ckpt_frame_shift");
+  EXPECT_THROW(fit(0.2, checkpoints, false, CrashAfter(4)), Crash);
+  const TrainResult rest = fit(0.2, checkpoints, true);
+  ASSERT_EQ(rest.steps.size(), 4u);
+  for (int i = 0; i < 4; ++i)
+    EXPECT_NEAR(rest.steps[i].loss, on.steps[4 + i].loss, 1e-4 * on.steps[4 + i].loss) << "step " << 4 + i;
+  EXPECT_NEAR(rest.frame_shift_rms, on.frame_shift_rms, 1e-4 * on.frame_shift_rms);
+  std::vector<torch::Tensor> saved;
+  torch::load(saved, checkpoints + "/step-8/shifts.pt");
+  ASSERT_EQ(saved.size(), 1u);
+  ASSERT_EQ(saved[0].size(0), 6);  // a row per frame of the dataset
+  EXPECT_EQ(saved[0].narrow(0, 4, 2).abs().max().item<double>(), 0.0) << "held-out frames take no shift";
+  EXPECT_GT(saved[0].narrow(0, 0, 4).abs().max().item<double>(), 0.0);
+  FitOptions bad;
+  bad.frame_shift_rate = -1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+  bad.frame_shift_rate = 0.1;
+  bad.loss.frame_shift_weight = std::nan("");
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
 // Several people's datasets: every frame drawn with its own dataset's subject,
