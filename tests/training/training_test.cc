@@ -723,6 +723,37 @@ TEST(TrainAvatar, OffsetsKeepOutOfWhatTheNetworksAreNotTold) {
   }
 }
 
+// An 8-step fine-tune of a tiny random avatar on `real` (batch 2, identity
+// frozen, a checkpoint every 4 steps into `checkpoints` when given);
+// `configure` sets what a test varies.
+TrainResult ShortFineTune(const PreparedDataset& real, const std::function<void(FitOptions&)>& configure,
+                          const std::string& checkpoints = "", bool resume = false,
+                          std::function<void(const StepInfo&)> progress = nullptr) {
+  Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
+  FitOptions f;
+  f.iterations = 8;
+  f.batch = 2;
+  f.freeze_identity = true;
+  f.checkpoint_dir = checkpoints;
+  f.checkpoint_every = 4;
+  f.resume = resume;
+  configure(f);
+  return TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
+}
+
+// The same run crashed after its 4th step and resumed from its checkpoint in
+// the (empty) folder `checkpoints` takes the last 4 steps `whole` took;
+// returns the resumed run.
+TrainResult ExpectResumeContinues(const TrainResult& whole, const PreparedDataset& real,
+                                  const std::function<void(FitOptions&)>& configure, const std::string& checkpoints) {
+  EXPECT_THROW(ShortFineTune(real, configure, checkpoints, false, CrashAfter(4)), Crash);
+  const TrainResult rest = ShortFineTune(real, configure, checkpoints, true);
+  EXPECT_EQ(rest.steps.size(), 4u);
+  for (size_t i = 0; i < 4 && i < rest.steps.size(); ++i)
+    EXPECT_NEAR(rest.steps[i].loss, whole.steps[4 + i].loss, 1e-4 * whole.steps[4 + i].loss) << "step " << 4 + i;
+  return rest;
+}
+
 // The offsets' rate is their own: Adam moves each by about its rate at each
 // visit, so four times the rate leaves offsets several times larger, and a
 // rate of zero leaves them at zero; a resume
@@ -731,36 +762,24 @@ TEST(TrainAvatar, OffsetsKeepOutOfWhatTheNetworksAreNotTold) {
 TEST(TrainAvatar, TheOffsetsRateIsTheirOwn) {
   const std::string dir = WriteRenderedDataset("dataset_offset_rate", 6, 2);
   const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
-  auto fit = [&](double scale, const std::string& checkpoints = "", bool resume = false,
-                 std::function<void(const StepInfo&)> progress = nullptr, bool identity_offsets = false) {
-    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
-    FitOptions f;
-    f.iterations = 8;
-    f.batch = 2;
-    f.freeze_identity = true;
-    f.identity_offsets = identity_offsets;
-    f.offset_lr_scale = scale;
-    f.checkpoint_dir = checkpoints;
-    f.checkpoint_every = 4;
-    f.resume = resume;
-    return TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
+  auto rate = [](double scale, bool identity_offsets = false) {
+    return [=](FitOptions& f) {
+      f.offset_lr_scale = scale;
+      f.identity_offsets = identity_offsets;
+    };
   };
-  const TrainResult one = fit(1), four = fit(4), none = fit(0);
+  const TrainResult one = ShortFineTune(real, rate(1)), four = ShortFineTune(real, rate(4)),
+                    none = ShortFineTune(real, rate(0));
   ASSERT_GT(one.offset_rms, 0);
   EXPECT_GT(four.offset_rms, 2 * one.offset_rms);
   EXPECT_LT(four.offset_rms, 8 * one.offset_rms);
   EXPECT_EQ(none.offset_rms, 0.0);
   for (float v : none.mean_offset_geometry) EXPECT_EQ(v, 0.f);
-  const std::string dir_split = testing::TempDir("ckpt_offset_rate");
-  EXPECT_THROW(fit(4, dir_split, false, CrashAfter(4)), Crash);
-  const TrainResult rest = fit(4, dir_split, true);
-  ASSERT_EQ(rest.steps.size(), 4u);
-  for (int i = 0; i < 4; ++i)
-    EXPECT_NEAR(rest.steps[i].loss, four.steps[4 + i].loss, 1e-4 * four.steps[4 + i].loss) << "step " << 4 + i;
+  const TrainResult rest = ExpectResumeContinues(four, real, rate(4), testing::TempDir("ckpt_offset_rate"));
   EXPECT_NEAR(rest.offset_rms, four.offset_rms, 1e-4 * four.offset_rms);
 
   const int shape = Model().num_shape();  // CreateRandom fits the conditioning to the model
-  const TrainResult identity = fit(1, "", false, nullptr, true);
+  const TrainResult identity = ShortFineTune(real, rate(1, true));
   double beta_one = 0, beta_identity = 0;
   for (int i = 0; i < shape; ++i) {
     beta_one += std::abs(one.mean_offset_geometry.at(i));
@@ -777,31 +796,15 @@ TEST(TrainAvatar, TheOffsetsRateIsTheirOwn) {
 TEST(TrainAvatar, FrameShiftsAreLearntPerTrainingFrame) {
   const std::string dir = WriteRenderedDataset("dataset_frame_shift", 6, 2);
   const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
-  auto fit = [&](double rate, const std::string& checkpoints = "", bool resume = false,
-                 std::function<void(const StepInfo&)> progress = nullptr) {
-    Avatar avatar = Avatar::CreateRandom(Tiny(), Model(), real.subject(), 4);
-    FitOptions f;
-    f.iterations = 8;
-    f.batch = 2;
-    f.freeze_identity = true;
-    f.frame_shift_rate = rate;
-    f.checkpoint_dir = checkpoints;
-    f.checkpoint_every = 4;
-    f.resume = resume;
-    return TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
-  };
-  const TrainResult off = fit(0), on = fit(0.2);
+  auto rate = [](double r) { return [=](FitOptions& f) { f.frame_shift_rate = r; }; };
+  const TrainResult off = ShortFineTune(real, rate(0)), on = ShortFineTune(real, rate(0.2));
   EXPECT_EQ(off.frame_shift_rms, 0.0);
   EXPECT_EQ(off.frame_shift_mean[0], 0.0);
   ASSERT_GT(on.frame_shift_rms, 0.01);
   // Adam moves a shift by about its rate at each visit: 16 draws over 4 frames.
   EXPECT_LT(on.frame_shift_rms, 0.2 * 16);
   const std::string checkpoints = testing::TempDir("ckpt_frame_shift");
-  EXPECT_THROW(fit(0.2, checkpoints, false, CrashAfter(4)), Crash);
-  const TrainResult rest = fit(0.2, checkpoints, true);
-  ASSERT_EQ(rest.steps.size(), 4u);
-  for (int i = 0; i < 4; ++i)
-    EXPECT_NEAR(rest.steps[i].loss, on.steps[4 + i].loss, 1e-4 * on.steps[4 + i].loss) << "step " << 4 + i;
+  const TrainResult rest = ExpectResumeContinues(on, real, rate(0.2), checkpoints);
   EXPECT_NEAR(rest.frame_shift_rms, on.frame_shift_rms, 1e-4 * on.frame_shift_rms);
   std::vector<torch::Tensor> saved;
   torch::load(saved, checkpoints + "/step-8/shifts.pt");
