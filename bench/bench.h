@@ -18,8 +18,11 @@ struct RefineBenchOptions {
   int iterations = 40;         // per frame: Adam steps from zero offsets
   int causal_every = 10;       // causal: refine on every this many frames
   int causal_iterations = 10;  // causal: steps each time
-  int refine_size = 0;         // the refinement's picture size (0: the avatar's own)
-  std::string frames_dir;      // per frame: DIR/before, DIR/after as eval writes frames ("" = none)
+  // causal: refine only on the first this many held-out frames, then keep the
+  // offsets (a calibration at the start of a call); 0: on all of them.
+  int causal_until = 0;
+  int refine_size = 0;     // the refinement's picture size (0: the avatar's own)
+  std::string frames_dir;  // per frame: DIR/before, DIR/after as eval writes frames ("" = none)
   RefineOptions refine;
   void Check() const;
 };

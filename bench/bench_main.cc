@@ -89,6 +89,8 @@ int main(int argc, char** argv) {
   refine->add_option("--iterations", options.refine.iterations, "per frame: Adam steps from zero offsets");
   refine->add_option("--causal-every", options.refine.causal_every, "causal: refine on every this many frames");
   refine->add_option("--causal-iterations", options.refine.causal_iterations, "causal: steps each time");
+  refine->add_option("--causal-until", options.refine.causal_until,
+                     "causal: refine only on the first this many held-out frames, then keep the offsets (0: all)");
   refine->add_option("--lr", options.refine.refine.learning_rate, "Adam's rate");
   refine->add_option("--refine-size", options.refine.refine_size,
                      "the refinement draws this size (its offsets scored at the avatar's own; 0: the avatar's)");

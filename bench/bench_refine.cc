@@ -8,7 +8,10 @@
 //  - causal: the held-out frames in order, the running offsets refined on
 //    every `causal_every`-th frame for `causal_iterations` steps, each frame
 //    scored with the offsets as they were before it (what a sender refining
-//    in the background, behind the frames it sends, could give).
+//    in the background, behind the frames it sends, could give); with
+//    `causal_until` only the first frames are refined on and the offsets then
+//    kept (a calibration at the start of a call), and the frames after that
+//    window are scored apart too.
 // Scored as evaluation scores (the picture as the receiver shows it, its skin
 // colour matched to the frame's, against the masked target), before and
 // after in the same run.
@@ -79,6 +82,7 @@ void RefineBenchOptions::Check() const {
   c.That(refine_size == 0 || (refine_size >= 64 && refine_size % 32 == 0),
          "refine_size must be 0 or a multiple of 32 from 64");
   c.InRange("causal_every", causal_every, 1, 100000).InRange("causal_iterations", causal_iterations, 0, 100000);
+  c.InRange("causal_until", causal_until, 0, 100000);
   c.ThrowIfErrors();
   refine.Check();
 }
@@ -199,18 +203,24 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
   }
   // Causal.
   {
-    Scores before, after;
+    Scores before, after, later_before, later_after;  // later: the frames past the calibration window
     refiner.Reset();
     double norms = 0;
+    const size_t until = r.causal_until > 0 ? static_cast<size_t>(r.causal_until) : data.test().size();
     for (size_t k = 0; k < data.test().size(); ++k) {
       const int position = data.test()[k];
       AvatarFrameInputs in;
       const cv::Mat target_bgr = prepare(position, &in);
-      const torch::Tensor target = BgrToImageTensor(target_bgr);
-      before.Add(shown(position, in, false), target);
-      after.Add(shown(position, in, true), target);
+      const torch::Tensor target = BgrToImageTensor(target_bgr), drawn_before = shown(position, in, false),
+                          drawn_after = shown(position, in, true);
+      before.Add(drawn_before, target);
+      after.Add(drawn_after, target);
+      if (k >= until) {
+        later_before.Add(drawn_before, target);
+        later_after.Add(drawn_after, target);
+      }
       norms += refiner.OffsetNorm();
-      if (k % r.causal_every == 0) {
+      if (k < until && k % r.causal_every == 0) {
         AvatarFrameInputs fit;
         const torch::Tensor fit_target = prepare_fit(position, target_bgr, &fit);
         refiner.Refine(&fit, fit_target, r.causal_iterations);
@@ -220,9 +230,13 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
                      {"every", r.causal_every},
                      {"iterations", r.causal_iterations},
                      {"steps_per_frame", static_cast<double>(r.causal_iterations) / r.causal_every},
+                     {"until", r.causal_until},
                      {"before", before.ToJson()},
                      {"after", after.ToJson()},
                      {"offset_norm_mean", norms / before.count}};
+    if (later_before.count > 0)
+      out["causal"]["after_the_window"] = {
+          {"frames", later_before.count}, {"before", later_before.ToJson()}, {"after", later_after.ToJson()}};
   }
   out["threads"] = o.threads;
   return out;

@@ -124,6 +124,17 @@ written=$(ls "$tmp/rf/before" "$tmp/rf/after" | grep -c '_0000[04].png')
 [ "$same" = True ] && [ $rc -ne 0 ] && echo "$out" | grep -q "no-dataset" && [ "$written" = 8 ] &&
   ok "bench refine: eval's PSNR before, 2 frames alone (written before and after) and 8 in order; a missing dataset refused" ||
   bad "bench refine: same=$same rc=$rc written=$written $(json "$tmp/refine.json" "(j['causal']['before'], j['per_frame']['frames'], j['per_frame']['after'])") eval $(json "$tmp/ev/eval.json" "j['eval']['psnr_db']") $out"
+# A calibration window: refined on the first frames only, the frames after it scored apart; a window as long as
+# the frames is the plain causal schedule.
+for until in 4 8; do
+  "$bin/headcast-bench" refine --avatar "$tmp/s.hcavatar" --data "$tmp/ds" --every 8 --iterations 0 --causal-every 2 \
+    --causal-iterations 1 --causal-until $until --json "$tmp/refine_u$until.json" > /dev/null 2>&1
+done
+window=$(json "$tmp/refine_u4.json" "(j['causal']['until'], j['causal']['after_the_window']['frames'], 0 < j['causal']['after_the_window']['after']['psnr_db'] < 100)")
+whole=$(json "$tmp/refine_u8.json" "'after_the_window' not in j['causal'] and abs(j['causal']['after']['psnr_db'] - json.load(open('$tmp/refine.json'))['causal']['after']['psnr_db']) < 1e-6")
+[ "$window" = "(4, 4, True)" ] && [ "$whole" = True ] &&
+  ok "bench refine --causal-until: 4 frames after a 4-frame window scored apart; a window of all 8 is the causal schedule" ||
+  bad "bench refine --causal-until: window=$window whole=$whole"
 
 # Short videos: frames interpolated between consecutive training frames, used by subject unless told not to.
 "$bin/headcast-train" prep --input "$tmp/seq" --out "$tmp/dsi" --resolutions 128 --test-frames 8 --no-calibrate \
