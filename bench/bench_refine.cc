@@ -233,7 +233,8 @@ nlohmann::json RunRefineSuite(const BenchOptions& o) {
                      {"until", r.causal_until},
                      {"before", before.ToJson()},
                      {"after", after.ToJson()},
-                     {"offset_norm_mean", norms / before.count}};
+                     {"offset_norm_mean", norms / before.count},
+                     {"largest_offsets_at_the_end", LargestOffsets(refiner, config, model, 8)}};
     if (later_before.count > 0)
       out["causal"]["after_the_window"] = {
           {"frames", later_before.count}, {"before", later_before.ToJson()}, {"after", later_after.ToJson()}};

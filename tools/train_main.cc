@@ -70,6 +70,10 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
                 "subject's)");
   app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
       ->capture_default_str();
+  app->add_option("--offset-segment", fit->offset_segment,
+                  "consecutive training frames sharing one offset (and one shift): a slow drift learnt by offsets "
+                  "visited many times (1: one per frame)")
+      ->capture_default_str();
   app->add_option("--frame-shift-rate", fit->frame_shift_rate,
                   "each real training frame's picture moved by a learnt shift of its own before the loss, at this "
                   "rate in pixels a step (0: off; the receiver draws with none)")

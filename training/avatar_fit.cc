@@ -54,6 +54,7 @@ void FitOptions::Check() const {
       .InRange("surface_lr_scale", surface_lr_scale, 0.0, 1000.0)
       .InRange("blend_lr_scale", blend_lr_scale, 0.0, 1000.0)
       .InRange("offset_lr_scale", offset_lr_scale, 0.0, 1000.0)
+      .InRange("offset_segment", offset_segment, 1, 100000)
       .InRange("frame_shift_rate", frame_shift_rate, 0.0, 10.0)
       .That(blend_decay >= 0 && blend_decay * learning_rate * blend_lr_scale < 1,
             "blend_decay is >= 0 and shrinks the blendshapes by less than all of them a step "
@@ -220,8 +221,8 @@ class WeightAverage {
 
 // The real training frames of every dataset as one list: where each is
 // (dataset, position) and its row among the per-frame offsets (the datasets'
-// frames one after another, so a checkpoint's offsets are for these datasets
-// in this order).
+// frames one after another, `segment` consecutive positions to a row, so a
+// checkpoint's offsets are for these datasets in this order).
 class RealFrames {
  public:
   struct Frame {
@@ -229,7 +230,7 @@ class RealFrames {
     int position;
     int offset_row;
   };
-  RealFrames(const std::vector<const PreparedDataset*>& datasets, int resolution) {
+  RealFrames(const std::vector<const PreparedDataset*>& datasets, int resolution, int segment) {
     for (size_t d = 0; d < datasets.size(); ++d) {
       const std::string which = datasets.size() == 1 ? "the dataset" : "dataset " + std::to_string(d + 1);
       if (!datasets[d]) throw std::invalid_argument("TrainAvatar: " + which + " is missing (null)");
@@ -238,8 +239,8 @@ class RealFrames {
       if (data.resolution() != resolution)
         throw std::invalid_argument("TrainAvatar: " + which + "'s crops are " + std::to_string(data.resolution()) +
                                     " pixels, the avatar renders " + std::to_string(resolution));
-      for (int i : data.train()) frames_.push_back({&data, i, rows_ + i});
-      rows_ += data.size();
+      for (int i : data.train()) frames_.push_back({&data, i, rows_ + i / segment});
+      rows_ += (data.size() + segment - 1) / segment;
     }
   }
   bool empty() const { return frames_.empty(); }
@@ -379,7 +380,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         "TrainAvatar: expression_noise needs an avatar told the expression (motion conditioning "
         "full, not " +
         std::string(MotionConditioningName(config.motion_conditioning)) + ")");
-  const RealFrames real(data.real, config.output_size);
+  const RealFrames real(data.real, config.output_size, options.offset_segment);
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (config.surface_blend_components > 0 && modules.surface && !modules.surface->has_blend_basis())

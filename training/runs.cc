@@ -98,6 +98,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
       {"blend_lr_scale", f.blend_lr_scale},
       {"blend_decay", f.blend_decay},
       {"offset_lr_scale", f.offset_lr_scale},
+      {"offset_segment", f.offset_segment},
       {"identity_offsets", f.identity_offsets},
       {"weight_average", f.weight_average},
       {"region_weight", f.loss.regions.weight},

@@ -789,6 +789,35 @@ TEST(TrainAvatar, TheOffsetsRateIsTheirOwn) {
   EXPECT_GT(beta_identity, 0.0);
 }
 
+// Offset segments: consecutive training frames share one offset row and one
+// shift; the checkpoint holds a row per segment of the dataset, the held-out
+// frames' segment untouched; a resume continues exactly.
+TEST(TrainAvatar, OffsetSegmentsShareARow) {
+  const std::string dir = WriteRenderedDataset("dataset_offset_segment", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  auto segment = [](int frames) {
+    return [=](FitOptions& f) {
+      f.offset_segment = frames;
+      f.frame_shift_rate = 0.2;
+    };
+  };
+  const TrainResult whole = ShortFineTune(real, segment(2));
+  ASSERT_GT(whole.offset_rms, 0);
+  const std::string checkpoints = testing::TempDir("ckpt_offset_segment");
+  ExpectResumeContinues(whole, real, segment(2), checkpoints);
+  for (const std::string file : {"offsets.pt", "shifts.pt"}) {
+    std::vector<torch::Tensor> saved;
+    torch::load(saved, checkpoints + "/step-8/" + file);
+    ASSERT_FALSE(saved.empty());
+    ASSERT_EQ(saved[0].size(0), 3) << file << ": six frames, two to a row";
+    EXPECT_GT(saved[0].narrow(0, 0, 2).abs().max().item<double>(), 0.0) << file;
+    EXPECT_EQ(saved[0].narrow(0, 2, 1).abs().max().item<double>(), 0.0) << file << ": the held-out frames' row";
+  }
+  FitOptions bad;
+  bad.offset_segment = 0;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 // Frame shifts: each real training frame's picture moved by a learnt shift
 // of its own before the loss. Off, the run has none; on, the training frames'
 // shifts move and the held-out frames' stay zero; a resume continues exactly
