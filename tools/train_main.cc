@@ -71,8 +71,8 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
   app->add_option("--offset-lr", fit->offset_lr_scale, "the per-frame offsets' learning rate as a multiple of --lr")
       ->capture_default_str();
   app->add_option("--offset-segment", fit->offset_segment,
-                  "consecutive training frames sharing one offset (and one shift): a slow drift learnt by offsets "
-                  "visited many times (1: one per frame)")
+                  "consecutive training frames sharing one offset (and one shift), for a slow drift of the picture "
+                  "against the fit (1: one per frame)")
       ->capture_default_str();
   app->add_option("--frame-shift-rate", fit->frame_shift_rate,
                   "each real training frame's picture moved by a learnt shift of its own before the loss, at this "

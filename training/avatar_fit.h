@@ -89,10 +89,12 @@ struct FitOptions {
   // end as a per-frame jitter of that many steps (bench/results/fidelity_ablation.md).
   double offset_lr_scale = 1;
   // Consecutive real training frames (by position in their dataset) that
-  // share one offset row, and one shift: a slow drift of the picture against
-  // the fit (the hair settling, the light changing over the clip) is then
-  // learnt by offsets visited many times, where a frame's own offset is
-  // visited too few times to learn anything but Adam's jitter. 1: per frame.
+  // share one offset row, and one shift: meant for a slow drift of the
+  // picture against the fit (the hair settling, the light changing over the
+  // clip), which offsets visited many times could learn where a frame's own
+  // offset is visited too few times to learn anything but Adam's jitter. On
+  // the four clips they found none (bench/results/fidelity_ablation.md), so
+  // the default is 1: per frame.
   int offset_segment = 1;
   // Each real training frame's picture may be moved by a learnt shift of its
   // own (pixels, x and y) before the loss: the fit places the head a pixel or
