@@ -74,6 +74,10 @@ void AddTrainingFlags(CLI::App* app, FitOptions* fit, RunOutputs* out, int* proc
                   "consecutive training frames sharing one offset (and one shift), for a slow drift of the picture "
                   "against the fit (1: one per frame)")
       ->capture_default_str();
+  app->add_option("--exposure-rate", fit->exposure_rate,
+                  "with --motion-blur: the rate at which the camera's exposure is learnt from the value given "
+                  "(frame intervals a step; 0: kept)")
+      ->capture_default_str();
   app->add_option("--frame-shift-rate", fit->frame_shift_rate,
                   "each real training frame's picture moved by a learnt shift of its own before the loss, at this "
                   "rate in pixels a step (0: off; the receiver draws with none)")
@@ -226,6 +230,10 @@ void AddSurfaceFlags(CLI::App* app, AvatarConfig* config, FitOptions* fit) {
   app->add_flag("--view-rotation,!--no-view-rotation", config->view_rotation,
                 "tell the networks the head's rotation as the camera sees it (in the neck's place): how it is "
                 "turned to the camera and the light");
+  app->add_option("--motion-blur", config->motion_blur,
+                  "the camera's exposure in frame intervals: each real frame is drawn smeared along the head's "
+                  "image motion since the frame before over that much of it, in training and in a call (0: sharp)")
+      ->capture_default_str();
   app->add_option("--hair-reach", config->hair_reach,
                   "metres per unit of an expression coefficient below which a face counts as the hair's "
                   "(--hair-conditioning)")
@@ -474,6 +482,10 @@ int main(int argc, char** argv) {
   eval->add_option("--matte-scale", e.matte_scale,
                    "draw with the matte's coverage logit multiplied by this instead of the avatar's scale (0: the "
                    "avatar's)")
+      ->capture_default_str();
+  eval->add_option("--motion-blur", e.motion_blur,
+                   "draw with this exposure (frame intervals) for the motion blur instead of the avatar's (-1: the "
+                   "avatar's; 0: sharp)")
       ->capture_default_str();
 
   auto* compare = app.add_subcommand(

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <numeric>
 #include <opencv2/imgproc.hpp>
@@ -56,6 +57,7 @@ void FitOptions::Check() const {
       .InRange("offset_lr_scale", offset_lr_scale, 0.0, 1000.0)
       .InRange("offset_segment", offset_segment, 1, 100000)
       .InRange("frame_shift_rate", frame_shift_rate, 0.0, 10.0)
+      .InRange("exposure_rate", exposure_rate, 0.0, 1.0)
       .That(blend_decay >= 0 && blend_decay * learning_rate * blend_lr_scale < 1,
             "blend_decay is >= 0 and shrinks the blendshapes by less than all of them a step "
             "(blend_decay * learning_rate * blend_lr_scale < 1)")
@@ -252,6 +254,48 @@ class RealFrames {
   int rows_ = 0;
 };
 
+// Each real frame's image motion since the frame before it, for
+// AvatarConfig::motion_blur: from the fitted parameters of the two (the
+// frame before is the one with the previous sequence number; interpolated
+// frames have none), computed when a frame is first drawn.
+class FrameMotions {
+ public:
+  explicit FrameMotions(const HeadModel& model) : model_(model) {}
+
+  std::optional<ImageMotion> At(const PreparedDataset& data, int position) {
+    const auto key = std::make_pair(&data, position);
+    if (const auto it = motions_.find(key); it != motions_.end()) return it->second;
+    const int real = data.size() - data.interpolated();
+    std::optional<ImageMotion> motion;
+    if (position < real) {
+      auto [known, fresh] = before_.try_emplace(&data);
+      if (fresh)
+        for (int i = 0; i < real; ++i) known->second.emplace(data.params(i).sequence, i);
+      const FrameParams& now = data.params(position);
+      const auto before = known->second.find(now.sequence - 1);
+      if (now.sequence > 0 && before != known->second.end()) {
+        const HeadIdentity identity = model_.MakeIdentity(data.subject().shape.cast<double>());
+        motion = MeasureImageMotion(InCamera(identity, data.params(before->second)), InCamera(identity, now),
+                                    data.subject().intrinsics);
+      }
+    }
+    return motions_[key] = motion;
+  }
+
+ private:
+  RasterVertices InCamera(const HeadIdentity& identity, const FrameParams& frame) const {
+    HeadModelOutput posed;
+    model_.Forward(identity, frame.expression.cast<double>(), frame.HeadPose(), &posed);
+    RasterVertices v_cam;
+    TransformToCamera(posed.vertices, frame.CamFromHead(), &v_cam);
+    return v_cam;
+  }
+
+  const HeadModel& model_;
+  std::map<std::pair<const PreparedDataset*, int>, std::optional<ImageMotion>> motions_;
+  std::map<const PreparedDataset*, std::map<uint64_t, int>> before_;  // sequence -> position
+};
+
 // Each sample's draws (synthetic or real, which frame, augmentation, ray
 // jitter) from its own generator: a resumed run, or one split over ranks,
 // makes exactly the draws of one uninterrupted process.
@@ -264,7 +308,8 @@ std::mt19937 SampleRng(uint64_t seed, int step, int b) {
 namespace fs = std::filesystem;
 
 void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, torch::optim::Adam& adam,
-                    const Offsets& offsets, const torch::Tensor& shifts, WeightAverage* average) {
+                    const Offsets& offsets, const torch::Tensor& shifts, const torch::Tensor& exposure,
+                    WeightAverage* average) {
   const fs::path staging = dir / ("staging-" + std::to_string(next_step));
   fs::remove_all(staging);
   fs::create_directories(staging);
@@ -275,6 +320,7 @@ void SaveCheckpoint(const fs::path& dir, int next_step, const Avatar& avatar, to
   if (offsets.enabled())
     torch::save(std::vector<torch::Tensor>{offsets.geometry, offsets.appearance}, (staging / "offsets.pt").string());
   if (shifts.defined()) torch::save(std::vector<torch::Tensor>{shifts}, (staging / "shifts.pt").string());
+  if (exposure.defined()) torch::save(std::vector<torch::Tensor>{exposure}, (staging / "exposure.pt").string());
   if (average) torch::save(average->average(), (staging / "average.pt").string());
   WriteFileAtomically((staging / "state.json").string(), nlohmann::json{{"next_step", next_step}}.dump() + "\n");
   // Everything on the disk before the checkpoint is named; the previous one
@@ -314,7 +360,8 @@ void CopyInto(const std::vector<torch::Tensor>& from, const std::vector<torch::T
 
 // Restores weights and optimiser state; returns the step to continue from (0 without a checkpoint).
 int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, torch::optim::Adam& adam,
-                   Offsets* offsets, const torch::Tensor& shifts, WeightAverage* average) {
+                   Offsets* offsets, const torch::Tensor& shifts, const torch::Tensor& exposure,
+                   WeightAverage* average) {
   std::ifstream latest(dir / "LATEST");
   if (!latest) return 0;
   std::string name;
@@ -337,6 +384,11 @@ int LoadCheckpoint(const fs::path& dir, Avatar& avatar, const HeadModel& model, 
                "the checkpoint's per-frame offsets are for another dataset");
     if (shifts.defined())
       CopyInto(load("shifts.pt"), {shifts}, "the checkpoint's per-frame shifts are for another dataset");
+    if (exposure.defined()) {
+      if (!fs::exists(ckpt / "exposure.pt"))
+        throw std::runtime_error("the checkpoint was made without motion blur (no exposure.pt)");
+      CopyInto(load("exposure.pt"), {exposure}, "the checkpoint's exposure is not one value");
+    }
     if (average)  // a checkpoint made without averaging starts the average at its weights
       CopyInto(fs::exists(ckpt / "average.pt") ? load("average.pt") : to, average->average(),
                "the checkpoint's averaged weights differ from this avatar's networks");
@@ -381,6 +433,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         "full, not " +
         std::string(MotionConditioningName(config.motion_conditioning)) + ")");
   const RealFrames real(data.real, config.output_size, options.offset_segment);
+  FrameMotions motions(model);
   if (options.threads > 0) SetComputeThreads(options.threads);
   AvatarModules& modules = avatar.modules();
   if (config.surface_blend_components > 0 && modules.surface && !modules.surface->has_blend_basis())
@@ -416,6 +469,12 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   torch::Tensor shifts;  // (rows, 2) pixels, FitOptions::frame_shift_rate; rows as the offsets'
   if (!real.empty() && options.frame_shift_rate > 0)
     shifts = torch::zeros({real.offset_rows(), 2}, torch::requires_grad());
+  // With motion blur on real frames, the camera's exposure is learnt from
+  // the value given: how far the frames are smeared along their motion is
+  // the camera's, and only the blur can tie a smear to the motion (the
+  // networks are not told it).
+  torch::Tensor exposure;
+  if (!real.empty() && config.motion_blur > 0) exposure = torch::full({}, config.motion_blur, torch::requires_grad());
   std::vector<torch::optim::OptimizerParamGroup> groups = {torch::optim::OptimizerParamGroup(params)};
   std::vector<double> group_scale = {1.0};
   if (!surface_params.empty()) {
@@ -437,6 +496,11 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
     group_scale.push_back(options.frame_shift_rate / options.learning_rate);
     params.push_back(shifts);
   }
+  if (exposure.defined()) {
+    groups.emplace_back(std::vector<torch::Tensor>{exposure});
+    group_scale.push_back(options.exposure_rate / options.learning_rate);
+    params.push_back(exposure);
+  }
   torch::optim::Adam adam(groups, torch::optim::AdamOptions(options.learning_rate));
   params.insert(params.end(), texture.begin(), texture.end());  // all of them, for the all-reduce
   std::unique_ptr<PerceptualLoss> vgg;
@@ -453,7 +517,8 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   const bool writes = dp.rank == 0;
   if (writes && !options.checkpoint_dir.empty()) CheckCheckpointFolder(options.checkpoint_dir, options.resume);
   if (options.resume)
-    result.first_step = LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, shifts, average.get());
+    result.first_step =
+        LoadCheckpoint(options.checkpoint_dir, avatar, model, adam, &offsets, shifts, exposure, average.get());
   if (!options.checkpoint_dir.empty() && writes) fs::create_directories(options.checkpoint_dir);
   std::unique_ptr<GradientAllReduce> group;
   if (dp.enabled()) group = std::make_unique<GradientAllReduce>(dp);
@@ -488,6 +553,7 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       std::mt19937 rng = SampleRng(options.seed, step, b);
       PreparedSample p;
       int real_index = -1;
+      std::optional<ImageMotion> motion;
       if (u01(rng) < p_synthetic) {
         const SyntheticSample s = data.synthetic->At(static_cast<uint64_t>(step) * options.batch + b);
         p = Prepare(config, model, s.subject, s.frame, s.image_bgr, s.mask, &sampler, w.regions, w.blind_synthetic_face,
@@ -502,7 +568,9 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         const SubjectParams& subject = f.data->subject();
         FrameParams frame = s.params;
         cv::Mat image = s.image_bgr, mask = s.mask;
+        bool augmented = false;
         if (u01(rng) < options.z_augmentation) {
+          augmented = true;
           const double scale = std::exp(std::uniform_real_distribution<double>(std::log(options.z_scale_min),
                                                                                std::log(options.z_scale_max))(rng));
           ChangeDistance(scale, subject.intrinsics, &frame, &image, &mask);
@@ -512,7 +580,10 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
           const double limit = options.roll_max_degrees * M_PI / 180;
           TurnCamera(std::uniform_real_distribution<double>(-limit, limit)(rng), subject.intrinsics, &frame, &image,
                      &mask);
+          augmented = true;
         }
+        // A frame moved by an augmentation no longer moves as its neighbours say: drawn sharp.
+        if (config.motion_blur > 0 && !augmented) motion = motions.At(*f.data, f.position);
         p = Prepare(config, model, subject, frame, image, mask, &sampler, w.regions, false, &rng);
       }
       if (real_index >= 0 && options.expression_noise > 0) {
@@ -537,6 +608,10 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
         if (out.coverage.defined()) out.coverage = ShiftImage(out.coverage, shift);
         penalty = penalty + w.frame_shift_weight * shift.square().sum();
       }
+      // The picture as the camera saw it; the coverage stays the head's
+      // outline at the instant, as the frame's mask (cut where the smeared
+      // edge is half the head) has it.
+      if (motion) out.image = BlurAlongMotion(out.image, *motion, exposure);
       // Blind pixels take the output itself as their target: the MSE sees no
       // error there, SSIM and VGG only through windows reaching past them.
       const torch::Tensor target = p.blind.defined() ? torch::where(p.blind, out.image.detach(), p.target) : p.target;
@@ -570,12 +645,16 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
       const double shrink = options.LearningRateAt(step) * options.blend_lr_scale * options.blend_decay;
       for (torch::Tensor& p : blend_params) p.mul_(1 - shrink);
     }
+    if (exposure.defined()) {
+      torch::NoGradGuard no_grad;
+      exposure.clamp_(0, kMaxMotionBlur);
+    }
     if (average) average->Update(options.WeightAverageDecayAt(step));
     result.steps.push_back(info);
     if (writes && !options.checkpoint_dir.empty() &&
         ((step + 1) % options.checkpoint_every == 0 || step + 1 == options.iterations)) {
       modules.eval();
-      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets, shifts, average.get());
+      SaveCheckpoint(options.checkpoint_dir, step + 1, avatar, adam, offsets, shifts, exposure, average.get());
     }
     if (progress) {
       if (average) average->Swap();  // the callback sees (and may evaluate) the average
@@ -612,6 +691,15 @@ TrainResult TrainAvatar(Avatar& avatar, const HeadModel& model, const TrainingDa
   const int steps = options.iterations - result.first_step;
   result.samples_per_s = result.seconds > 0 ? steps * options.batch / result.seconds : 0;
   modules.eval();
+  // The receiver draws with the exposure learnt. The avatar's networks are
+  // new objects after this: `modules` is not used again.
+  if (exposure.defined()) {
+    result.exposure = exposure.item<double>();
+    AvatarConfig c = avatar.config();
+    c.motion_blur = result.exposure;
+    avatar = avatar.WithRuntimeSwitches(c);
+    avatar.modules().eval();
+  }
   return result;
 }
 

@@ -104,6 +104,10 @@ struct FitOptions {
   // receiver draws with none. Their rate in pixels a step at the schedule's
   // peak (warm-up and fall as the networks'). 0: off.
   double frame_shift_rate = 0;
+  // With AvatarConfig::motion_blur: the exposure's rate (frame intervals a
+  // step at the schedule's peak); it starts at the configuration's value and
+  // the avatar keeps what it learns.
+  double exposure_rate = 1e-3;
   // Decoupled weight decay of the blendshapes alone (AdamW's: each step shrinks
   // them by rate * blend_decay, rate being theirs): a blendshape the frames do
   // not keep pushing the same way fades, so one fitted to noise or to what
@@ -208,6 +212,8 @@ struct TrainResult {
   // length about it over the training frames.
   double frame_shift_mean[2] = {0, 0};
   double frame_shift_rms = 0;
+  // With motion blur: the exposure learnt (frame intervals); -1 without.
+  double exposure = -1;
   double seconds = 0;
   double samples_per_s = 0;
 };

@@ -121,6 +121,7 @@ nlohmann::json FitJson(const FitOptions& f, const TrainResult& r, bool real) {
                         {"weight", f.loss.frame_shift_weight},
                         {"mean_px", {r.frame_shift_mean[0], r.frame_shift_mean[1]}},
                         {"rms_px_about_mean", r.frame_shift_rms}};
+  if (real && r.exposure >= 0) j["motion_blur"] = {{"exposure_learnt", r.exposure}, {"rate", f.exposure_rate}};
   if (!r.mean_offset_geometry.empty()) {
     double square = 0;
     for (const std::vector<float>* m : {&r.mean_offset_geometry, &r.mean_offset_appearance})
@@ -167,6 +168,7 @@ void TakeSampleSwitches(const AvatarConfig& from, AvatarConfig* to) {
   to->hair_conditioning = from.hair_conditioning;
   to->hair_reach = from.hair_reach;
   to->view_rotation = from.view_rotation;
+  to->motion_blur = from.motion_blur;
 }
 
 }  // namespace
@@ -450,6 +452,8 @@ void EvalOptions::Check() const {
   c.That(split == "test" || split == "train", "split must be test or train, not '" + split + "'");
   c.That(expression_span == "avatar" || expression_span == "none" || expression_span == "dataset",
          "expression_span must be avatar, none or dataset, not '" + expression_span + "'");
+  c.That(motion_blur == -1 || (motion_blur >= 0 && motion_blur <= 2),
+         "motion_blur must be -1 (the avatar's) or an exposure of 0 to 2 frame intervals");
   c.ThrowIfErrors();
   if (matte_scale != 0) {  // 0: the avatar's; any other, a scale an avatar may carry
     AvatarConfig scaled = AvatarConfig::Default();
@@ -469,6 +473,11 @@ nlohmann::json RunEval(const EvalOptions& o) {
   if (o.matte_scale > 0) {
     if (!avatar.config().has_matte()) throw std::invalid_argument(o.avatar + " has no matte to scale (matte_scale)");
     avatar = WithMatteScale(avatar, o.matte_scale);
+  }
+  if (o.motion_blur >= 0) {
+    AvatarConfig c = avatar.config();
+    c.motion_blur = o.motion_blur;
+    avatar = avatar.WithRuntimeSwitches(c);
   }
   const bool on_test = o.split == "test" && !data.test().empty();
   std::vector<int> positions = on_test ? data.test() : data.train();
@@ -553,6 +562,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
                             ? nlohmann::json(nullptr)
                             : nlohmann::json{{"value", avatar.config().matte_scale},
                                              {"from", o.matte_scale > 0 ? "--matte-scale" : "the avatar"}}},
+        {"motion_blur", nlohmann::json{{"exposure", avatar.config().motion_blur},
+                                       {"from", o.motion_blur >= 0 ? "--motion-blur" : "the avatar"}}},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",

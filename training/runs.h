@@ -112,6 +112,9 @@ struct EvalOptions {
   // The coverage logit's scale (AvatarConfig::matte_scale) instead of the
   // avatar's; 0: the avatar's.
   double matte_scale = 0;
+  // The exposure of the motion blur (AvatarConfig::motion_blur) instead of
+  // the avatar's; -1: the avatar's.
+  double motion_blur = -1;
   // Expression fidelity: dlib's landmarks on the avatar's frames against the
   // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
   bool landmarks = true;

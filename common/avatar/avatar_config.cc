@@ -109,6 +109,7 @@ void AvatarConfig::Check() const {
   c.That(!covered_apart || !surface_displacement,
          "covered_apart moves the covered parts' canonical points, which surface_displacement measures from");
   c.InRange("matte_core", matte_core, 0.0, 0.1).InRange("matte_scale", matte_scale, 0.05, 4.0);
+  c.InRange("motion_blur", motion_blur, 0.0, kMaxMotionBlur);
   c.That(expression_low.size() == expression_high.size(),
          "expression_low and expression_high must have as many values");
   c.That(expression_low.empty() || static_cast<int>(expression_low.size()) == num_expression,
@@ -175,6 +176,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"matte_rules", matte_rules.ToJson()},
                       {"matte_core", matte_core},
                       {"matte_scale", matte_scale},
+                      {"motion_blur", motion_blur},
                       {"motion_conditioning", MotionConditioningName(motion_conditioning)},
                       {"hair_conditioning", MotionConditioningName(hair_conditioning)},
                       {"hair_reach", hair_reach},
@@ -229,6 +231,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     if (j.contains("matte_rules")) c.matte_rules = MatteRules::FromJson(j.at("matte_rules"));
     c.matte_core = j.value("matte_core", 0.0);
     c.matte_scale = j.value("matte_scale", 1.0);
+    c.motion_blur = j.value("motion_blur", 0.0);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
     c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
     c.hair_reach = j.value("hair_reach", c.hair_reach);

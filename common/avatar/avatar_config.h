@@ -47,6 +47,8 @@ inline constexpr int kSubjectSurfaceBlend = 64;
 // values of about one, as it sees the texture's.
 inline constexpr float kSurfaceDisplacementScale = 100;
 inline constexpr MatteMode kSubjectMatte = MatteMode::kBounded;
+// AvatarConfig::motion_blur's largest exposure, in frame intervals.
+inline constexpr double kMaxMotionBlur = 2;
 // AvatarConfig::matte_scale a fine-tune writes (bench/DEFAULTS.md).
 inline constexpr double kSubjectMatteScale = 0.5;
 
@@ -186,6 +188,11 @@ struct AvatarConfig : AvatarCommonConfig {
   // that, and an edge drawn as sharply at the wrong place costs more than a
   // softer one. 1 in files from before it. A run-time switch.
   double matte_scale = 1;
+  // The camera's exposure in frame intervals: each real frame (training) and
+  // each frame of a call (the receiver, from the frame before it) is drawn
+  // smeared along the head's image motion over that much of it
+  // (motion_blur.h); 0: drawn sharp, as before it existed. A run-time switch.
+  double motion_blur = 0;
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;

@@ -3,10 +3,12 @@
 // AvatarRenderer, so that the quality a report measures is what a call shows.
 #pragma once
 
+#include <optional>
 #include <random>
 
 #include "common/avatar/avatar_model.h"
 #include "common/avatar/avatar_renderer.h"
+#include "common/avatar/motion_blur.h"
 #include "common/avatar/ray_sampler.h"
 #include "common/core/parallel_tasks.h"
 
@@ -42,7 +44,20 @@ struct AvatarFrameInputs {
   AvatarConditioning conditioning;
   HeadModelOutput posed;
   RasterVertices v_cam;
+  // The frame drawn before with these buffers (RenderAvatarFrame): its posed
+  // vertices in the camera frame and its sequence number, for the motion
+  // AvatarConfig::motion_blur smears along.
+  RasterVertices previous_v_cam;
+  std::optional<uint64_t> previous_sequence;
 };
+
+// The head's image motion per frame interval from the frame `buffers` drew
+// before to the one they hold now (PrepareAvatarRays made it), when that frame
+// was one of the last kMotionBlurMaxGap before this one: a receiver that
+// dropped a frame still knows how the head moves; a new session or a jump does not.
+inline constexpr uint64_t kMotionBlurMaxGap = 3;
+std::optional<ImageMotion> MotionSincePrevious(const AvatarFrameInputs& buffers, const FrameParams& frame,
+                                               const PinholeCamera& camera);
 
 // The posed model's 68 landmarks seen through `camera` (pixels): where the
 // frame's fit puts them in the picture the avatar draws.

@@ -312,11 +312,28 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
   }
   RunAvatarUpsampling(modules, *buffers, &out, timings);
   Stopwatch watch;
+  if (config.motion_blur > 0) {
+    if (const std::optional<ImageMotion> motion = MotionSincePrevious(*buffers, frame, subject.intrinsics)) {
+      out.image = BlurAlongMotion(out.image, *motion, config.motion_blur);
+      if (out.coverage.defined()) out.coverage = BlurAlongMotion(out.coverage, *motion, config.motion_blur);
+    }
+    buffers->previous_v_cam = buffers->v_cam;
+    buffers->previous_sequence = frame.sequence;
+  }
   ImageTensorToBgr(out.image, image_bgr);
   if (frame.skin_colour)
     MatchSkinColour(out, *frame.skin_colour,
                     ProjectLandmarks(buffers->posed, buffers->cam_from_head, subject.intrinsics), image_bgr);
   if (timings) timings->convert_ms = watch.ElapsedMs();
+}
+
+std::optional<ImageMotion> MotionSincePrevious(const AvatarFrameInputs& buffers, const FrameParams& frame,
+                                               const PinholeCamera& camera) {
+  if (!buffers.previous_sequence || frame.sequence <= *buffers.previous_sequence ||
+      frame.sequence - *buffers.previous_sequence > kMotionBlurMaxGap)
+    return std::nullopt;
+  return MeasureImageMotion(buffers.previous_v_cam, buffers.v_cam, camera,
+                            static_cast<int>(frame.sequence - *buffers.previous_sequence));
 }
 
 bool MatchSkinColour(const AvatarOutput& out, const Eigen::Vector3f& target, const Landmarks2d& landmarks,

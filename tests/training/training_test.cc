@@ -849,6 +849,61 @@ TEST(TrainAvatar, FrameShiftsAreLearntPerTrainingFrame) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// Motion blur: real frames drawn smeared along their motion since the frame
+// before (the synthetic frames' poses jump from one to the next). The
+// exposure is learnt from its start at its own rate and the avatar keeps it;
+// at rate 0 it stays; a checkpoint keeps it, so a resume continues exactly.
+TEST(TrainAvatar, MotionBlurLearnsTheCamerasExposure) {
+  const std::string dir = WriteRenderedDataset("dataset_motion_blur", 6, 2);
+  const PreparedDataset real = PreparedDataset::Load(dir, Model(), 128);
+  auto run = [&](double start, double rate, double* kept, const std::string& checkpoints = "", bool resume = false,
+                 std::function<void(const StepInfo&)> progress = nullptr) {
+    AvatarConfig c = Tiny();
+    c.motion_blur = start;
+    Avatar avatar = Avatar::CreateRandom(c, Model(), real.subject(), 4);
+    FitOptions f;
+    f.iterations = 8;
+    f.batch = 2;
+    f.freeze_identity = true;
+    f.exposure_rate = rate;
+    f.checkpoint_dir = checkpoints;
+    f.checkpoint_every = 4;
+    f.resume = resume;
+    const TrainResult r = TrainAvatar(avatar, Model(), TrainingData{nullptr, {&real}}, f, progress);
+    *kept = avatar.config().motion_blur;
+    return r;
+  };
+  double kept = -1;
+  const TrainResult sharp = run(0, 0.05, &kept);
+  EXPECT_EQ(sharp.exposure, -1.0);
+  EXPECT_EQ(kept, 0.0);
+  const TrainResult held = run(0.5, 0, &kept);
+  EXPECT_EQ(held.exposure, 0.5);
+  EXPECT_EQ(kept, 0.5);
+  // The same draws (the first frame, with none before it, is drawn sharp).
+  auto total = [](const TrainResult& r) {
+    double sum = 0;
+    for (const StepInfo& s : r.steps) sum += s.loss;
+    return sum;
+  };
+  EXPECT_NE(total(held), total(sharp)) << "the frames drawn smeared";
+  const TrainResult learnt = run(0.5, 0.05, &kept);
+  EXPECT_NE(learnt.exposure, 0.5);
+  EXPECT_GE(learnt.exposure, 0.0);
+  EXPECT_LE(learnt.exposure, kMaxMotionBlur);
+  EXPECT_EQ(kept, learnt.exposure);
+  const std::string checkpoints = testing::TempDir("ckpt_motion_blur");
+  EXPECT_THROW(run(0.5, 0.05, &kept, checkpoints, false, CrashAfter(4)), Crash);
+  const TrainResult rest = run(0.5, 0.05, &kept, checkpoints, true);
+  ASSERT_EQ(rest.steps.size(), 4u);
+  for (size_t i = 0; i < 4; ++i)
+    EXPECT_NEAR(rest.steps[i].loss, learnt.steps[4 + i].loss, 1e-4 * learnt.steps[4 + i].loss) << "step " << 4 + i;
+  EXPECT_NEAR(rest.exposure, learnt.exposure, 1e-6);
+  FitOptions bad;
+  bad.exposure_rate = -0.1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 // Several people's datasets: every frame drawn with its own dataset's subject,
 // the offsets one row per frame of the datasets one after another. Networks
 // that also saw the second person draw that person's held-out frames better
