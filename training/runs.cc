@@ -319,6 +319,7 @@ void SubjectOptions::Check() const {
   AvatarConfig own = AvatarConfig::Default(resolution);
   CopySurfaceTexture(config, &own);
   own.matte_scale = matte_scale;
+  own.motion_blur = config.motion_blur;
   own.Check();
 }
 

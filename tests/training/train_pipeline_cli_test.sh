@@ -267,6 +267,31 @@ refused_plain=$?
   [ $refused_zero -ne 0 ] && grep -qi "matte.scale" <<<"$out" && [ $refused_plain -ne 0 ] && grep -q "no matte" <<<"$out2" &&
   ok "subject --matte-scale: the default ($default_scale) or the given scale kept; eval draws at it or at --matte-scale; bad scales refused" ||
   bad "matte scale: '$default_scale' '$scales' $refused_zero '$(tail -1 <<<"$out")' $refused_plain '$(tail -1 <<<"$out2")' $(tail -2 "$tmp/ms.err")"
+# Motion blur: a subject with --motion-blur learns the exposure from that start and keeps what it learnt in the file
+# and its report; eval draws at the avatar's exposure unless --motion-blur says otherwise, and says which; an
+# exposure out of range is refused by both.
+"$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 --iterations 2 \
+  --motion-blur 0.5 --exposure-rate 0.05 --out "$tmp/mb.hcavatar" --json "$tmp/mb.json" > /dev/null 2> "$tmp/mb.err"
+for how in avatar 0; do
+  flag=(); [ "$how" = avatar ] || flag=(--motion-blur "$how")
+  "$bin/headcast-train" eval --avatar "$tmp/mb.hcavatar" --data "$tmp/dsi" --out "$tmp/emb_$how" --orbit-frames 0 \
+    --no-landmarks "${flag[@]}" > /dev/null 2>&1
+done
+learnt=$(json "$tmp/mb.json" "j['fit']['motion_blur']['exposure_learnt']")
+blur="$(config "$tmp/mb.hcavatar" "['motion_blur'] == $learnt")"
+blur+=" $(json "$tmp/emb_avatar/eval.json" "(j['motion_blur']['exposure'] == $learnt, j['motion_blur']['from'])")"
+blur+=" $(json "$tmp/emb_0/eval.json" "(j['motion_blur']['exposure'], j['motion_blur']['from'])")"
+blur+=" $(config "$tmp/i.hcavatar" "['motion_blur']")"
+out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
+  --iterations 2 --motion-blur 2.5 --out "$tmp/mb2.hcavatar" 2>&1)
+refused_subject=$?
+out2=$("$bin/headcast-train" eval --avatar "$tmp/mb.hcavatar" --data "$tmp/dsi" --out "$tmp/emb3" --orbit-frames 0 \
+  --no-landmarks --motion-blur 3 2>&1)
+refused_eval=$?
+[ "$blur" = "True (True, 'the avatar') (0.0, '--motion-blur') 0.0" ] && [ $refused_subject -ne 0 ] &&
+  grep -q "motion_blur" <<<"$out" && [ $refused_eval -ne 0 ] && grep -q "motion_blur" <<<"$out2" &&
+  ok "subject --motion-blur: the exposure learnt ($learnt) kept in the file and the report; eval draws at it or at --motion-blur; out of range refused" ||
+  bad "motion blur: '$learnt' '$blur' $refused_subject '$(tail -1 <<<"$out")' $refused_eval '$(tail -1 <<<"$out2")' $(tail -2 "$tmp/mb.err")"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
   --iterations 2 --surface-levels 4 --out "$tmp/l4.hcavatar" 2>&1)
 [ $? -ne 0 ] && grep -q "surface-levels" <<<"$out" && ok "--surface-levels 4 refused" || bad "surface levels 4: $out"
