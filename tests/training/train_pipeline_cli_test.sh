@@ -289,7 +289,7 @@ out2=$("$bin/headcast-train" eval --avatar "$tmp/mb.hcavatar" --data "$tmp/dsi" 
   --no-landmarks --motion-blur 3 2>&1)
 refused_eval=$?
 [ "$blur" = "True (True, 'the avatar') (0.0, '--motion-blur') 0.0" ] && [ $refused_subject -ne 0 ] &&
-  grep -q "motion_blur" <<<"$out" && [ $refused_eval -ne 0 ] && grep -q "motion_blur" <<<"$out2" &&
+  grep -q "motion.blur" <<<"$out" && [ $refused_eval -ne 0 ] && grep -q "motion.blur" <<<"$out2" &&
   ok "subject --motion-blur: the exposure learnt ($learnt) kept in the file and the report; eval draws at it or at --motion-blur; out of range refused" ||
   bad "motion blur: '$learnt' '$blur' $refused_subject '$(tail -1 <<<"$out")' $refused_eval '$(tail -1 <<<"$out2")' $(tail -2 "$tmp/mb.err")"
 out=$("$bin/headcast-train" subject --general "$tmp/general.hcavatar" --data "$tmp/dsi" --resolution 128 \
