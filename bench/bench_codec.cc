@@ -201,6 +201,16 @@ nlohmann::json RunCodecSuite(const BenchOptions& options) {
     out["frames_with_skin_colour"] =
         std::count_if(frames.begin(), frames.end(), [](const FrameParams& f) { return f.skin_colour.has_value(); });
   }
+  {
+    // The outline's share: a layout without it.
+    ParamEncoder without(
+        CodecLayout::FromModel(model, options.codec_error_m, {}, options.key_interval, true, /*outline_bins=*/0));
+    double bits_without = 0;
+    for (const FrameParams& f : frames) bits_without += 8.0 * without.Encode(f).size();
+    out["bits_per_frame_mean_without_outline"] = bits_without / static_cast<double>(frames.size());
+    out["frames_with_outline"] =
+        std::count_if(frames.begin(), frames.end(), [](const FrameParams& f) { return !f.outline.empty(); });
+  }
   out["max_abs_error"] = {{"expression", max_abs_err[0]},
                           {"joint_rotation_rad", max_abs_err[1]},
                           {"cam_rotation_rad", max_abs_err[2]},

@@ -1,6 +1,8 @@
 // Conversions between headcast types and proto messages.
 #include "proto/convert.h"
 
+#include "common/headmodel/head_outline.h"
+
 namespace headcast {
 namespace {
 
@@ -39,6 +41,7 @@ void ToProto(const FrameParams& in, v1::FrameParams* out) {
   out->set_sequence(in.sequence);
   out->set_confidence(in.confidence);
   if (in.skin_colour) PutVector3(*in.skin_colour, out->mutable_skin_colour());
+  out->mutable_outline()->Assign(in.outline.begin(), in.outline.end());
 }
 
 bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why) {
@@ -58,7 +61,8 @@ bool FromProto(const v1::FrameParams& in, FrameParams* out, std::string* why) {
     if (!GetVector3(in.skin_colour(), "skin_colour", &rgb, why)) return false;
     out->skin_colour = rgb;
   }
-  return true;
+  out->outline.assign(in.outline().begin(), in.outline().end());
+  return OutlineIsValid(out->outline, why);
 }
 
 void ToProto(const SubjectParams& in, v1::SubjectParams* out) {
@@ -104,6 +108,7 @@ void ToProto(const CodecLayout& in, double fps, v1::ParameterLayout* out) {
   out->set_codec_version(kCodecVersion);
   out->set_head_model_fingerprint(in.head_model_fingerprint);
   out->set_skin_colour(in.skin_colour);
+  out->set_outline_bins(static_cast<uint32_t>(in.outline_bins));
 }
 
 bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why) {
@@ -132,6 +137,12 @@ bool FromProto(const v1::ParameterLayout& in, CodecLayout* out, std::string* why
   l.key_frame_interval = static_cast<int>(in.key_frame_interval());
   l.head_model_fingerprint = in.head_model_fingerprint();  // Check bounds its length
   l.skin_colour = in.skin_colour();
+  if (in.outline_bins() > static_cast<uint32_t>(kMaxOutlineBins)) {
+    if (why)
+      *why = "outline_bins " + std::to_string(in.outline_bins()) + " is more than " + std::to_string(kMaxOutlineBins);
+    return false;
+  }
+  l.outline_bins = static_cast<int>(in.outline_bins());
   try {
     l.Check();
   } catch (const std::invalid_argument& e) {

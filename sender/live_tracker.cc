@@ -3,6 +3,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include "common/core/options.h"
+#include "common/core/timer.h"
+#include "common/headmodel/head_outline.h"
+
 namespace headcast {
 
 std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOptions& o,
@@ -22,7 +26,11 @@ std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOpti
 }
 
 LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& options)
-    : options_(options), tracker_(model, options.tracker) {
+    : model_(model), options_(options), tracker_(model, options.tracker) {
+  OptionsCheck c("LiveTrackerOptions");
+  c.InRange("outline_resolution", options.outline_resolution, 32, 2048);
+  c.ThrowIfErrors();
+  options.outline_mask.Check();
   if (options.identity.size() > 0) tracker_.SetIdentity(options.identity);
   if (options.anchor) tracker_.SetAnchor(*options.anchor);
 }
@@ -36,10 +44,38 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   }
   camera_->width = bgr.cols;  // given intrinsics: the frame says how big it is
   camera_->height = bgr.rows;
+  if (options_.outline && !crop_ && !outline_refused_) {
+    if (options_.contract) crop_ = ContractCrop(*options_.contract, *camera_, options_.outline_resolution);
+    outline_refused_ = !crop_;
+    if (outline_refused_)
+      spdlog::warn("the hair's outline is not measured: {}",
+                   options_.contract ? "these frames are not of the avatar's camera (another aspect)"
+                                     : "no camera contract (--identity-from an avatar that records one)");
+  }
   const TrackedFrame t =
       tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params, frame.depth_on_demand.get());
-  return {t.fitted,         t.with_depth,           t.face.status,         t.landmarks_ms, t.fit_ms,   t.depth_ms,
-          t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,     t.anchor_ms};
+  LiveTrackResult r{t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,        t.fit_ms,
+                    t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,
+                    t.anchor_ms};
+  if (t.fitted && crop_) {
+    Stopwatch watch;
+    params->outline = MeasureFrameOutline(bgr, t.face.raw, *params);
+    r.outline_ms = watch.ElapsedMs();
+  }
+  return r;
+}
+
+std::vector<float> LiveTracker::MeasureFrameOutline(const cv::Mat& bgr, const Landmarks2d& face,
+                                                    const FrameParams& params) {
+  const Eigen::VectorXd& shape = tracker_.identity();
+  if (!mask_identity_ || mask_shape_.size() != shape.size() || mask_shape_ != shape) {
+    mask_identity_ = model_.MakeIdentity(shape);
+    mask_shape_ = shape;
+  }
+  const cv::Mat mask = CutFrameMask(bgr, face, *crop_, model_, *mask_identity_, tracker_.fitter(), params,
+                                    options_.matte_rules, options_.outline_mask);
+  const OutlineOptions outline;
+  return MeasureOutline(mask, OutlineFrame::Of(crop_->camera, params.CamFromHead(), outline), outline);
 }
 
 }  // namespace headcast

@@ -10,6 +10,7 @@
 #include "common/capture/frame_source.h"
 #include "common/core/camera.h"
 #include "common/headmodel/params.h"
+#include "common/tracking/frame_mask.h"
 #include "common/tracking/frame_tracker.h"
 
 namespace headcast {
@@ -25,6 +26,16 @@ struct LiveTrackerOptions {
   // The avatar's photometric anchor (ReadAvatarAnchorReference): the head's
   // placement held to the appearance its training frames were fitted to.
   std::optional<AnchorReference> anchor;
+  // With the contract: each fitted frame carries the top of its head's
+  // outline (FrameParams::outline), measured on the frame's head mask cut as
+  // the avatar's training masks were (CutFrameMask, at this resolution), so
+  // that the receiver draws the hair's edge where the person's is. Off by
+  // default: the mask's GrabCut runs on the tracking thread and costs more
+  // than a frame interval (the benchmark report).
+  bool outline = false;
+  int outline_resolution = 256;
+  MatteRules matte_rules;        // the avatar's (its masks' rules)
+  HeadMaskOptions outline_mask;  // GrabCut's: the training masks' by default
 };
 
 struct LiveTrackResult {
@@ -39,6 +50,7 @@ struct LiveTrackResult {
   bool identity_frozen_now = false;   // RGB-D: the identity was made at this frame
   bool anchored = false;              // fitted again with the placement held to the anchor's references
   double anchor_ms = 0;               // the anchor's alignment and fit (within fit_ms)
+  double outline_ms = 0;              // the head mask and the outline measured on it
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.
@@ -48,6 +60,7 @@ std::pair<PinholeCamera, std::string> ChooseTrackingCamera(const LiveTrackerOpti
 
 class LiveTracker {
  public:
+  // Throws std::invalid_argument naming an option out of range.
   LiveTracker(const HeadModel& model, const LiveTrackerOptions& options);
   // Tracks one frame; on success *params holds the frame's expression, jaw and
   // cam_from_head (the caller stamps sequence and capture time).
@@ -55,9 +68,17 @@ class LiveTracker {
   const Eigen::VectorXd& identity() const { return tracker_.identity(); }
 
  private:
+  // The top of the head's outline on `bgr` (LiveTrackerOptions::outline); empty without a crop.
+  std::vector<float> MeasureFrameOutline(const cv::Mat& bgr, const Landmarks2d& face, const FrameParams& params);
+
+  const HeadModel& model_;
   LiveTrackerOptions options_;
   FrameTracker tracker_;
   std::optional<PinholeCamera> camera_;
+  std::optional<FrameCrop> crop_;  // the avatar's square in this camera's frames (with the contract)
+  bool outline_refused_ = false;   // asked for, but these frames have no square: said once
+  Eigen::VectorXd mask_shape_;     // the identity mask_identity_ was made for
+  std::optional<HeadIdentity> mask_identity_;
 };
 
 }  // namespace headcast

@@ -96,6 +96,18 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_flag("!--no-landmark-repair", f.live.tracker.face.repair.repair,
                "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
                "frame (no repair; as the avatar's prep did)");
+  app.add_flag("--outline", f.live.outline,
+               "--input: measure the top of the head's outline on each frame (the frame's head mask cut as the "
+               "avatar's training masks were) and send it, so the receiver draws the hair's edge where the person's "
+               "is; needs --identity-from an avatar that records its camera. Costs a GrabCut a frame on the "
+               "tracking thread (see outline_ms in --json)");
+  app.add_option("--outline-mask-size", f.live.outline_mask.working_size,
+                 "--input: the head mask the outline is measured on is segmented at about this many pixels across "
+                 "(the training masks' by default; smaller is faster and coarser)")
+      ->capture_default_str();
+  app.add_option("--outline-mask-iterations", f.live.outline_mask.iterations,
+                 "--input: GrabCut iterations of that mask (the training masks' by default)")
+      ->capture_default_str();
   app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
                "--input: do not locate the irises (the eyes look straight ahead)");
   AddCameraFlags(app, f.source, f.camera_size);
@@ -172,6 +184,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   if (!f.identity_from.empty()) {
     f.live.identity = ReadTrackingIdentity(f.identity_from, model);
     f.live.contract = ReadAvatarCameraContract(f.identity_from);
+    if (const std::optional<MatteRules> rules = ReadAvatarMatteRules(f.identity_from)) f.live.matte_rules = *rules;
     // The avatar learnt the codes of its training fits: the live fit makes them the same way.
     if (const std::optional<ExpressionFitSettings> fit = ReadAvatarExpressionFit(f.identity_from)) {
       fit->ApplyTo(&f.live.tracker.fit);
@@ -202,8 +215,8 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   clock.Restart();                  // the stream's time starts once the tracker is ready
   constexpr size_t kKept = 100000;  // a camera session may run for days
   SampleStats landmarks_ms(kKept), fit_ms(kKept), read_ms(kKept), depth_ms(kKept), frame_ms(kKept),
-      tracking_frame_ms(kKept), provisional_frame_ms(kKept), anchor_ms(kKept);
-  int read = 0, fitted = 0, skipped = 0, with_depth = 0, identity_frames = 0, anchored = 0;
+      tracking_frame_ms(kKept), provisional_frame_ms(kKept), anchor_ms(kKept), outline_ms(kKept);
+  int read = 0, fitted = 0, skipped = 0, with_depth = 0, identity_frames = 0, anchored = 0, outlined = 0;
   std::optional<double> first_fit_s, identity_made_s;  // stream clock
   uint64_t sequence = 0;
   std::ofstream frames_csv;
@@ -244,6 +257,10 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     if (r.with_depth) depth_ms.Add(r.depth_ms);
     if (f.live.anchor && !r.with_depth) anchor_ms.Add(r.anchor_ms);
     anchored += r.anchored;
+    if (!p.outline.empty()) {
+      ++outlined;
+      outline_ms.Add(r.outline_ms);
+    }
     // Capture to parameters: from the capture stamp for live sources; for
     // files read as fast as possible, the work on this thread (decoding,
     // rectifying, landmarks, depth, fit).
@@ -285,6 +302,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
           {"photometric_anchor", f.live.anchor.has_value()},
           {"frames_anchored", anchored},
           {"anchor_ms_median", median(anchor_ms)},
+          {"frames_with_outline", outlined},
+          {"outline_ms_median", median(outline_ms)},
+          {"outline_ms_p95", p95(outline_ms)},
           {"depth_ms_median", median(depth_ms)},
           {"capture_to_params_ms_median", median(frame_ms)},
           {"capture_to_params_ms_p95", p95(frame_ms)},

@@ -487,6 +487,21 @@ int main(int argc, char** argv) {
                    "draw with this exposure (frame intervals) for the motion blur instead of the avatar's (-1: the "
                    "avatar's; 0: sharp)")
       ->capture_default_str();
+  eval->add_option("--outline-bins", e.outline_bins,
+                   "each frame carries the top of its mask's outline in this many arcs, as a sender with --outline "
+                   "measures it on its frame (12: the sender's; 0: none, the avatar alone, as the default sender's)")
+      ->capture_default_str();
+  eval->add_option("--outline-every", e.outline_every,
+                   "with --outline-bins: the outline measured on every Nth frame only, the others carrying the last "
+                   "measurement (a sender measuring at a lower rate)")
+      ->capture_default_str();
+  eval->add_option("--outline-ramp", e.outline_ramp,
+                   "the avatar's outline is moved to the frame's from this far inside it (share of the picture's "
+                   "height) instead of the avatar's setting (-1: the avatar's; 0: not moved)")
+      ->capture_default_str();
+  eval->add_option("--outline-centre-y", e.outline_centre_y,
+                   "the head point the outline's rays start from, (0, Y, 0) in the head frame, metres")
+      ->capture_default_str();
 
   auto* compare = app.add_subcommand(
       "compare",

@@ -806,11 +806,21 @@ EvalResult EvaluateOnFrames(Avatar& avatar, const HeadModel& model, const Subjec
 
 EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
                              const std::vector<int>& positions,
-                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render, bool skin_colour) {
+                             const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render, bool skin_colour,
+                             const OutlineOptions* outline, int outline_every) {
+  if (outline_every < 1) throw std::invalid_argument("EvaluateOnDataset: outline_every must be at least 1");
   std::vector<FrameParams> frames;
-  for (int i : positions) {
+  std::vector<float> measured;
+  for (size_t k = 0; k < positions.size(); ++k) {
+    const int i = positions[k];
     frames.push_back(data.At(i).params);
     if (!skin_colour) frames.back().skin_colour.reset();
+    if (!outline) continue;
+    if (k % outline_every == 0)
+      measured =
+          MeasureOutline(data.At(i).mask,
+                         OutlineFrame::Of(data.subject().intrinsics, frames.back().CamFromHead(), *outline), *outline);
+    frames.back().outline = measured;
   }
   return EvaluateOnFrames(
       avatar, model, data.subject(), frames,

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "common/avatar/avatar.h"
+#include "common/headmodel/head_outline.h"
 #include "training/data_parallel.h"
 #include "training/dataset.h"
 #include "training/expression_balance.h"
@@ -251,10 +252,14 @@ EvalResult EvaluateOnSynthetic(Avatar& avatar, const HeadModel& model, const Syn
 // PSNR/SSIM on dataset frames (positions; default its test split), the
 // ground truth with its background replaced as in training. `render(i, avatar_bgr)` per frame if given.
 // `skin_colour` false: the frames' skin colours are left out (the avatar's own colours, as a sender without them).
+// With `outline`, each frame carries the top of its mask's outline measured so
+// (FrameParams::outline: what a sender that cut the same mask would send);
+// with `outline_every` N > 1 only every Nth frame is measured and the others
+// carry the last measurement (a sender that measures at a lower rate).
 EvalResult EvaluateOnDataset(Avatar& avatar, const HeadModel& model, const PreparedDataset& data,
                              const std::vector<int>& positions,
                              const std::function<void(int, const cv::Mat&, const cv::Mat&)>& render = nullptr,
-                             bool skin_colour = true);
+                             bool skin_colour = true, const OutlineOptions* outline = nullptr, int outline_every = 1);
 
 // PSNR/SSIM of the avatar rendered for `frames` (as the receiver shows them)
 // against `target(k)` (BGR, the avatar's size; an empty Mat skips frame k).

@@ -25,6 +25,7 @@
 
 #include "common/avatar/matte.h"
 #include "common/capture/frame_source.h"
+#include "common/core/crop.h"
 #include "common/headmodel/head_model.h"
 #include "common/headmodel/params.h"
 #include "common/tracking/expression_fit.h"
@@ -171,12 +172,5 @@ class PreparedDataset {
   int first_interpolated_ = 0;
   mutable std::map<int, RealSample> cache_;
 };
-
-// The crop box's intrinsics: `camera` (full frame) cut to the square at
-// (x0, y0) with edge `side` pixels, resized to `resolution`.
-PinholeCamera CropIntrinsics(const PinholeCamera& camera, double x0, double y0, double side, int resolution);
-// The square crop of `image` at (x0, y0, side) source pixels, resized to
-// resolution²; outside the frame is black. Pixel centres as in CropIntrinsics.
-cv::Mat CropSquare(const cv::Mat& image, double x0, double y0, double side, int resolution, int interpolation);
 
 }  // namespace headcast

@@ -455,6 +455,10 @@ void EvalOptions::Check() const {
          "expression_span must be avatar, none or dataset, not '" + expression_span + "'");
   c.That(motion_blur == -1 || (motion_blur >= 0 && motion_blur <= 2),
          "motion_blur must be -1 (the avatar's) or an exposure of 0 to 2 frame intervals");
+  c.InRange("outline_bins", outline_bins, 0, kMaxOutlineBins).InRange("outline_every", outline_every, 1, 1000);
+  c.That(outline_ramp == -1 || (outline_ramp >= 0 && outline_ramp <= 0.5),
+         "outline_ramp must be -1 (the avatar's) or a share of the picture's height of 0 to 0.5");
+  c.InRange("outline_centre_y", outline_centre_y, -0.2, 0.2);
   c.ThrowIfErrors();
   if (matte_scale != 0) {  // 0: the avatar's; any other, a scale an avatar may carry
     AvatarConfig scaled = AvatarConfig::Default();
@@ -475,10 +479,18 @@ nlohmann::json RunEval(const EvalOptions& o) {
     if (!avatar.config().has_matte()) throw std::invalid_argument(o.avatar + " has no matte to scale (matte_scale)");
     avatar = WithMatteScale(avatar, o.matte_scale);
   }
-  if (o.motion_blur >= 0) {
+  if (o.motion_blur >= 0 || o.outline_ramp >= 0 || o.outline_bins > 0) {
     AvatarConfig c = avatar.config();
-    c.motion_blur = o.motion_blur;
+    if (o.motion_blur >= 0) c.motion_blur = o.motion_blur;
+    if (o.outline_ramp >= 0) c.outline_ramp = o.outline_ramp;
+    if (o.outline_bins > 0) c.outline_centre_y = o.outline_centre_y;
     avatar = avatar.WithRuntimeSwitches(c);
+  }
+  std::optional<OutlineOptions> outline;
+  if (o.outline_bins > 0) {
+    outline.emplace();
+    outline->bins = o.outline_bins;
+    outline->centre_y_m = o.outline_centre_y;
   }
   const bool on_test = o.split == "test" && !data.test().empty();
   std::vector<int> positions = on_test ? data.test() : data.train();
@@ -544,7 +556,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
             WriteImage((dir / "frames" / ("avatar" + std::string(name))).string(), rendered);
           }
         },
-        o.skin_colour);
+        o.skin_colour, outline ? &*outline : nullptr, o.outline_every);
     progress.Finish();
     for (int k = 0; k < e.count; ++k)
       csv << data.At(positions[k]).frame << "," << e.psnr[k] << "," << e.ssim[k] << "\n";
@@ -565,6 +577,16 @@ nlohmann::json RunEval(const EvalOptions& o) {
                                              {"from", o.matte_scale > 0 ? "--matte-scale" : "the avatar"}}},
         {"motion_blur", nlohmann::json{{"exposure", avatar.config().motion_blur},
                                        {"from", o.motion_blur >= 0 ? "--motion-blur" : "the avatar"}}},
+        {"outline", !outline
+                        ? nlohmann::json("none: the frames carry no outline")
+                        : nlohmann::json{{"bins", outline->bins},
+                                         {"measured_every", o.outline_every},
+                                         {"centre_y_m", outline->centre_y_m},
+                                         {"ramp", avatar.config().outline_ramp},
+                                         {"how",
+                                          "each frame carries the top of its mask's outline, as a sender with "
+                                          "--outline measures it on its frame's mask; the avatar's outline is moved "
+                                          "there"}}},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",

@@ -115,6 +115,19 @@ struct EvalOptions {
   // The exposure of the motion blur (AvatarConfig::motion_blur) instead of
   // the avatar's; -1: the avatar's.
   double motion_blur = -1;
+  // Each frame carries the top of its mask's outline in this many arcs, as a
+  // sender with --outline measures it on its frame's mask cut the same way
+  // (FrameParams::outline, LiveTrackerOptions::outline); 0: none (the avatar
+  // alone, as the default sender's frames).
+  int outline_bins = 0;
+  // The outline measured on every Nth held-out frame only, the others
+  // carrying the last measurement (a sender measuring at a lower rate).
+  int outline_every = 1;
+  // How the avatar moves its outline there (AvatarConfig::outline_ramp)
+  // instead of the avatar's; -1: the avatar's.
+  double outline_ramp = -1;
+  // The head point the outline is measured about (AvatarConfig::outline_centre_y), metres.
+  double outline_centre_y = AvatarConfig{}.outline_centre_y;
   // Expression fidelity: dlib's landmarks on the avatar's frames against the
   // true frames' (LandmarkAgreement); skipped, and said so, without the predictor file.
   bool landmarks = true;

@@ -110,6 +110,7 @@ void AvatarConfig::Check() const {
          "covered_apart moves the covered parts' canonical points, which surface_displacement measures from");
   c.InRange("matte_core", matte_core, 0.0, 0.1).InRange("matte_scale", matte_scale, 0.05, 4.0);
   c.InRange("motion_blur", motion_blur, 0.0, kMaxMotionBlur);
+  c.InRange("outline_ramp", outline_ramp, 0.0, 0.5).InRange("outline_centre_y", outline_centre_y, -0.2, 0.2);
   c.That(expression_low.size() == expression_high.size(),
          "expression_low and expression_high must have as many values");
   c.That(expression_low.empty() || static_cast<int>(expression_low.size()) == num_expression,
@@ -177,6 +178,8 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"matte_core", matte_core},
                       {"matte_scale", matte_scale},
                       {"motion_blur", motion_blur},
+                      {"outline_ramp", outline_ramp},
+                      {"outline_centre_y", outline_centre_y},
                       {"motion_conditioning", MotionConditioningName(motion_conditioning)},
                       {"hair_conditioning", MotionConditioningName(hair_conditioning)},
                       {"hair_reach", hair_reach},
@@ -232,6 +235,8 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.matte_core = j.value("matte_core", 0.0);
     c.matte_scale = j.value("matte_scale", 1.0);
     c.motion_blur = j.value("motion_blur", 0.0);
+    c.outline_ramp = j.value("outline_ramp", c.outline_ramp);  // files from before it: only frames with an outline move
+    c.outline_centre_y = j.value("outline_centre_y", c.outline_centre_y);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
     c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
     c.hair_reach = j.value("hair_reach", c.hair_reach);

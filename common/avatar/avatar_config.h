@@ -7,6 +7,7 @@
 
 #include "common/avatar/avatar_backend.h"
 #include "common/avatar/matte.h"
+#include "common/headmodel/head_outline.h"
 
 namespace headcast {
 
@@ -193,6 +194,15 @@ struct AvatarConfig : AvatarCommonConfig {
   // smeared along the head's image motion over that much of it
   // (motion_blur.h); 0: drawn sharp, as before it existed. A run-time switch.
   double motion_blur = 0;
+  // How a frame that carries the top of the head's outline
+  // (FrameParams::outline, measured by the sender on its frame) moves the
+  // avatar's outline there (outline_warp.h): from this far inside the outline
+  // outward, as a share of the picture's height; 0: the frames' outlines are
+  // ignored. A run-time switch.
+  double outline_ramp = 0.078;
+  // The head point the outline's rays start from, (0, y, 0) in the head
+  // frame, metres: where the sender measures it from (OutlineOptions).
+  double outline_centre_y = OutlineOptions{}.centre_y_m;
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;

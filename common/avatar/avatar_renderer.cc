@@ -7,6 +7,7 @@
 
 #include "common/avatar/avatar_pipeline.h"
 #include "common/avatar/compute_threads.h"
+#include "common/avatar/outline_warp.h"
 #include "common/core/options.h"
 #include "common/core/rotation.h"
 #include "common/core/timer.h"
@@ -319,6 +320,14 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
     }
     buffers->previous_v_cam = buffers->v_cam;
     buffers->previous_sequence = frame.sequence;
+  }
+  if (config.outline_ramp > 0 && !frame.outline.empty() && out.coverage.defined()) {
+    OutlineOptions outline;
+    outline.bins = static_cast<int>(frame.outline.size());
+    outline.centre_y_m = config.outline_centre_y;
+    const double height = static_cast<double>(out.image.size(2));
+    WarpToOutline(frame.outline, OutlineFrame::Of(subject.intrinsics, buffers->cam_from_head, outline), outline,
+                  {config.outline_ramp * height, kOutlineMaxShift * height}, &out.image, &out.coverage);
   }
   ImageTensorToBgr(out.image, image_bgr);
   if (frame.skin_colour)

@@ -31,6 +31,9 @@ std::vector<double> Values(const CodecLayout& layout, const FrameParams& f) {
     for (int i = 0; i < 3; ++i) v.push_back((*r)[i]);
   if (layout.skin_colour)
     for (int i = 0; i < 3; ++i) v.push_back(f.skin_colour ? (*f.skin_colour)[i] : 0.0);
+  // An outline of another size than the layout's travels as unknown.
+  const bool outline = static_cast<int>(f.outline.size()) == layout.outline_bins;
+  for (int i = 0; i < layout.outline_bins; ++i) v.push_back(outline ? f.outline[i] : kOutlineUnknown);
   return v;
 }
 
@@ -44,16 +47,23 @@ void SetValues(const CodecLayout& layout, const std::vector<double>& v, FramePar
   if (layout.skin_colour) {
     const Eigen::Vector3f rgb(static_cast<float>(v[k]), static_cast<float>(v[k + 1]), static_cast<float>(v[k + 2]));
     if (rgb != Eigen::Vector3f::Zero()) f->skin_colour = rgb;  // 0, 0, 0: not measured
+    k += 3;
   }
+  f->outline.clear();
+  bool measured = false;
+  for (int i = 0; i < layout.outline_bins; ++i) measured = measured || v[k + i] != kOutlineUnknown;
+  if (measured)  // all unknown: not measured
+    for (int i = 0; i < layout.outline_bins; ++i) f->outline.push_back(static_cast<float>(v[k + i]));
 }
 
 // Largest magnitude a value may decode to (garbage and hostile packets are refused).
 double Limit(const CodecLayout& layout, int index) {
   const int e = static_cast<int>(layout.expression_components.size());
-  if (index < e) return 10.0;       // expression coefficients
-  if (index < e + 15) return M_PI;  // rotations, radians
-  if (index < e + 18) return 20.0;  // translation, metres
-  return 1.0;                       // skin colour
+  if (index < e) return 10.0;                            // expression coefficients
+  if (index < e + 15) return M_PI;                       // rotations, radians
+  if (index < e + 18) return 20.0;                       // translation, metres
+  if (layout.skin_colour && index < e + 21) return 1.0;  // skin colour
+  return kMaxOutlineMm;                                  // outline, mm
 }
 
 }  // namespace
@@ -61,6 +71,7 @@ double Limit(const CodecLayout& layout, int index) {
 void CodecLayout::Check() const {
   OptionsCheck c("CodecLayout");
   c.InRange("num_expression", num_expression, 0, 4096).InRange("key_frame_interval", key_frame_interval, 1, 100000);
+  c.InRange("outline_bins", outline_bins, 0, kMaxOutlineBins);
   for (size_t i = 0; i < expression_components.size(); ++i) {
     c.That(expression_components[i] >= 0 && expression_components[i] < num_expression,
            "expression component " + std::to_string(expression_components[i]) + " outside [0, num_expression)");
@@ -74,9 +85,10 @@ void CodecLayout::Check() const {
 }
 
 CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vector<int> components, int key_interval,
-                                   bool skin_colour) {
+                                   bool skin_colour, int outline_bins) {
   CodecLayout l;
   l.skin_colour = skin_colour;
+  l.outline_bins = outline_bins;
   l.num_expression = model.num_expression();
   l.key_frame_interval = key_interval;
   l.head_model_fingerprint = model.fingerprint();
@@ -120,6 +132,7 @@ CodecLayout CodecLayout::FromModel(const HeadModel& model, double err, std::vect
   for (int i = 0; i < 3; ++i) l.steps.push_back(static_cast<float>(err));
   if (skin_colour)
     for (int i = 0; i < 3; ++i) l.steps.push_back(1.f / 255);
+  for (int i = 0; i < outline_bins; ++i) l.steps.push_back(kOutlineStepMm);
   l.Check();
   return l;
 }

@@ -11,6 +11,7 @@
 
 #include "common/codec/range_coder.h"
 #include "common/headmodel/head_model.h"
+#include "common/headmodel/head_outline.h"
 #include "common/headmodel/params.h"
 
 namespace headcast {
@@ -19,29 +20,38 @@ constexpr int kCodecVersion = 2;
 constexpr size_t kMaxFingerprintBytes = 128;
 
 // What both ends agree on when a session starts (sent in Hello).
+// The outline's quantisation step, mm: a fifth of a pixel or less on a 256² avatar at arm's length.
+inline constexpr float kOutlineStepMm = 0.25f;
+
 struct CodecLayout {
   int num_expression = 0;                  // E of the head model; unsent components decode as 0
   std::vector<int> expression_components;  // indices sent, ascending, each < num_expression
   // Quantisation step per coded value, in order: the sent expression
   // components, jaw, neck, left eye, right eye (3 each, radians), cam rotation
   // (3, radians), cam translation (3, metres), then with skin_colour the skin's
-  // R, G, B (0..1; a frame without one travels as 0, 0, 0).
+  // R, G, B (0..1; a frame without one travels as 0, 0, 0), then the
+  // outline's outline_bins values (mm; a frame without one travels as zeros).
   std::vector<float> steps;
   bool skin_colour = false;     // FrameParams::skin_colour travels (a peer that predates it sends none)
+  int outline_bins = 0;         // FrameParams::outline travels in this many values (0: none; a peer that predates it)
   int key_frame_interval = 30;  // a key frame at least this often, frames
   // HeadModel::fingerprint() of the model the parameters belong to: a receiver
   // refuses to drive an avatar of another model with them.
   std::string head_model_fingerprint;
 
-  int num_values() const { return static_cast<int>(expression_components.size()) + 18 + (skin_colour ? 3 : 0); }
+  int num_values() const {
+    return static_cast<int>(expression_components.size()) + 18 + (skin_colour ? 3 : 0) + outline_bins;
+  }
   void Check() const;  // throws std::invalid_argument naming the problem
 
   // Steps such that one step of any component moves no vertex of `model` by
   // more than `max_vertex_error_m` (rotations: about the joint, over the mesh's
   // extent). `components` empty = every expression component.
-  // The skin colour travels in steps of one 8-bit level.
+  // The skin colour travels in steps of one 8-bit level, the outline in
+  // kOutlineStepMm.
   static CodecLayout FromModel(const HeadModel& model, double max_vertex_error_m = 2e-4,
-                               std::vector<int> components = {}, int key_frame_interval = 30, bool skin_colour = true);
+                               std::vector<int> components = {}, int key_frame_interval = 30, bool skin_colour = true,
+                               int outline_bins = OutlineOptions{}.bins);
 };
 
 // What encoder and decoder keep in step between packets: the last frame's

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "common/core/rotation.h"
+#include "common/headmodel/head_outline.h"
 
 namespace headcast {
 
@@ -62,6 +63,7 @@ bool FrameParams::IsValid(std::string* why, float max_abs_expression) const {
   if (!(confidence >= 0 && confidence <= 1)) return fail("confidence outside 0..1");
   if (skin_colour && !(skin_colour->allFinite() && skin_colour->minCoeff() >= 0 && skin_colour->maxCoeff() <= 1))
     return fail("skin colour outside 0..1");
+  if (std::string outline_why; !OutlineIsValid(outline, &outline_why)) return fail(outline_why);
   return true;
 }
 
@@ -92,6 +94,13 @@ FrameParams InterpolateParams(const FrameParams& a, const FrameParams& b, double
   out.confidence = static_cast<float>((1 - t) * a.confidence + t * b.confidence);
   if (a.skin_colour && b.skin_colour)
     out.skin_colour = ((1 - t) * a.skin_colour->cast<double>() + t * b.skin_colour->cast<double>()).cast<float>();
+  if (a.outline.size() == b.outline.size())  // a bin unknown in either stays unknown
+    for (size_t k = 0; k < a.outline.size(); ++k)
+      out.outline[k] = a.outline[k] == kOutlineUnknown || b.outline[k] == kOutlineUnknown
+                           ? kOutlineUnknown
+                           : static_cast<float>((1 - t) * a.outline[k] + t * b.outline[k]);
+  else
+    out.outline.clear();
   return out;
 }
 

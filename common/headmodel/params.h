@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "common/core/camera.h"
 #include "common/core/rigid_transform.h"
@@ -32,6 +33,10 @@ struct FrameParams {
   // picture is matched to it (the camera's exposure and white balance, the
   // light on the face). None: not measured; the avatar draws its own.
   std::optional<Eigen::Vector3f> skin_colour;
+  // The top of the head's outline in the frame, mm per arc (MeasureOutline,
+  // common/headmodel/head_outline.h): the avatar's edge is moved there.
+  // Empty: not measured; the avatar draws its own.
+  std::vector<float> outline;
 
   // The model pose vector: root zero (the head's placement is cam_from_head), then neck, jaw, eyes.
   PoseVector HeadPose() const;

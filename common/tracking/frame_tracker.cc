@@ -59,6 +59,17 @@ std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path) 
   return ReadAvatarEntry(path, "camera", &CameraContract::FromJson);
 }
 
+std::optional<MatteRules> ReadAvatarMatteRules(const std::string& path) {
+  const std::optional<nlohmann::json> config = ReadAvatarEntry(
+      path, "config", +[](const nlohmann::json& j) { return j; });
+  if (!config || !config->contains("matte_rules")) return std::nullopt;
+  try {
+    return MatteRules::FromJson(config->at("matte_rules"));
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
+}
+
 std::optional<AnchorReference> ReadAvatarAnchorReference(const std::string& path) {
   return ReadAvatarEntry(path, "tracking_anchor", &AnchorReference::FromJson);
 }

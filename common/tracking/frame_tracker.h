@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "common/avatar/matte.h"
 #include "common/capture/frame_source.h"
 #include "common/core/camera.h"
 #include "common/headmodel/params.h"
@@ -159,6 +160,11 @@ Eigen::VectorXd ReadTrackingIdentity(const std::string& path, const HeadModel& m
 // The camera contract an avatar file (.hcavatar) records, if any; nothing for
 // other files. Throws naming the file when it is unreadable or the contract malformed.
 std::optional<CameraContract> ReadAvatarCameraContract(const std::string& path);
+
+// The rules an avatar file's (.hcavatar) training masks were cut by (its
+// matte's), if it records them; nothing for other files. Throws naming the
+// file when it is unreadable or the rules malformed.
+std::optional<MatteRules> ReadAvatarMatteRules(const std::string& path);
 
 // The photometric anchor's references an avatar file (.hcavatar) carries (its
 // training frames were fitted to them), if any; nothing for other files.

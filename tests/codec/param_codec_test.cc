@@ -88,8 +88,9 @@ TEST(Varint, RoundTripsAndRefusesOverlongEncodings) {
 
 TEST(ParamCodec, StepsComeFromSensitivity) {
   const CodecLayout l = CodecLayout::FromModel(Model(), 2e-4);
-  EXPECT_EQ(l.num_values(), Model().num_expression() + 21);  // and the skin colour
-  EXPECT_EQ(CodecLayout::FromModel(Model(), 2e-4, {}, 30, false).num_values(), Model().num_expression() + 18);
+  const int bins = OutlineOptions{}.bins;
+  EXPECT_EQ(l.num_values(), Model().num_expression() + 21 + bins);  // and the skin colour and the outline
+  EXPECT_EQ(CodecLayout::FromModel(Model(), 2e-4, {}, 30, false, 0).num_values(), Model().num_expression() + 18);
   // A step of any expression component moves the mesh by at most ~0.2 mm.
   for (size_t k = 0; k < l.expression_components.size(); ++k) {
     HeadModelParams p;
@@ -99,8 +100,9 @@ TEST(ParamCodec, StepsComeFromSensitivity) {
     EXPECT_LE(moved, 2.01e-4f);
     EXPECT_GT(moved, 1e-4f);
   }
-  EXPECT_NEAR(l.steps[Model().num_expression() + 17], 2e-4f, 1e-9f);  // translation: the error itself
-  EXPECT_NEAR(l.steps.back(), 1.f / 255, 1e-9f);                      // skin colour: an 8-bit level
+  EXPECT_NEAR(l.steps[Model().num_expression() + 17], 2e-4f, 1e-9f);      // translation: the error itself
+  EXPECT_NEAR(l.steps[Model().num_expression() + 20], 1.f / 255, 1e-9f);  // skin colour: an 8-bit level
+  EXPECT_EQ(l.steps.back(), kOutlineStepMm);
 }
 
 TEST(ParamCodec, RoundTripWithinTheStepAndFewBits) {
@@ -152,6 +154,50 @@ TEST(ParamCodec, TheSkinColourTravelsWhenTheLayoutSaysSo) {
   std::string why;
   EXPECT_FALSE(d2.Decode(e2.Encode(bright), &out, &why));
   EXPECT_NE(why.find("out of range"), std::string::npos) << why;
+}
+
+// The outline travels within its step, a frame without one (or with an
+// outline of another size) decodes without one, a layout without it carries
+// none, and a negative value is refused.
+TEST(ParamCodec, TheOutlineTravelsWhenTheLayoutSaysSo) {
+  const CodecLayout with = CodecLayout::FromModel(Model());
+  const CodecLayout without = CodecLayout::FromModel(Model(), 2e-4, {}, 30, true, 0);
+  ASSERT_EQ(with.outline_bins, OutlineOptions{}.bins);
+  ParamEncoder enc(with), enc_without(without);
+  ParamDecoder dec(with), dec_without(without);
+  for (int i = 0; i < 60; ++i) {
+    FrameParams f = SyntheticTalkingHead(Model(), i);
+    if (i % 10 != 9)
+      for (int k = 0; k < with.outline_bins; ++k) f.outline.push_back(k == 3 ? kOutlineUnknown : 90.f + 0.37f * i + k);
+    if (i == 25) f.outline.resize(5);  // not the layout's: travels as unknown
+    FrameParams out;
+    std::string why;
+    ASSERT_TRUE(dec.Decode(enc.Encode(f), &out, &why)) << why;
+    ExpectWithinStep(with, f, out);
+    if (i % 10 == 9 || i == 25) {
+      EXPECT_TRUE(out.outline.empty()) << i;
+    } else {
+      ASSERT_EQ(out.outline.size(), f.outline.size()) << i;
+      for (size_t k = 0; k < f.outline.size(); ++k)
+        EXPECT_NEAR(out.outline[k], f.outline[k], kOutlineStepMm / 2 + 1e-4);
+      EXPECT_EQ(out.outline[3], kOutlineUnknown);
+    }
+    ASSERT_TRUE(dec_without.Decode(enc_without.Encode(f), &out, &why)) << why;
+    EXPECT_TRUE(out.outline.empty());
+  }
+  FrameParams inward = SyntheticTalkingHead(Model(), 0);
+  inward.outline.assign(with.outline_bins, 50.f);
+  inward.outline[2] = -20.f;  // encodable, refused on decode
+  ParamEncoder e2(with);
+  ParamDecoder d2(with);
+  FrameParams out;
+  std::string why;
+  EXPECT_FALSE(d2.Decode(e2.Encode(inward), &out, &why));
+  EXPECT_NE(why.find("outline"), std::string::npos) << why;
+  CodecLayout too_many = with;
+  too_many.outline_bins = kMaxOutlineBins + 1;
+  too_many.steps.resize(too_many.num_values(), kOutlineStepMm);
+  EXPECT_THROW(too_many.Check(), std::invalid_argument);
 }
 
 TEST(ParamCodec, SubsetDecodesUnsentComponentsAsZero) {

@@ -18,12 +18,13 @@ cd "$root"
 [ "$out/gen/proto/headcast.pb.cc" -nt proto/headcast.proto ] ||
   { mkdir -p "$out/gen/proto" && protoc --cpp_out="$out/gen/proto" -I proto headcast.proto; }
 codec=(common/codec/param_codec.cc common/codec/range_coder.cc common/codec/varint.cc common/core/options.cc common/core/rotation.cc
-       common/core/camera.cc common/headmodel/head_model.cc common/headmodel/params.cc)
+       common/core/camera.cc common/headmodel/head_model.cc common/headmodel/params.cc common/headmodel/head_outline.cc)
 proto=("$out/gen/proto/headcast.pb.cc" proto/convert.cc)
 declare -A sources libs
 sources[frame_decoder]="tests/fuzz/frame_decoder_fuzzer.cc ${codec[*]}"
+libs[frame_decoder]="-lopencv_core"
 sources[session_messages]="tests/fuzz/session_messages_fuzzer.cc ${codec[*]} ${proto[*]} proto/datagram.cc"
-libs[session_messages]="-lprotobuf -lcrypto"
+libs[session_messages]="-lprotobuf -lcrypto -lopencv_core"
 sources[files]="tests/fuzz/files_fuzzer.cc ${codec[*]} ${proto[*]} proto/recording.cc proto/protocol.cc
   common/core/npy.cc common/core/zip_archive.cc common/core/check.cc common/core/log.cc
   common/avatar/avatar_config.cc common/avatar/matte.cc common/tracking/anchor_reference.cc

@@ -67,6 +67,18 @@ TEST(Convert, FrameParamsRoundTripAndLengthChecks) {
   p.skin_colour = Eigen::Vector3f(0.6f, std::nanf(""), 0.3f);
   EXPECT_FALSE(p.IsValid(&why));
   EXPECT_NE(why.find("skin colour"), std::string::npos) << why;
+  // The outline: absent when not measured, kept when measured, refused when it is not one.
+  p.skin_colour.reset();
+  ToProto(p, &m);
+  ASSERT_TRUE(FromProto(m, &back));
+  EXPECT_TRUE(back.outline.empty());
+  p.outline = {101.5f, 0.f, 97.25f};
+  ToProto(p, &m);
+  ASSERT_TRUE(FromProto(m, &back));
+  EXPECT_EQ(back.outline, p.outline);
+  m.set_outline(1, -3.f);
+  EXPECT_FALSE(FromProto(m, &back, &why));
+  EXPECT_NE(why.find("outline"), std::string::npos) << why;
 }
 
 TEST(Recording, WritesAndReadsEveryFrame) {

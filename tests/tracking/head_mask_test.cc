@@ -7,9 +7,13 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "common/core/crop.h"
+#include "common/core/timer.h"
 #include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_outline.h"
 #include "common/headmodel/head_render.h"
 #include "common/tracking/face_tracker.h"
+#include "common/tracking/frame_mask.h"
 
 namespace headcast {
 namespace {
@@ -38,15 +42,20 @@ class RestingHeadScenes {
   struct Scene {
     cv::Mat image, mask;
     Landmarks2d landmarks;
+    FrameParams params;
   };
   Scene At(double distance, double yaw_deg, double pitch_deg) const {
     const RigidTransform cam_from_head =
         FrontalCamFromHead(distance, yaw_deg, pitch_deg, model_.rest_landmark_centroid());
     const HeadRender r = RenderHead(model_, out_.vertices, cam_from_head, cam_, AlbedoTexture(model_));
-    Scene s{background_.clone(), r.mask, ExactLandmarks(out_, cam_from_head, cam_)};
+    Scene s{background_.clone(), r.mask, ExactLandmarks(out_, cam_from_head, cam_), {}};
     r.image_bgr.copyTo(s.image, r.mask);
+    s.params.expression = Eigen::VectorXf::Zero(model_.num_expression());
+    s.params.SetCamFromHead(cam_from_head);
     return s;
   }
+  const HeadModel& model() const { return model_; }
+  const PinholeCamera& camera() const { return cam_; }
 
  private:
   const HeadModel model_ = MakeBuiltinHead();
@@ -133,6 +142,48 @@ TEST(HeadMask, AFinerWorkingGridDrawsTheOutlineCloser) {
     wrong_fine += f;
   }
   EXPECT_LT(wrong_fine, wrong_coarse);
+}
+
+// The sender's mask of a live frame, cut to the avatar's square as prep cuts
+// a training target's: its outline is the head's (the render's silhouette),
+// within a millimetre or two at the top; a frame of another aspect has no square.
+TEST(FrameMask, TheCutMasksOutlineIsTheHeads) {
+  const RestingHeadScenes scenes(9);
+  CameraContract contract;
+  contract.source = scenes.camera();
+  contract.crop_x0 = 120;
+  contract.crop_y0 = 40;
+  contract.crop_side = 400;
+  const std::optional<FrameCrop> crop = ContractCrop(contract, scenes.camera(), 256);
+  ASSERT_TRUE(crop);
+  EXPECT_EQ(crop->camera.width, 256);
+  PinholeCamera wide = scenes.camera();
+  wide.width = 853;  // 16:9
+  EXPECT_FALSE(ContractCrop(contract, wide, 256));
+  const HeadModel& model = scenes.model();
+  const HeadIdentity identity = model.MakeIdentity(Eigen::VectorXd::Zero(model.num_shape()));
+  const HeadFitter fitter(model);
+  const OutlineOptions o;
+  for (double pitch : {0.0, 15.0}) {
+    const RestingHeadScenes::Scene s = scenes.At(0.7, 10, pitch);
+    Stopwatch watch;
+    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, identity, fitter, s.params, MatteRules{});
+    std::printf("pitch %+.0f: mask cut in %.1f ms\n", pitch, watch.ElapsedMs());
+    ASSERT_EQ(cut.rows, 256);
+    cv::Mat truth = CropSquare(s.mask, crop->x0, crop->y0, crop->side, 256, cv::INTER_LINEAR);
+    cv::threshold(truth, truth, 127, 255, cv::THRESH_BINARY);
+    const OutlineFrame at = OutlineFrame::Of(crop->camera, s.params.CamFromHead(), o);
+    const std::vector<float> measured = MeasureOutline(cut, at, o), true_mm = MeasureOutline(truth, at, o);
+    int known = 0;
+    for (int k = 0; k < o.bins; ++k) {
+      if (true_mm[k] == kOutlineUnknown) continue;
+      ++known;
+      EXPECT_NE(measured[k], kOutlineUnknown) << "pitch " << pitch << " arc " << k;
+      EXPECT_NEAR(measured[k], true_mm[k], 3.0) << "pitch " << pitch << " arc " << k;
+      std::printf("  arc %d: %.1f mm (true %.1f)\n", k, measured[k], true_mm[k]);
+    }
+    EXPECT_GE(known, o.bins / 2) << "pitch " << pitch;
+  }
 }
 
 TEST(HeadMask, BadInputIsRefused) {
