@@ -6,7 +6,9 @@
 # avatar and true frames), the frames whose fit the tracker lost, and the
 # avatar's creation time (prep + fine-tune), the frames whose brow or mouth
 # landmarks the tracker disputed and repaired, and the PSNR/SSIM on 150 of the
-# avatar's own training frames (what it fits against what it generalises to);
+# avatar's own training frames (what it fits against what it generalises to),
+# and the test PSNR/SSIM with each frame's hair outline as a sender with
+# --outline sends it (eval --outline-bins 12);
 # then the receiver's frame rate on each clip's avatar at 256² (headcast-avatar
 # render, synthetic motion: the avatar as trained, with the head model's
 # expression coefficients) and on a random avatar of the default subject
@@ -72,6 +74,12 @@ for clip in $clips; do
     --data "$out/ds_$clip" --out "$out/eval_train_$clip" --split train --max-frames 150 --orbit-frames 0 --no-landmarks
 done
 for clip in $clips; do
+  [ -f "$out/eval_outline_$clip/eval.json" ] && continue
+  step "$clip: eval with each frame's hair outline, as a sender with --outline sends it"
+  run "eval_outline_$clip.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$clip.hcavatar" \
+    --data "$out/ds_$clip" --out "$out/eval_outline_$clip" --orbit-frames 0 --no-landmarks --outline-bins 12
+done
+for clip in $clips; do
   [ "$render" = 1 ] || break
   step "$clip: the receiver on its avatar"
   run "receiver_$clip.log" "$bin/headcast-avatar" render "$out/avatar_$clip.hcavatar" --head-model "$model" \
@@ -113,6 +121,10 @@ for c in clips:
                  "landmark_disputed": checks.get("disputed"), "landmark_repaired_frames": checks.get("repaired_frames"),
                  "prep_s": t["prep_s"], "fine_tune_s": t["fine_tune_s"],
                  "creation_min": (t["prep_s"] + t["fine_tune_s"]) / 60})
+    outlined = os.path.join(out, f"eval_outline_{c}", "eval.json")
+    if os.path.exists(outlined):
+        e2 = json.load(open(outlined))["eval"]
+        rows[-1]["with_outline"] = {"test_psnr_db": e2["psnr_db"], "test_ssim": e2["ssim"]}
     receiver = os.path.join(out, f"receiver_{c}.json")
     if os.path.exists(receiver):
         j = json.load(open(receiver))
@@ -135,14 +147,16 @@ def f(v, fmt):
 L = [f"Made by `{command}`: ICT-FaceKit, the last 150 frames held out, {iterations} fine-tune steps at 256² "
      "(default subject settings, 2 processes). Landmark error: dlib's 68 points on avatar against true test "
      "frames, over the true eye distance. Training frames: 150 of the avatar's own training frames, spread evenly over them, "
-     "through the same render path (no per-frame offsets).", "",
-     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) | receiver 256² fps / p95 ms |",
-     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+     "through the same render path (no per-frame offsets). With the sender's outline: each held-out frame carries the top of its "
+     "own mask's outline, as a sender with `--outline` measures it (`eval --outline-bins 12`).", "",
+     "| clip | fitted / read | landmarks disputed / repaired (frames) | test PSNR (dB) | test SSIM | worst 5 % PSNR | with the sender's outline: PSNR / SSIM | training frames PSNR / SSIM | eyes | brows | mouth | jaw | all | blink corr. | gaze corr. x / y | creation (min) | receiver 256² fps / p95 ms |",
+     "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for x in rows:
     le = x["landmark_error_iod"] or {}
     L.append(f"| {x['clip']} | {x['frames_fitted']}/{x['frames_read']} | "
              f"{f(x['landmark_disputed_frames'], 'd')} / {f(x['landmark_repaired_frames'], 'd')} | {x['test_psnr_db']:.3f} | {x['test_ssim']:.4f} | {x['worst_5pct_psnr_db']:.2f} | "
-             f"{x['train_psnr_db']:.2f} / {x['train_ssim']:.4f} | "
+             + (f"{x['with_outline']['test_psnr_db']:.3f} / {x['with_outline']['test_ssim']:.4f} | " if "with_outline" in x else "– | ")
+             + f"{x['train_psnr_db']:.2f} / {x['train_ssim']:.4f} | "
              f"{f(le.get('eyes'), '.4f')} | {f(le.get('brows'), '.4f')} | {f(le.get('mouth'), '.4f')} | "
              f"{f(le.get('jaw'), '.4f')} | {f(le.get('all'), '.4f')} | {f(x['blink_correlation'], '.2f')} | "
              f"{f(x['gaze_correlation_x'], '.2f')} / {f(x['gaze_correlation_y'], '.2f')} | {x['creation_min']:.1f} | "

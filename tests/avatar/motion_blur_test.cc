@@ -7,6 +7,7 @@
 #include "common/avatar/avatar_pipeline.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "tests/testing/switched_avatars.h"
 #include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
@@ -112,34 +113,25 @@ FrameParams Frame(std::shared_ptr<const HeadModel> model, uint64_t sequence, dou
 }
 
 TEST(MotionBlurInTheRenderPath, AMovingHeadIsSmearedAStillOrNewOneIsNot) {
-  auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
   AvatarConfig c = testing::TinyAvatarConfig();
-  const SubjectParams subject = DefaultSubject(*model, c.output_size);
-  const HeadIdentity identity = model->MakeIdentity(subject.shape.cast<double>());
-  Avatar sharp = Avatar::CreateRandom(c, *model, subject, 3);
-  c.motion_blur = 1;
-  Avatar blurred = sharp.WithRuntimeSwitches(c);
-  sharp.modules().eval();
-  blurred.modules().eval();
-  torch::InferenceMode inference;
-  auto draw = [&](Avatar& a, AvatarFrameInputs* buffers, const FrameParams& f) {
-    RaySampler sampler(a.config());
-    cv::Mat bgr;
-    RenderAvatarFrame(a.modules(), a.config(), *model, identity, a.subject(), f, &sampler, buffers, &bgr);
-    return bgr;
-  };
-  auto same = [](const cv::Mat& a, const cv::Mat& b) { return cv::norm(a, b, cv::NORM_INF) == 0; };
+  AvatarConfig blur = c;
+  blur.motion_blur = 1;
+  testing::SwitchedAvatars avatars(c, blur);
+  const auto model = avatars.model();
+  Avatar &sharp = avatars.base(), &blurred = avatars.switched();
+  auto draw = [&](Avatar& a, AvatarFrameInputs* buffers, const FrameParams& f) { return avatars.Draw(a, buffers, f); };
+  using testing::SamePicture;
   AvatarFrameInputs with, without;
   // The first frame has no frame before it: drawn sharp.
-  EXPECT_TRUE(same(draw(blurred, &with, Frame(model, 10, 0)), draw(sharp, &without, Frame(model, 10, 0))));
+  EXPECT_TRUE(SamePicture(draw(blurred, &with, Frame(model, 10, 0)), draw(sharp, &without, Frame(model, 10, 0))));
   // The next, the head 2 cm to the side (~6 pixels at 128²): smeared.
   const cv::Mat moved = draw(blurred, &with, Frame(model, 11, 0.02));
-  EXPECT_FALSE(same(moved, draw(sharp, &without, Frame(model, 11, 0.02))));
+  EXPECT_FALSE(SamePicture(moved, draw(sharp, &without, Frame(model, 11, 0.02))));
   // The head still since the frame before: sharp again.
-  EXPECT_TRUE(same(draw(blurred, &with, Frame(model, 12, 0.02)), draw(sharp, &without, Frame(model, 12, 0.02))));
+  EXPECT_TRUE(SamePicture(draw(blurred, &with, Frame(model, 12, 0.02)), draw(sharp, &without, Frame(model, 12, 0.02))));
   // A jump in the sequence (a new session, a long loss) is no motion to smear.
-  EXPECT_TRUE(same(draw(blurred, &with, Frame(model, 40, 0.05)), draw(sharp, &without, Frame(model, 40, 0.05))));
-  EXPECT_TRUE(same(draw(blurred, &with, Frame(model, 3, 0.0)), draw(sharp, &without, Frame(model, 3, 0.0))));
+  EXPECT_TRUE(SamePicture(draw(blurred, &with, Frame(model, 40, 0.05)), draw(sharp, &without, Frame(model, 40, 0.05))));
+  EXPECT_TRUE(SamePicture(draw(blurred, &with, Frame(model, 3, 0.0)), draw(sharp, &without, Frame(model, 3, 0.0))));
 }
 
 TEST(MotionBlur, TheExposureTravelsWithTheAvatarAndIsChecked) {

@@ -7,6 +7,7 @@
 #include "common/avatar/avatar_pipeline.h"
 #include "common/headmodel/builtin_head.h"
 #include "common/headmodel/head_render.h"
+#include "tests/testing/switched_avatars.h"
 #include "tests/testing/tiny_avatar.h"
 
 namespace headcast {
@@ -103,32 +104,21 @@ FrameParams Frontal(std::shared_ptr<const HeadModel> model) {
 }
 
 TEST(OutlineInTheRenderPath, AFrameWithAnOutlineMovesTheAvatarsEdge) {
-  auto model = std::make_shared<const HeadModel>(MakeBuiltinHead());
   AvatarConfig c = testing::TinyAvatarConfig();
   c.matte = MatteMode::kLearned;
-  const SubjectParams subject = DefaultSubject(*model, c.output_size);
-  const HeadIdentity identity = model->MakeIdentity(subject.shape.cast<double>());
-  Avatar avatar = Avatar::CreateRandom(c, *model, subject, 3);
-  c.outline_ramp = 0;
-  Avatar ignoring = avatar.WithRuntimeSwitches(c);
-  avatar.modules().eval();
-  ignoring.modules().eval();
-  torch::InferenceMode inference;
-  auto draw = [&](Avatar& a, const FrameParams& f) {
-    RaySampler sampler(a.config());
-    AvatarFrameInputs buffers;
-    cv::Mat bgr;
-    RenderAvatarFrame(a.modules(), a.config(), *model, identity, a.subject(), f, &sampler, &buffers, &bgr);
-    return bgr;
-  };
-  auto same = [](const cv::Mat& a, const cv::Mat& b) { return cv::norm(a, b, cv::NORM_INF) == 0; };
-  const FrameParams plain = Frontal(model);
+  AvatarConfig ignore = c;
+  ignore.outline_ramp = 0;
+  testing::SwitchedAvatars avatars(c, ignore);
+  Avatar &avatar = avatars.base(), &ignoring = avatars.switched();
+  auto draw = [&](Avatar& a, const FrameParams& f) { return avatars.Draw(a, f); };
+  using testing::SamePicture;
+  const FrameParams plain = Frontal(avatars.model());
   FrameParams outlined = plain;
   outlined.outline.assign(OutlineOptions{}.bins,
                           60.f);  // 6 cm above the head point: the untrained matte's edge is elsewhere
-  EXPECT_TRUE(same(draw(avatar, plain), draw(ignoring, plain)));
-  EXPECT_FALSE(same(draw(avatar, outlined), draw(avatar, plain)));
-  EXPECT_TRUE(same(draw(ignoring, outlined), draw(ignoring, plain)));  // ramp 0: outlines ignored
+  EXPECT_TRUE(SamePicture(draw(avatar, plain), draw(ignoring, plain)));
+  EXPECT_FALSE(SamePicture(draw(avatar, outlined), draw(avatar, plain)));
+  EXPECT_TRUE(SamePicture(draw(ignoring, outlined), draw(ignoring, plain)));  // ramp 0: outlines ignored
 }
 
 TEST(OutlineInTheRenderPath, TheSettingTravelsWithTheAvatarAndIsChecked) {
