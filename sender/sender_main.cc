@@ -394,7 +394,10 @@ int Run(SenderFlags& f) {
     if (f.error_flag->count() == 0) f.error_m = kNarrowLinkQuantisationError;
   }
   if (f.key_interval < 1) throw std::invalid_argument("--key-interval must be at least 1");
-  const CodecLayout layout = CodecLayout::FromModel(model, f.error_m, ParseComponents(f.components), f.key_interval);
+  // The outline's values travel when frames may carry one (a live --outline, or a recording that may hold them).
+  const int outline_bins = f.live.outline || !f.params.empty() ? OutlineOptions{}.bins : 0;
+  const CodecLayout layout =
+      CodecLayout::FromModel(model, f.error_m, ParseComponents(f.components), f.key_interval, true, outline_bins);
   if (f.params.empty() && f.input.empty()) {
     SyntheticMotionOptions motion;
     motion.fps = o.fps;

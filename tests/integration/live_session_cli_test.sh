@@ -20,7 +20,7 @@ rx=$!
 wait_for "$tmp/rx.log" listening || bad "receiver never listened"
 "$bin/headcast-sender" --target "127.0.0.1:$port" --plaintext --avatar-id demo --input "$tmp/seq.mp4" --fov 45 \
   --identity-from "$tmp/a.hcavatar" --landmark-filter causal --landmark-filter-hz 4 --landmark-filter-beta 0.2 \
-  --json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
+  --outline --json "$tmp/tx.json" > /dev/null 2> "$tmp/tx.log"
 sleep 0.5
 kill -INT "$rx"; wait "$rx"; rx=
 fitted=$(json "$tmp/tx.json" "j['tracking']['frames_fitted']")
@@ -38,6 +38,11 @@ shown=$(json "$tmp/rx.json" "j['rendered']")
   [ "$(tail -n +2 "$tmp/shown.csv" | wc -l)" -eq "$shown" ] &&
   ok "receiver got $received frames, showed $shown; glass to glass p50 $p50 ms, logged per shown frame" ||
   bad "receiver: received=$received p50=$p50 $(tail -3 "$tmp/rx.log")"
+# --outline needs the avatar's camera (a random avatar records none): said, and the frames go without one.
+grep -q "outline is not measured: no camera contract" "$tmp/tx.log" &&
+  [ "$(json "$tmp/tx.json" "j['tracking']['frames_with_outline']")" = 0 ] &&
+  ok "--outline without the avatar's camera: said so, no outline sent" ||
+  bad "--outline without a contract: $(grep -i outline "$tmp/tx.log" | head -2)"
 [ "$(json "$tmp/tx.json" "(j['tracking']['landmark_filter'], j['tracking']['landmark_filter_hz'], j['tracking']['landmark_filter_beta'])")" = "('causal', 4.0, 0.2)" ] &&
   ok "the sender's landmark filter as asked (causal, 4 Hz, beta 0.2)" || bad "landmark filter: $(json "$tmp/tx.json" "j['tracking']")"
 "$bin/headcast-sender" --target "127.0.0.1:1" --plaintext --input "$tmp/seq.mp4" --landmark-filter causal \
@@ -57,6 +62,22 @@ if [ -f "$src/models/demo_avatar.hcavatar" ]; then
     [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] && grep -q "glass to glass p50" "$tmp/demo.out" &&
     ok "deploy/demo.sh: $frames, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
     bad "demo: $frames $(head -5 "$tmp/demo.out")"
+  # With the avatar's camera the sender measures the hair's outline on each frame and the receiver gets it.
+  "$bin/headcast-receiver" --listen "127.0.0.1:$((port + 1))" --plaintext --allow-no-token \
+    --avatar "demo=$src/models/demo_avatar.hcavatar" --display none --record "$tmp/outlined.hcrec" \
+    > /dev/null 2> "$tmp/rx2.log" &
+  rx=$!
+  wait_for "$tmp/rx2.log" listening || bad "second receiver never listened"
+  "$bin/headcast-sender" --target "127.0.0.1:$((port + 1))" --plaintext --avatar-id demo \
+    --input "$src/models/demo/demo_sequence.mp4" --identity-from "$src/models/demo_avatar.hcavatar" --pacing none \
+    --duration 3 --outline --json "$tmp/tx2.json" > /dev/null 2> "$tmp/tx2.log"
+  sleep 0.5
+  kill -INT "$rx"; wait "$rx"; rx=
+  outlined=$(json "$tmp/tx2.json" "j['tracking']['frames_with_outline']")
+  [ "${outlined:-0}" -ge 5 ] && [ "$outlined" = "$(json "$tmp/tx2.json" "j['tracking']['frames_fitted']")" ] &&
+    [ "$(json "$tmp/tx2.json" "j['frames_sent']")" = "$outlined" ] && [ -s "$tmp/outlined.hcrec" ] &&
+    ok "--outline with the demo avatar's camera: $outlined frames carried the hair's outline, all sent" ||
+    bad "--outline with the demo avatar: outlined=$outlined $(tail -2 "$tmp/tx2.log")"
   # The shipped avatar reproduces its subject (32.4 dB when made; a bound below it, not the figure).
   psnr=$(json "$tmp/demo/report.json" "j['avatar_vs_truth']['psnr_db']")
   "$python" -c "import sys; sys.exit(0 if float('${psnr:-0}') >= 31 else 1)" &&
