@@ -59,7 +59,11 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
                     t.anchor_ms};
   if (t.fitted && crop_) {
     Stopwatch watch;
-    params->outline = MeasureFrameOutline(bgr, t.face.raw, *params);
+    try {
+      params->outline = MeasureFrameOutline(bgr, t.face.raw, *params);
+    } catch (const std::exception& e) {  // a frame the mask cannot be cut on goes without an outline
+      spdlog::warn("frame without the hair's outline: {}", e.what());
+    }
     r.outline_ms = watch.ElapsedMs();
   }
   return r;
