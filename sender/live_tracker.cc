@@ -76,8 +76,10 @@ std::vector<float> LiveTracker::MeasureFrameOutline(const cv::Mat& bgr, const La
     mask_identity_ = model_.MakeIdentity(shape);
     mask_shape_ = shape;
   }
-  const cv::Mat mask = CutFrameMask(bgr, face, *crop_, model_, *mask_identity_, tracker_.fitter(), params,
-                                    options_.matte_rules, options_.outline_mask);
+  HeadModelOutput posed;
+  model_.Forward(*mask_identity_, params.expression.cast<double>(), params.HeadPose(), &posed);
+  const cv::Mat mask = CutFrameMask(bgr, face, *crop_, model_, posed, tracker_.fitter(), params, options_.matte_rules,
+                                    options_.outline_mask);
   const OutlineOptions outline;
   return MeasureOutline(mask, OutlineFrame::Of(crop_->camera, params.CamFromHead(), outline), outline);
 }

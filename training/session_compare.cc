@@ -16,9 +16,8 @@
 #include "common/core/image_io.h"
 #include "common/headmodel/head_model_io.h"
 #include "common/headmodel/head_render.h"
-#include "common/raster/rasterizer.h"
+#include "common/tracking/frame_mask.h"
 #include "common/tracking/head_fitter.h"
-#include "common/tracking/head_mask.h"
 #include "proto/recording.h"
 #include "training/avatar_fit.h"
 #include "training/dataset.h"
@@ -158,8 +157,7 @@ nlohmann::json RunCompare(const CompareOptions& o) {
     const double s = static_cast<double>(current.bgr.cols) / contract.source.width;
     const double x0 = s * contract.crop_x0, y0 = s * contract.crop_y0, side = s * contract.crop_side;
     Cut cut{CropSquare(current.bgr, x0, y0, side, size, cv::INTER_AREA),
-            CropSquare(HeadMask(current.bgr, fitter.Project(f, *full)), x0, y0, side, size, cv::INTER_LINEAR)};
-    cv::threshold(cut.mask, cut.mask, 127, 255, cv::THRESH_BINARY);
+            CropGrabCutMask(current.bgr, fitter.Project(f, *full), {x0, y0, side, size, subject.intrinsics})};
     return cut;
   };
 
@@ -186,12 +184,8 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         input_panel = cut.image;
         fit_panel =
             RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
-        RasterVertices in_camera;
-        TransformToCamera(posed.vertices, f.CamFromHead(), &in_camera);
-        RasterBuffers silhouette;
-        Rasterize(in_camera, model.data().faces, subject.intrinsics, RasterOptions{}, &silhouette);
-        const Landmarks2d landmarks = fitter.Project(f, subject.intrinsics);
-        return MaskedTarget(cut.image, CutTrainingMask(cut.mask, silhouette.Mask(), landmarks, prep.matte_rules()));
+        return MaskedTarget(cut.image,
+                            CutCropMask(cut.mask, model, posed, fitter, f, subject.intrinsics, prep.matte_rules()));
       },
       [&](int k, const cv::Mat& target, const cv::Mat& shown) {
         scored.push_back(k);

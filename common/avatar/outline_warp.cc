@@ -66,10 +66,16 @@ bool WarpToOutline(const std::vector<float>& target_mm, const OutlineFrame& fram
     moves = moves || std::abs(shift[k]) > 0.05f;
   }
   if (!moves) return false;
-  // The sampling grid, normalised as grid_sample's (align_corners false).
-  std::vector<float> grid(static_cast<size_t>(height * width * 2));
+  // The sampling grid, normalised as grid_sample's (align_corners false),
+  // over the rows that may move: above the head point, and below it only the
+  // end arcs' fade, within one arc's angle of the horizontal.
   const double cx = frame.centre_px.x(), cy = frame.centre_px.y();
-  for (int64_t y = 0; y < height; ++y)
+  const double reach = std::hypot(static_cast<double>(width), static_cast<double>(height));
+  const int64_t rows =
+      std::clamp<int64_t>(static_cast<int64_t>(std::floor(cy + reach * std::sin(OutlineBinWidth(o)))) + 2, 0, height);
+  if (rows == 0) return false;
+  std::vector<float> grid(static_cast<size_t>(rows * width * 2));
+  for (int64_t y = 0; y < rows; ++y)
     for (int64_t x = 0; x < width; ++x) {
       const double dx = x - cx, up = cy - y, r = std::hypot(dx, up);
       double angle = std::atan2(up, dx);
@@ -79,12 +85,14 @@ bool WarpToOutline(const std::vector<float>& target_mm, const OutlineFrame& fram
       g[0] = static_cast<float>((2 * (x + dx * s) + 1) / width - 1);
       g[1] = static_cast<float>((2 * (y - up * s) + 1) / height - 1);
     }
-  const torch::Tensor grid_t = torch::from_blob(grid.data(), {1, height, width, 2}, torch::kFloat32);
+  const torch::Tensor grid_t = torch::from_blob(grid.data(), {1, rows, width, 2}, torch::kFloat32);
   const int64_t channels = image->size(1);
   namespace F = torch::nn::functional;
-  const torch::Tensor moved = F::grid_sample(
-      torch::cat({*image, *coverage}, 1), grid_t.to(image->dtype()),
+  const torch::Tensor both = torch::cat({*image, *coverage}, 1);
+  torch::Tensor moved = F::grid_sample(
+      both, grid_t.to(image->dtype()),
       F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(false));
+  if (rows < height) moved = torch::cat({moved, both.narrow(2, rows, height - rows)}, 2);
   *image = moved.narrow(1, 0, channels);
   *coverage = moved.narrow(1, channels, 1);
   return true;

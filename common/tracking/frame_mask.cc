@@ -17,19 +17,29 @@ std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const Pinh
   return crop;
 }
 
-cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadIdentity& identity, const HeadFitter& fitter,
-                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options) {
+cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
+                        const HeadMaskOptions& mask_options) {
   cv::Mat grabcut = CropSquare(HeadMask(bgr, face_landmarks, mask_options), crop.x0, crop.y0, crop.side,
                                crop.resolution, cv::INTER_LINEAR);
   cv::threshold(grabcut, grabcut, 127, 255, cv::THRESH_BINARY);
-  HeadModelOutput posed;
-  model.Forward(identity, params.expression.cast<double>(), params.HeadPose(), &posed);
+  return grabcut;
+}
+
+cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadModelOutput& posed,
+                    const HeadFitter& fitter, const FrameParams& params, const PinholeCamera& crop_camera,
+                    const MatteRules& rules) {
   RasterVertices in_camera;
   TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
   RasterBuffers silhouette;
-  Rasterize(in_camera, model.data().faces, crop.camera, RasterOptions{}, &silhouette);
-  return CutTrainingMask(grabcut, silhouette.Mask(), fitter.Project(params, crop.camera), rules);
+  Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
+  return CutTrainingMask(grabcut, silhouette.Mask(), fitter.Project(params, crop_camera), rules);
+}
+
+cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
+                     const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
+                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options) {
+  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options), model, posed, fitter, params,
+                     crop.camera, rules);
 }
 
 }  // namespace headcast

@@ -28,11 +28,22 @@ struct FrameCrop {
 // when their aspect is not the contract's (that frame shows another view).
 std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const PinholeCamera& camera, int resolution);
 
-// CV_8U, crop.resolution², 255 on the head. `face_landmarks`: the frame's
-// (pixels of the whole frame) that seed GrabCut. Throws std::invalid_argument
-// on an empty frame or non-finite landmarks.
+// The tracker's GrabCut head mask made on the whole frame (seeded by
+// `face_landmarks`, pixels of the frame) and cut to `crop`: CV_8U,
+// crop.resolution², 0 or 255. Throws std::invalid_argument on an empty frame
+// or non-finite landmarks.
+cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
+                        const HeadMaskOptions& mask = {});
+
+// A training target's mask from a crop's GrabCut mask: the matte's rules with
+// the fitted head (`posed` by `params`) seen through `crop_camera`.
+cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadModelOutput& posed,
+                    const HeadFitter& fitter, const FrameParams& params, const PinholeCamera& crop_camera,
+                    const MatteRules& rules);
+
+// Both: a live frame's mask as prep cut the training masks.
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadIdentity& identity, const HeadFitter& fitter,
+                     const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
                      const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {});
 
 }  // namespace headcast

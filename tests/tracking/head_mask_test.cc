@@ -167,7 +167,9 @@ TEST(FrameMask, TheCutMasksOutlineIsTheHeads) {
   for (double pitch : {0.0, 15.0}) {
     const RestingHeadScenes::Scene s = scenes.At(0.7, 10, pitch);
     Stopwatch watch;
-    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, identity, fitter, s.params, MatteRules{});
+    HeadModelOutput posed;
+    model.Forward(identity, s.params.expression.cast<double>(), s.params.HeadPose(), &posed);
+    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, posed, fitter, s.params, MatteRules{});
     std::printf("pitch %+.0f: mask cut in %.1f ms\n", pitch, watch.ElapsedMs());
     ASSERT_EQ(cut.rows, 256);
     cv::Mat truth = CropSquare(s.mask, crop->x0, crop->y0, crop->side, 256, cv::INTER_LINEAR);
