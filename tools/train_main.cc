@@ -499,6 +499,10 @@ int main(int argc, char** argv) {
                    "the avatar's outline is moved to the frame's from this far inside it (share of the picture's "
                    "height) instead of the avatar's setting (-1: the avatar's; 0: not moved)")
       ->capture_default_str();
+  eval->add_option("--outline-matte-scale", e.outline_matte_scale,
+                   "on frames whose outline is moved there, draw with the matte's coverage logit multiplied by this "
+                   "instead of the avatar's outline scale (0: the avatar's)")
+      ->capture_default_str();
   eval->add_option("--outline-centre-y", e.outline_centre_y,
                    "the head point the outline's rays start from, (0, Y, 0) in the head frame, metres")
       ->capture_default_str();

@@ -459,6 +459,8 @@ void EvalOptions::Check() const {
   c.That(outline_ramp == -1 || (outline_ramp >= 0 && outline_ramp <= 0.5),
          "outline_ramp must be -1 (the avatar's) or a share of the picture's height of 0 to 0.5");
   c.InRange("outline_centre_y", outline_centre_y, -0.2, 0.2);
+  c.That(outline_matte_scale == 0 || (outline_matte_scale >= 0.05 && outline_matte_scale <= 4),
+         "outline_matte_scale must be 0 (the avatar's) or a scale of 0.05 to 4");
   c.ThrowIfErrors();
   if (matte_scale != 0) {  // 0: the avatar's; any other, a scale an avatar may carry
     AvatarConfig scaled = AvatarConfig::Default();
@@ -479,10 +481,11 @@ nlohmann::json RunEval(const EvalOptions& o) {
     if (!avatar.config().has_matte()) throw std::invalid_argument(o.avatar + " has no matte to scale (matte_scale)");
     avatar = WithMatteScale(avatar, o.matte_scale);
   }
-  if (o.motion_blur >= 0 || o.outline_ramp >= 0 || o.outline_bins > 0) {
+  if (o.motion_blur >= 0 || o.outline_ramp >= 0 || o.outline_matte_scale > 0 || o.outline_bins > 0) {
     AvatarConfig c = avatar.config();
     if (o.motion_blur >= 0) c.motion_blur = o.motion_blur;
     if (o.outline_ramp >= 0) c.outline_ramp = o.outline_ramp;
+    if (o.outline_matte_scale > 0) c.outline_matte_scale = o.outline_matte_scale;
     if (o.outline_bins > 0) c.outline_centre_y = o.outline_centre_y;
     avatar = avatar.WithRuntimeSwitches(c);
   }
@@ -583,6 +586,7 @@ nlohmann::json RunEval(const EvalOptions& o) {
                                          {"measured_every", o.outline_every},
                                          {"centre_y_m", outline->centre_y_m},
                                          {"ramp", avatar.config().outline_ramp},
+                                         {"matte_scale", avatar.config().outline_matte_scale},
                                          {"how",
                                           "each frame carries the top of its mask's outline, as a sender with "
                                           "--outline measures it on its frame's mask; the avatar's outline is moved "

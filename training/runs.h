@@ -126,6 +126,9 @@ struct EvalOptions {
   // How the avatar moves its outline there (AvatarConfig::outline_ramp)
   // instead of the avatar's; -1: the avatar's.
   double outline_ramp = -1;
+  // The coverage logit's scale on those frames (AvatarConfig::outline_matte_scale)
+  // instead of the avatar's; 0: the avatar's.
+  double outline_matte_scale = 0;
   // The head point the outline is measured about (AvatarConfig::outline_centre_y), metres.
   double outline_centre_y = AvatarConfig{}.outline_centre_y;
   // Expression fidelity: dlib's landmarks on the avatar's frames against the

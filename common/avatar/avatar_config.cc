@@ -111,6 +111,7 @@ void AvatarConfig::Check() const {
   c.InRange("matte_core", matte_core, 0.0, 0.1).InRange("matte_scale", matte_scale, 0.05, 4.0);
   c.InRange("motion_blur", motion_blur, 0.0, kMaxMotionBlur);
   c.InRange("outline_ramp", outline_ramp, 0.0, 0.5).InRange("outline_centre_y", outline_centre_y, -0.2, 0.2);
+  c.InRange("outline_matte_scale", outline_matte_scale, 0.05, 4.0);
   c.That(expression_low.size() == expression_high.size(),
          "expression_low and expression_high must have as many values");
   c.That(expression_low.empty() || static_cast<int>(expression_low.size()) == num_expression,
@@ -180,6 +181,7 @@ nlohmann::json AvatarConfig::ToJson() const {
                       {"motion_blur", motion_blur},
                       {"outline_ramp", outline_ramp},
                       {"outline_centre_y", outline_centre_y},
+                      {"outline_matte_scale", outline_matte_scale},
                       {"motion_conditioning", MotionConditioningName(motion_conditioning)},
                       {"hair_conditioning", MotionConditioningName(hair_conditioning)},
                       {"hair_reach", hair_reach},
@@ -237,6 +239,7 @@ AvatarConfig AvatarConfig::FromJson(const nlohmann::json& j) {
     c.motion_blur = j.value("motion_blur", 0.0);
     c.outline_ramp = j.value("outline_ramp", c.outline_ramp);  // files from before it: only frames with an outline move
     c.outline_centre_y = j.value("outline_centre_y", c.outline_centre_y);
+    c.outline_matte_scale = j.value("outline_matte_scale", c.outline_matte_scale);
     c.motion_conditioning = ParseMotionConditioning(j.value("motion_conditioning", std::string("full")));
     c.hair_conditioning = ParseMotionConditioning(j.value("hair_conditioning", std::string("full")));
     c.hair_reach = j.value("hair_reach", c.hair_reach);

@@ -203,6 +203,11 @@ struct AvatarConfig : AvatarCommonConfig {
   // The head point the outline's rays start from, (0, y, 0) in the head
   // frame, metres: where the sender measures it from (OutlineOptions).
   double outline_centre_y = OutlineOptions{}.centre_y_m;
+  // The coverage logit's scale on a frame whose outline is moved there,
+  // instead of matte_scale: matte_scale softens the edge because where the
+  // hair's outline falls on an unseen frame is uncertain, and the frame's own
+  // outline removes most of that uncertainty. A run-time switch.
+  double outline_matte_scale = 1;
 
   // A run-time switch: the networks' sizes are the same in every mode.
   MotionConditioning motion_conditioning = MotionConditioning::kFull;

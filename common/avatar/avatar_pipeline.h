@@ -40,6 +40,7 @@ struct AvatarFrameInputs {
   std::vector<float> hair_rays;     // with hair_conditioning: 1 per ray (HairRays)
   cv::Mat matte_bound;              // with a bounded matte: H x W CV_8U, 255 where the head may show (MatteBound)
   cv::Mat matte_core;               // and with a core: 255 where it always shows (MatteCore)
+  double coverage_scale = 0;  // with a matte: the coverage logit's scale this frame (0: AvatarConfig::matte_scale)
   RigidTransform cam_from_head;
   AvatarConditioning conditioning;
   HeadModelOutput posed;

@@ -208,7 +208,7 @@ void RunAvatarUpsampling(AvatarModules& modules, const AvatarFrameInputs& inputs
         inputs.matte_bound.empty() ? ImageWindow::Whole(height, width) : WindowAround(inputs.matte_bound);
     torch::Tensor logit;
     const torch::Tensor rgb = modules.renderer->forward(out->feature_map, surface_term, &logit, &window);
-    const double scale = modules.cnerf->config().matte_scale;
+    const double scale = inputs.coverage_scale > 0 ? inputs.coverage_scale : modules.cnerf->config().matte_scale;
     torch::Tensor coverage = torch::sigmoid(scale == 1 ? logit : logit * scale);
     if (!inputs.matte_core.empty()) {
       const torch::Tensor core = MaskTensor(inputs.matte_core, window);
@@ -311,6 +311,8 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
     surface();
     features();
   }
+  const bool moves_outline = config.outline_ramp > 0 && !frame.outline.empty();
+  buffers->coverage_scale = moves_outline ? config.outline_matte_scale : 0;
   RunAvatarUpsampling(modules, *buffers, &out, timings);
   Stopwatch watch;
   if (config.motion_blur > 0) {
@@ -321,7 +323,7 @@ void RenderAvatarFrame(AvatarModules& modules, const AvatarConfig& config, const
     buffers->previous_v_cam = buffers->v_cam;
     buffers->previous_sequence = frame.sequence;
   }
-  if (config.outline_ramp > 0 && !frame.outline.empty() && out.coverage.defined()) {
+  if (moves_outline && out.coverage.defined()) {
     OutlineOptions outline;
     outline.bins = static_cast<int>(frame.outline.size());
     outline.centre_y_m = config.outline_centre_y;

@@ -121,19 +121,44 @@ TEST(OutlineInTheRenderPath, AFrameWithAnOutlineMovesTheAvatarsEdge) {
   EXPECT_TRUE(SamePicture(draw(ignoring, outlined), draw(ignoring, plain)));  // ramp 0: outlines ignored
 }
 
+// A frame whose outline is moved there is drawn at outline_matte_scale, the
+// others at matte_scale.
+TEST(OutlineInTheRenderPath, AFrameWithAnOutlineIsDrawnAtTheOutlinesMatteScale) {
+  AvatarConfig sharp = testing::TinyAvatarConfig();
+  sharp.matte = MatteMode::kLearned;
+  sharp.matte_scale = 2;
+  sharp.outline_matte_scale = 2;
+  AvatarConfig soft = sharp;
+  soft.matte_scale = 0.5;
+  testing::SwitchedAvatars avatars(sharp, soft);
+  using testing::SamePicture;
+  const FrameParams plain = Frontal(avatars.model());
+  FrameParams outlined = plain;
+  outlined.outline.assign(OutlineOptions{}.bins, 60.f);
+  EXPECT_FALSE(SamePicture(avatars.Draw(avatars.base(), plain), avatars.Draw(avatars.switched(), plain)));
+  EXPECT_TRUE(SamePicture(avatars.Draw(avatars.base(), outlined), avatars.Draw(avatars.switched(), outlined)));
+}
+
 TEST(OutlineInTheRenderPath, TheSettingTravelsWithTheAvatarAndIsChecked) {
   AvatarConfig c = testing::TinyAvatarConfig();
   c.outline_ramp = 0.05;
   c.outline_centre_y = 0.03;
+  c.outline_matte_scale = 1.5;
   const AvatarConfig back = AvatarConfig::FromJson(c.ToJson());
   EXPECT_DOUBLE_EQ(back.outline_ramp, 0.05);
   EXPECT_DOUBLE_EQ(back.outline_centre_y, 0.03);
+  EXPECT_DOUBLE_EQ(back.outline_matte_scale, 1.5);
   nlohmann::json old = c.ToJson();
   old.erase("outline_ramp");
   old.erase("outline_centre_y");
+  old.erase("outline_matte_scale");
   // Files from before it: moved like any avatar (only frames that carry an outline change).
   EXPECT_DOUBLE_EQ(AvatarConfig::FromJson(old).outline_ramp, AvatarConfig{}.outline_ramp);
   EXPECT_DOUBLE_EQ(AvatarConfig::FromJson(old).outline_centre_y, OutlineOptions{}.centre_y_m);
+  EXPECT_DOUBLE_EQ(AvatarConfig::FromJson(old).outline_matte_scale, AvatarConfig{}.outline_matte_scale);
+  c.outline_matte_scale = 0;
+  EXPECT_THROW(c.Check(), std::invalid_argument);
+  c.outline_matte_scale = 1;
   c.outline_ramp = -0.1;
   EXPECT_THROW(c.Check(), std::invalid_argument);
   c.outline_ramp = std::nan("");
