@@ -57,6 +57,7 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   LiveTrackResult r{t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,        t.fit_ms,
                     t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,
                     t.anchor_ms};
+  if (!t.fitted) mask_models_ = {};
   if (t.fitted && crop_) {
     Stopwatch watch;
     try {
@@ -79,7 +80,7 @@ std::vector<float> LiveTracker::MeasureFrameOutline(const cv::Mat& bgr, const La
   HeadModelOutput posed;
   model_.Forward(*mask_identity_, params.expression.cast<double>(), params.HeadPose(), &posed);
   const cv::Mat mask = CutFrameMask(bgr, face, *crop_, model_, posed, tracker_.fitter(), params, options_.matte_rules,
-                                    options_.outline_mask);
+                                    options_.outline_mask, &mask_models_);
   const OutlineOptions outline;
   return MeasureOutline(mask, OutlineFrame::Of(crop_->camera, params.CamFromHead(), outline), outline);
 }

@@ -30,12 +30,20 @@ struct LiveTrackerOptions {
   // outline (FrameParams::outline), measured on the frame's head mask cut as
   // the avatar's training masks were (CutFrameMask, at this resolution), so
   // that the receiver draws the hair's edge where the person's is. Off by
-  // default: the mask's GrabCut runs on the tracking thread and costs more
-  // than a frame interval (the benchmark report).
+  // default: even with its colour models carried, the mask's GrabCut on the
+  // tracking thread keeps the sender below 30 fps beside a receiver on two
+  // cores (the benchmark report).
   bool outline = false;
   int outline_resolution = 256;
-  MatteRules matte_rules;        // the avatar's (its masks' rules)
-  HeadMaskOptions outline_mask;  // GrabCut's: the training masks' by default
+  MatteRules matte_rules;  // the avatar's (its masks' rules)
+  // GrabCut's: the training masks', except that a frame learns its own colour
+  // models only every 8th frame (HeadMaskOptions::refit_every; the benchmark
+  // report has what that costs and saves).
+  HeadMaskOptions outline_mask = [] {
+    HeadMaskOptions o;
+    o.refit_every = 8;
+    return o;
+  }();
 };
 
 struct LiveTrackResult {
@@ -79,6 +87,9 @@ class LiveTracker {
   bool outline_refused_ = false;   // asked for, but these frames have no square: said once
   Eigen::VectorXd mask_shape_;     // the identity mask_identity_ was made for
   std::optional<HeadIdentity> mask_identity_;
+  // GrabCut's colour models from frame to frame (HeadMaskOptions::refit_every);
+  // forgotten when the face is lost, so a face that returns learns its own.
+  HeadMaskModels mask_models_;
 };
 
 }  // namespace headcast

@@ -108,6 +108,10 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_option("--outline-mask-iterations", f.live.outline_mask.iterations,
                  "--input: GrabCut iterations of that mask (the training masks' by default)")
       ->capture_default_str();
+  app.add_option("--outline-refit-every", f.live.outline_mask.refit_every,
+                 "--input: that GrabCut learns its colour models on every Nth frame only; the frames between cut "
+                 "once with the last ones (1: every frame learns its own, as the training masks did)")
+      ->capture_default_str();
   app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
                "--input: do not locate the irises (the eyes look straight ahead)");
   AddCameraFlags(app, f.source, f.camera_size);

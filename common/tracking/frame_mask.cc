@@ -18,8 +18,8 @@ std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const Pinh
 }
 
 cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                        const HeadMaskOptions& mask_options) {
-  cv::Mat grabcut = CropSquare(HeadMask(bgr, face_landmarks, mask_options), crop.x0, crop.y0, crop.side,
+                        const HeadMaskOptions& mask_options, HeadMaskModels* carried) {
+  cv::Mat grabcut = CropSquare(HeadMask(bgr, face_landmarks, mask_options, carried), crop.x0, crop.y0, crop.side,
                                crop.resolution, cv::INTER_LINEAR);
   cv::threshold(grabcut, grabcut, 127, 255, cv::THRESH_BINARY);
   return grabcut;
@@ -37,8 +37,9 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
 
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
                      const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
-                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options) {
-  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options), model, posed, fitter, params,
+                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options,
+                     HeadMaskModels* carried) {
+  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried), model, posed, fitter, params,
                      crop.camera, rules);
 }
 

@@ -33,7 +33,7 @@ std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const Pinh
 // crop.resolution², 0 or 255. Throws std::invalid_argument on an empty frame
 // or non-finite landmarks.
 cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                        const HeadMaskOptions& mask = {});
+                        const HeadMaskOptions& mask = {}, HeadMaskModels* carried = nullptr);
 
 // A training target's mask from a crop's GrabCut mask: the matte's rules with
 // the fitted head (`posed` by `params`) seen through `crop_camera`.
@@ -41,9 +41,11 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
                     const HeadFitter& fitter, const FrameParams& params, const PinholeCamera& crop_camera,
                     const MatteRules& rules);
 
-// Both: a live frame's mask as prep cut the training masks.
+// Both: a live frame's mask as prep cut the training masks (`carried`: the
+// colour models carried over the frames of a sequence, HeadMask's).
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
                      const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
-                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {});
+                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {},
+                     HeadMaskModels* carried = nullptr);
 
 }  // namespace headcast

@@ -13,11 +13,11 @@ void HeadMaskOptions::Check() const {
   c.InRange("iterations", iterations, 1, 20).InRange("working_size", working_size, 32, 2048);
   c.InRange("hair_height", hair_height, 0, 3).InRange("head_width", head_width, 1, 3);
   c.InRange("neck_height", neck_height, 0, 3).InRange("min_face_height", min_face_height, 0, 2);
-  c.InRange("background_ring", background_ring, 0, 2);
+  c.InRange("background_ring", background_ring, 0, 2).InRange("refit_every", refit_every, 1, 1000);
   c.ThrowIfErrors();
 }
 
-cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o) {
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried) {
   o.Check();
   if (bgr.empty() || bgr.type() != CV_8UC3) throw std::invalid_argument("HeadMask: an 8-bit BGR image is needed");
   std::vector<cv::Point2f> pts;
@@ -84,8 +84,14 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   std::vector<cv::Point> hull;
   for (const auto& p : hull_f) hull.push_back(to_work(face_centre + (p - face_centre) * 0.9f));
   cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));
-  cv::Mat bgd_model, fgd_model;
-  cv::grabCut(image, seeds, cv::Rect(), bgd_model, fgd_model, o.iterations, cv::GC_INIT_WITH_MASK);
+  if (carried && !carried->background.empty() && carried->frames_since_fit + 1 < o.refit_every) {
+    cv::grabCut(image, seeds, cv::Rect(), carried->background, carried->foreground, 1, cv::GC_EVAL_FREEZE_MODEL);
+    ++carried->frames_since_fit;
+  } else {
+    cv::Mat bgd_model, fgd_model;
+    cv::grabCut(image, seeds, cv::Rect(), bgd_model, fgd_model, o.iterations, cv::GC_INIT_WITH_MASK);
+    if (carried) *carried = {bgd_model, fgd_model, 0};
+  }
   cv::Mat fg = (seeds == cv::GC_FGD) | (seeds == cv::GC_PR_FGD);
   // The largest connected piece only, holes filled.
   std::vector<std::vector<cv::Point>> contours;

@@ -24,11 +24,28 @@ struct HeadMaskOptions {
   // background rather than certain: hair the region misses can still join the
   // head instead of teaching GrabCut that hair is background.
   double background_ring = 0.3;
+  // With colour models carried from frame to frame (HeadMaskModels): a frame
+  // learns its own models (`iterations` of GrabCut) only every this many
+  // frames; the others cut once with the last ones, unchanged. A head and
+  // what is behind it keep their colours over a few frames, and the models
+  // are what GrabCut's iterations spend most of their time refining.
+  int refit_every = 1;
   void Check() const;
 };
 
-// CV_8U, 255 on the head. Throws std::invalid_argument on an empty image or non-finite landmarks.
-cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {});
+// GrabCut's colour models of the head and of what is around it, learnt on one
+// frame and used on the next ones (HeadMaskOptions::refit_every).
+struct HeadMaskModels {
+  cv::Mat background, foreground;  // cv::grabCut's
+  int frames_since_fit = 0;
+};
+
+// CV_8U, 255 on the head. Throws std::invalid_argument on an empty image or
+// non-finite landmarks. With `carried`, the colour models are learnt or
+// reused as HeadMaskOptions::refit_every says (a sequence of frames: a live
+// sender); without, every mask learns its own.
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {},
+                 HeadMaskModels* carried = nullptr);
 
 // Intersection over union of two binary masks (non-zero = inside).
 double MaskIou(const cv::Mat& a, const cv::Mat& b);

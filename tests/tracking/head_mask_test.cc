@@ -188,6 +188,36 @@ TEST(FrameMask, TheCutMasksOutlineIsTheHeads) {
   }
 }
 
+// A sequence whose frames reuse the colour models learnt on every Nth: the
+// frames between cut as closely to the head as a frame that learns its own.
+TEST(HeadMask, CarriedColourModelsCutLikeAFramesOwn) {
+  const RestingHeadScenes scenes(11);
+  HeadMaskOptions every4;
+  every4.refit_every = 4;
+  HeadMaskModels carried;
+  int frame = 0;
+  for (double yaw : {-12.0, -9.0, -6.0, -3.0, 0.0, 3.0}) {
+    const RestingHeadScenes::Scene s = scenes.At(0.7, yaw, 0);
+    Stopwatch watch;
+    const cv::Mat reused = HeadMask(s.image, s.landmarks, every4, &carried);
+    const double reused_ms = watch.ElapsedMs();
+    watch.Restart();
+    const cv::Mat own = HeadMask(s.image, s.landmarks);
+    const double own_ms = watch.ElapsedMs();
+    EXPECT_EQ(carried.frames_since_fit, frame % 4) << "frame " << frame;
+    ASSERT_FALSE(carried.background.empty());
+    std::printf(
+        "frame %d (%s models): IoU %.4f against the truth, %.4f against its own models' mask; %.1f ms vs %.1f\n", frame,
+        frame % 4 ? "carried" : "its own", MaskIou(reused, s.mask), MaskIou(reused, own), reused_ms, own_ms);
+    EXPECT_GT(MaskIou(reused, s.mask), 0.9) << "frame " << frame;
+    EXPECT_GT(MaskIou(reused, own), 0.97) << "frame " << frame;
+    ++frame;
+  }
+  HeadMaskOptions bad;
+  bad.refit_every = 0;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 TEST(HeadMask, BadInputIsRefused) {
   Landmarks2d l;
   for (auto& p : l) p = Eigen::Vector2d(10, 10);
