@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "common/core/npy.h"
+#include "common/headmodel/head_outline.h"
 
 namespace headcast {
 namespace {
@@ -131,8 +132,27 @@ ExportFormat ExportFormatFor(const std::string& name, const std::string& out_pat
   return format;
 }
 
+namespace {
+
+// The outline's arcs in a recording's frames: 0 when none carries one; the
+// frames that do all carry as many (one sender's), or the export is refused.
+int OutlineBins(const std::vector<FrameParams>& frames) {
+  size_t bins = 0;
+  for (const FrameParams& f : frames) {
+    if (f.outline.empty()) continue;
+    if (bins != 0 && f.outline.size() != bins)
+      throw std::invalid_argument("the frames' outlines have different numbers of arcs (" + std::to_string(bins) +
+                                  " and " + std::to_string(f.outline.size()) + ")");
+    bins = f.outline.size();
+  }
+  return static_cast<int>(bins);
+}
+
+}  // namespace
+
 void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::string& out_path) {
   const int e = r.info.num_expression;
+  const int outline_bins = OutlineBins(r.frames);
   const size_t n = r.frames.size();
   auto expression_of = [&](const FrameParams& f, int i) { return i < f.expression.size() ? f.expression[i] : 0.f; };
   if (format == ExportFormat::kNpz) {
@@ -164,6 +184,13 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
       if (r.frames[k].skin_colour)
         for (int i = 0; i < 3; ++i) skin[k * 3 + i] = (*r.frames[k].skin_colour)[i];
     npz["skin_colour"] = NpyArray::From<float>({rows, 3}, skin.data());
+    // The top of the head's outline (FrameParams::outline): NaN rows where a frame has none.
+    if (outline_bins > 0) {
+      std::vector<float> outline(n * outline_bins, std::numeric_limits<float>::quiet_NaN());
+      for (size_t k = 0; k < n; ++k)
+        std::copy(r.frames[k].outline.begin(), r.frames[k].outline.end(), outline.begin() + k * outline_bins);
+      npz["outline"] = NpyArray::From<float>({rows, outline_bins}, outline.data());
+    }
     const SubjectParams& s = r.info.subject;
     npz["shape"] = NpyArray::From<float>({static_cast<int64_t>(s.shape.size())}, s.shape.data());
     npz["texture"] = NpyArray::From<float>({static_cast<int64_t>(s.texture.size())}, s.texture.data());
@@ -190,6 +217,7 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
                           {"expression", Vec(f.expression)}};
       for (const Group& g : kGroups) j[g.name] = Vec3(f.*g.member);
       j["skin_colour"] = f.skin_colour ? nlohmann::json(Vec3(*f.skin_colour)) : nlohmann::json(nullptr);
+      if (outline_bins > 0) j["outline"] = f.outline.empty() ? nlohmann::json(nullptr) : nlohmann::json(f.outline);
       frames.push_back(std::move(j));
     }
     out << nlohmann::json({{"header", HeaderJson(r.info)}, {"frames", frames}}).dump(1) << "\n";
@@ -202,6 +230,7 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
     for (const Group& g : kGroups)
       for (const char* axis : {"x", "y", "z"}) out << "," << g.name << "_" << axis;
     out << ",skin_r,skin_g,skin_b";  // empty where the frame has no measured skin colour
+    for (int i = 0; i < outline_bins; ++i) out << ",outline_" << i;  // mm; empty where the frame has none
     out << "\n" << std::setprecision(9);
     for (const auto& f : r.frames) {
       out << f.sequence << "," << std::setprecision(15) << f.capture_time_s << std::setprecision(9) << ","
@@ -212,6 +241,10 @@ void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::s
       for (int i = 0; i < 3; ++i) {
         out << ",";
         if (f.skin_colour) out << (*f.skin_colour)[i];
+      }
+      for (int i = 0; i < outline_bins; ++i) {
+        out << ",";
+        if (!f.outline.empty()) out << f.outline[i];
       }
       out << "\n";
     }
@@ -291,9 +324,21 @@ LoadedRecording ImportRecording(const std::string& path) {
       }
       // Exports from before the skin colour was kept have no such array.
       const float* skin = a.count("skin_colour") ? Column<float>(a, "skin_colour", {n, 3}) : nullptr;
+      // Exports of frames without an outline, or from before it was kept, have no such array.
+      const auto outline_it = a.find("outline");
+      int64_t bins = 0;
+      if (outline_it != a.end()) {
+        const std::vector<int64_t>& shape = outline_it->second.shape();
+        if (shape.size() != 2 || shape[0] != n || shape[1] < 1 || shape[1] > kMaxOutlineBins)
+          throw std::invalid_argument("array 'outline' must have one row a frame and 1 to " +
+                                      std::to_string(kMaxOutlineBins) + " arcs");
+        bins = shape[1];
+      }
+      const float* outline = bins > 0 ? Column<float>(a, "outline", {n, bins}) : nullptr;
       for (int64_t k = 0; k < n; ++k) {
         FrameParams& f = r.frames[k];
         if (skin) f.skin_colour = SkinColourFrom(skin + 3 * k);
+        if (outline && !std::isnan(outline[k * bins])) f.outline.assign(outline + k * bins, outline + (k + 1) * bins);
         f.expression = Eigen::Map<const Eigen::VectorXf>(expression + k * e, e);
         f.capture_time_s = times[k];
         if (sequence[k] < 0) throw std::invalid_argument("a negative sequence number");
@@ -318,6 +363,8 @@ LoadedRecording ImportRecording(const std::string& path) {
         f.confidence = fj.at("confidence").get<float>();
         // Null: not measured; absent: an export from before the skin colour was kept.
         if (fj.contains("skin_colour") && !fj.at("skin_colour").is_null()) f.skin_colour = Vec3From(fj, "skin_colour");
+        if (fj.contains("outline") && !fj.at("outline").is_null())
+          f.outline = fj.at("outline").get<std::vector<float>>();
         r.frames.push_back(std::move(f));
       }
     }
@@ -329,6 +376,8 @@ LoadedRecording ImportRecording(const std::string& path) {
       if (f.skin_colour &&
           !(f.skin_colour->allFinite() && f.skin_colour->minCoeff() >= 0 && f.skin_colour->maxCoeff() <= 1))
         throw std::invalid_argument("frame " + std::to_string(k) + ": a skin colour that is not three numbers in 0..1");
+      if (std::string why; !OutlineIsValid(f.outline, &why))
+        throw std::invalid_argument("frame " + std::to_string(k) + ": " + why);
     }
     if (r.frames.empty()) throw std::invalid_argument("no frames");
   } catch (const std::exception& e) {

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "common/headmodel/builtin_head.h"
+#include "common/headmodel/head_outline.h"
 #include "common/headmodel/synthetic_motion.h"
 #include "proto/convert.h"
 #include "proto/recording_tools.h"
@@ -178,6 +179,62 @@ TEST(RecordingExport, KeepsTheSkinColourOrItsAbsence) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("skin colour"), std::string::npos) << e.what();
+  }
+}
+
+// An export and its import keep each frame's outline, and its absence; an
+// edited export with an outline beyond the codec's range is refused.
+TEST(RecordingExport, KeepsTheOutlineOrItsAbsence) {
+  const std::string dir = testing::TempDir("outline_export");
+  LoadedRecording r;
+  r.info = Info();
+  for (int i = 0; i < 4; ++i) {
+    r.frames.push_back(SyntheticTalkingHead(Model(), i));
+    if (i != 1) r.frames.back().outline = {95.25f + i, kOutlineUnknown, 101.5f, 99.f};
+  }
+  for (const char* name : {"p.json", "p.npz"}) {
+    const std::string path = dir + "/" + name;
+    ExportRecording(r, ExportFormatFor("", path), path);
+    const LoadedRecording back = ImportRecording(path);
+    ASSERT_EQ(back.frames.size(), r.frames.size()) << name;
+    for (size_t k = 0; k < r.frames.size(); ++k) EXPECT_EQ(back.frames[k].outline, r.frames[k].outline) << name << k;
+  }
+  ExportRecording(r, ExportFormat::kCsv, dir + "/p.csv");
+  std::ifstream csv(dir + "/p.csv");
+  std::string line, rows[2];
+  while (std::getline(csv, line) && line[0] == '#') {
+  }
+  EXPECT_NE(line.find(",outline_0,outline_1,outline_2,outline_3"), std::string::npos) << line;
+  std::getline(csv, rows[0]);
+  std::getline(csv, rows[1]);
+  const std::string first = ",95.25,0,101.5,99", none = ",,,,";
+  EXPECT_EQ(rows[0].substr(rows[0].size() - first.size()), first) << rows[0];
+  EXPECT_EQ(rows[1].substr(rows[1].size() - none.size()), none) << rows[1];
+  // Frames without any outline export as before: no outline columns.
+  LoadedRecording plain = r;
+  for (FrameParams& f : plain.frames) f.outline.clear();
+  ExportRecording(plain, ExportFormat::kJson, dir + "/plain.json");
+  std::ifstream plain_in(dir + "/plain.json");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(plain_in)), std::istreambuf_iterator<char>()).find("outline"),
+            std::string::npos);
+  // Outlines of different lengths cannot share the export's columns.
+  LoadedRecording mixed = r;
+  mixed.frames[2].outline.push_back(1.f);
+  EXPECT_THROW(ExportRecording(mixed, ExportFormat::kNpz, dir + "/mixed.npz"), std::invalid_argument);
+  {
+    std::ifstream in(dir + "/p.json");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const size_t at = text.find("101.5");
+    ASSERT_NE(at, std::string::npos);
+    text.replace(at, 5, "-40.0");
+    std::ofstream(dir + "/bad.json") << text;
+  }
+  try {
+    ImportRecording(dir + "/bad.json");
+    ADD_FAILURE() << "an outline of -40 mm was taken";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("outline"), std::string::npos) << e.what();
   }
 }
 
