@@ -130,6 +130,25 @@ TEST(Recording, CaptureTimesThatAreNotTimesEndTheRecording) {
   }
 }
 
+// DIR/p.json with the first `value` after `after` replaced by `edited`, as
+// DIR/bad.json: its import is refused, naming the file and `what`.
+void ExpectEditRefused(const std::string& dir, const std::string& after, const std::string& value,
+                       const std::string& edited, const std::string& what) {
+  std::ifstream in(dir + "/p.json");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t at = text.find(value, text.find(after));
+  ASSERT_NE(at, std::string::npos) << value;
+  text.replace(at, value.size(), edited);
+  std::ofstream(dir + "/bad.json") << text;
+  try {
+    ImportRecording(dir + "/bad.json");
+    ADD_FAILURE() << what << " " << edited << " was taken";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
 // An export and its import keep each frame's skin colour, and its absence.
 TEST(RecordingExport, KeepsTheSkinColourOrItsAbsence) {
   const std::string dir = testing::TempDir("skin_export");
@@ -165,21 +184,7 @@ TEST(RecordingExport, KeepsTheSkinColourOrItsAbsence) {
   EXPECT_EQ(line.substr(line.size() - skin.size()), skin) << line;
   EXPECT_EQ(second.substr(second.size() - 3), ",,,") << second;
   // A skin colour beyond 0..1 in an edited export is refused, naming the file.
-  {
-    std::ifstream in(dir + "/p.json");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const size_t at = text.find("0.6", text.find("\"skin_colour\": ["));
-    ASSERT_NE(at, std::string::npos);
-    text.replace(at, 3, "1.6");
-    std::ofstream(dir + "/bad.json") << text;
-  }
-  try {
-    ImportRecording(dir + "/bad.json");
-    ADD_FAILURE() << "a skin colour of 1.6 was taken";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("skin colour"), std::string::npos) << e.what();
-  }
+  ExpectEditRefused(dir, "\"skin_colour\": [", "0.6", "1.6", "skin colour");
 }
 
 // An export and its import keep each frame's outline, and its absence; an
@@ -221,21 +226,7 @@ TEST(RecordingExport, KeepsTheOutlineOrItsAbsence) {
   LoadedRecording mixed = r;
   mixed.frames[2].outline.push_back(1.f);
   EXPECT_THROW(ExportRecording(mixed, ExportFormat::kNpz, dir + "/mixed.npz"), std::invalid_argument);
-  {
-    std::ifstream in(dir + "/p.json");
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const size_t at = text.find("101.5");
-    ASSERT_NE(at, std::string::npos);
-    text.replace(at, 5, "-40.0");
-    std::ofstream(dir + "/bad.json") << text;
-  }
-  try {
-    ImportRecording(dir + "/bad.json");
-    ADD_FAILURE() << "an outline of -40 mm was taken";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("bad.json"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("outline"), std::string::npos) << e.what();
-  }
+  ExpectEditRefused(dir, "\"outline\": [", "101.5", "-40.0", "outline");
 }
 
 TEST(Recording, TruncatedForeignAndMissingFiles) {
