@@ -61,6 +61,20 @@ void WriteOrThrow(std::ofstream& out, const std::string& path) {
   if (!out) throw std::runtime_error(path + ": cannot write");
 }
 
+// The outline's arcs in a recording's frames: 0 when none carries one; the
+// frames that do all carry as many (one sender's), or the export is refused.
+int OutlineBins(const std::vector<FrameParams>& frames) {
+  size_t bins = 0;
+  for (const FrameParams& f : frames) {
+    if (f.outline.empty()) continue;
+    if (bins != 0 && f.outline.size() != bins)
+      throw std::invalid_argument("the frames' outlines have different numbers of arcs (" + std::to_string(bins) +
+                                  " and " + std::to_string(f.outline.size()) + ")");
+    bins = f.outline.size();
+  }
+  return static_cast<int>(bins);
+}
+
 }  // namespace
 
 LoadedRecording LoadRecording(const std::string& path) {
@@ -131,24 +145,6 @@ ExportFormat ExportFormatFor(const std::string& name, const std::string& out_pat
                                 " its name says (drop --format, or name the file ." + name + ")");
   return format;
 }
-
-namespace {
-
-// The outline's arcs in a recording's frames: 0 when none carries one; the
-// frames that do all carry as many (one sender's), or the export is refused.
-int OutlineBins(const std::vector<FrameParams>& frames) {
-  size_t bins = 0;
-  for (const FrameParams& f : frames) {
-    if (f.outline.empty()) continue;
-    if (bins != 0 && f.outline.size() != bins)
-      throw std::invalid_argument("the frames' outlines have different numbers of arcs (" + std::to_string(bins) +
-                                  " and " + std::to_string(f.outline.size()) + ")");
-    bins = f.outline.size();
-  }
-  return static_cast<int>(bins);
-}
-
-}  // namespace
 
 void ExportRecording(const LoadedRecording& r, ExportFormat format, const std::string& out_path) {
   const int e = r.info.num_expression;

@@ -57,7 +57,7 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   LiveTrackResult r{t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,        t.fit_ms,
                     t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,
                     t.anchor_ms};
-  if (!t.fitted) mask_models_ = {};
+  if (!t.fitted && crop_) mask_models_ = {};
   if (t.fitted && crop_) {
     Stopwatch watch;
     try {
