@@ -5,7 +5,6 @@
 
 #include "common/core/options.h"
 #include "common/core/timer.h"
-#include "common/headmodel/head_outline.h"
 
 namespace headcast {
 
@@ -35,7 +34,7 @@ LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& optio
   if (options.anchor) tracker_.SetAnchor(*options.anchor);
 }
 
-LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params) {
+LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params, OutlineJob* deferred) {
   const cv::Mat& bgr = frame.bgr;
   if (!camera_) {
     auto [camera, why] = ChooseTrackingCamera(options_, frame.camera, bgr.cols, bgr.rows);
@@ -57,32 +56,31 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
   LiveTrackResult r{t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,        t.fit_ms,
                     t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,
                     t.anchor_ms};
-  if (!t.fitted && crop_) mask_models_ = {};
-  if (t.fitted && crop_) {
-    Stopwatch watch;
-    try {
-      params->outline = MeasureFrameOutline(bgr, t.face.raw, *params);
-    } catch (const std::exception& e) {  // a frame the mask cannot be cut on goes without an outline
-      spdlog::warn("frame without the hair's outline: {}", e.what());
-    }
-    r.outline_ms = watch.ElapsedMs();
+  if (!t.fitted) face_lost_ = true;
+  if (!t.fitted || !crop_) return r;
+  OutlineJob job{
+      deferred ? bgr.clone() : bgr, t.face.raw, *crop_, tracker_.fitter().Project(*params, crop_->camera), *params,
+      tracker_.identity(),          face_lost_};
+  face_lost_ = false;
+  if (deferred) {
+    *deferred = std::move(job);
+    r.outline_deferred = true;
+    return r;
   }
+  if (!outliner_) outliner_ = MakeOutliner();
+  Stopwatch watch;
+  try {
+    params->outline = outliner_->Measure(job);
+  } catch (const std::exception& e) {  // a frame the mask cannot be cut on goes without an outline
+    spdlog::warn("frame without the hair's outline: {}", e.what());
+  }
+  r.outline_ms = watch.ElapsedMs();
   return r;
 }
 
-std::vector<float> LiveTracker::MeasureFrameOutline(const cv::Mat& bgr, const Landmarks2d& face,
-                                                    const FrameParams& params) {
-  const Eigen::VectorXd& shape = tracker_.identity();
-  if (!mask_identity_ || mask_shape_.size() != shape.size() || mask_shape_ != shape) {
-    mask_identity_ = model_.MakeIdentity(shape);
-    mask_shape_ = shape;
-  }
-  HeadModelOutput posed;
-  model_.Forward(*mask_identity_, params.expression.cast<double>(), params.HeadPose(), &posed);
-  const cv::Mat mask = CutFrameMask(bgr, face, *crop_, model_, posed, tracker_.fitter(), params, options_.matte_rules,
-                                    options_.outline_mask, &mask_models_);
-  const OutlineOptions outline;
-  return MeasureOutline(mask, OutlineFrame::Of(crop_->camera, params.CamFromHead(), outline), outline);
+std::unique_ptr<FrameOutliner> LiveTracker::MakeOutliner() const {
+  if (!options_.outline) return nullptr;
+  return std::make_unique<FrameOutliner>(model_, options_.matte_rules, options_.outline_mask);
 }
 
 }  // namespace headcast

@@ -4,6 +4,7 @@
 // settings the offline pass (and so the trainer's prep) uses.
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -12,6 +13,7 @@
 #include "common/headmodel/params.h"
 #include "common/tracking/frame_mask.h"
 #include "common/tracking/frame_tracker.h"
+#include "sender/frame_outliner.h"
 
 namespace headcast {
 
@@ -30,9 +32,8 @@ struct LiveTrackerOptions {
   // outline (FrameParams::outline), measured on the frame's head mask cut as
   // the avatar's training masks were (CutFrameMask, at this resolution), so
   // that the receiver draws the hair's edge where the person's is. Off by
-  // default: even with its colour models carried, the mask's GrabCut on the
-  // tracking thread keeps the sender below 30 fps beside a receiver on two
-  // cores (the benchmark report).
+  // default: it costs a GrabCut a frame (the benchmark report); the sender
+  // measures it on a worker thread beside the tracker (OutlinePipeline).
   bool outline = false;
   int outline_resolution = 256;
   MatteRules matte_rules;  // the avatar's (its masks' rules)
@@ -59,6 +60,7 @@ struct LiveTrackResult {
   bool anchored = false;              // fitted again with the placement held to the anchor's references
   double anchor_ms = 0;               // the anchor's alignment and fit (within fit_ms)
   double outline_ms = 0;              // the head mask and the outline measured on it
+  bool outline_deferred = false;      // the outline's job was handed to the caller instead
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.
@@ -71,25 +73,27 @@ class LiveTracker {
   // Throws std::invalid_argument naming an option out of range.
   LiveTracker(const HeadModel& model, const LiveTrackerOptions& options);
   // Tracks one frame; on success *params holds the frame's expression, jaw and
-  // cam_from_head (the caller stamps sequence and capture time).
-  LiveTrackResult Process(const CapturedFrame& frame, FrameParams* params);
+  // cam_from_head (the caller stamps sequence and capture time). With the
+  // outline asked for, it is measured here, or with `deferred` handed over
+  // as a job (its frame copied) for the caller to measure (outline_deferred).
+  LiveTrackResult Process(const CapturedFrame& frame, FrameParams* params, OutlineJob* deferred = nullptr);
+  // What measures the outline of a deferred job as this tracker would
+  // (nothing when no outline is measured); one per thread.
+  std::unique_ptr<FrameOutliner> MakeOutliner() const;
   const Eigen::VectorXd& identity() const { return tracker_.identity(); }
 
  private:
-  // The top of the head's outline on `bgr` (LiveTrackerOptions::outline); empty without a crop.
-  std::vector<float> MeasureFrameOutline(const cv::Mat& bgr, const Landmarks2d& face, const FrameParams& params);
-
   const HeadModel& model_;
   LiveTrackerOptions options_;
   FrameTracker tracker_;
   std::optional<PinholeCamera> camera_;
   std::optional<FrameCrop> crop_;  // the avatar's square in this camera's frames (with the contract)
   bool outline_refused_ = false;   // asked for, but these frames have no square: said once
-  Eigen::VectorXd mask_shape_;     // the identity mask_identity_ was made for
-  std::optional<HeadIdentity> mask_identity_;
-  // GrabCut's colour models from frame to frame (HeadMaskOptions::refit_every);
-  // forgotten when the face is lost, so a face that returns learns its own.
-  HeadMaskModels mask_models_;
+  // Measures the outlines not deferred; its GrabCut colour models are carried
+  // from frame to frame and forgotten when the face is lost, so that a face
+  // that returns learns its own.
+  std::unique_ptr<FrameOutliner> outliner_;
+  bool face_lost_ = false;  // since the last outline's job
 };
 
 }  // namespace headcast

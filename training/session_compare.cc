@@ -184,8 +184,8 @@ nlohmann::json RunCompare(const CompareOptions& o) {
         input_panel = cut.image;
         fit_panel =
             RenderHead(model, posed.vertices, f.CamFromHead(), subject.intrinsics, albedo, render_options).image_bgr;
-        return MaskedTarget(cut.image,
-                            CutCropMask(cut.mask, model, posed, fitter, f, subject.intrinsics, prep.matte_rules()));
+        return MaskedTarget(cut.image, CutCropMask(cut.mask, model, posed, fitter.Project(f, subject.intrinsics), f,
+                                                   subject.intrinsics, prep.matte_rules()));
       },
       [&](int k, const cv::Mat& target, const cv::Mat& shown) {
         scored.push_back(k);

@@ -18,29 +18,30 @@ std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const Pinh
 }
 
 cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                        const HeadMaskOptions& mask_options, HeadMaskModels* carried) {
-  cv::Mat grabcut = CropSquare(HeadMask(bgr, face_landmarks, mask_options, carried), crop.x0, crop.y0, crop.side,
-                               crop.resolution, cv::INTER_LINEAR);
+                        const HeadMaskOptions& mask_options, HeadMaskModels* carried, double wanted_above_y) {
+  const double wanted_in_frame = crop.y0 + wanted_above_y * crop.side / crop.resolution;
+  cv::Mat grabcut = CropSquare(HeadMask(bgr, face_landmarks, mask_options, carried, wanted_in_frame), crop.x0, crop.y0,
+                               crop.side, crop.resolution, cv::INTER_LINEAR);
   cv::threshold(grabcut, grabcut, 127, 255, cv::THRESH_BINARY);
   return grabcut;
 }
 
 cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadModelOutput& posed,
-                    const HeadFitter& fitter, const FrameParams& params, const PinholeCamera& crop_camera,
+                    const Landmarks2d& fitted_landmarks, const FrameParams& params, const PinholeCamera& crop_camera,
                     const MatteRules& rules) {
   RasterVertices in_camera;
   TransformToCamera(posed.vertices, params.CamFromHead(), &in_camera);
   RasterBuffers silhouette;
   Rasterize(in_camera, model.data().faces, crop_camera, RasterOptions{}, &silhouette);
-  return CutTrainingMask(grabcut, silhouette.Mask(), fitter.Project(params, crop_camera), rules);
+  return CutTrainingMask(grabcut, silhouette.Mask(), fitted_landmarks, rules);
 }
 
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
+                     const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
                      const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options,
-                     HeadMaskModels* carried) {
-  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried), model, posed, fitter, params,
-                     crop.camera, rules);
+                     HeadMaskModels* carried, double wanted_above_y) {
+  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried, wanted_above_y), model, posed,
+                     fitted_landmarks, params, crop.camera, rules);
 }
 
 }  // namespace headcast

@@ -31,21 +31,25 @@ std::optional<FrameCrop> ContractCrop(const CameraContract& contract, const Pinh
 // The tracker's GrabCut head mask made on the whole frame (seeded by
 // `face_landmarks`, pixels of the frame) and cut to `crop`: CV_8U,
 // crop.resolution², 0 or 255. Throws std::invalid_argument on an empty frame
-// or non-finite landmarks.
+// or non-finite landmarks. `wanted_above_y` (pixels of the crop): only the
+// mask above that row is wanted (HeadMask's).
 cv::Mat CropGrabCutMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                        const HeadMaskOptions& mask = {}, HeadMaskModels* carried = nullptr);
+                        const HeadMaskOptions& mask = {}, HeadMaskModels* carried = nullptr,
+                        double wanted_above_y = HUGE_VAL);
 
 // A training target's mask from a crop's GrabCut mask: the matte's rules with
-// the fitted head (`posed` by `params`) seen through `crop_camera`.
+// the fitted head (`posed` by `params`) seen through `crop_camera`, and its
+// landmarks projected there (HeadFitter::Project).
 cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadModelOutput& posed,
-                    const HeadFitter& fitter, const FrameParams& params, const PinholeCamera& crop_camera,
+                    const Landmarks2d& fitted_landmarks, const FrameParams& params, const PinholeCamera& crop_camera,
                     const MatteRules& rules);
 
-// Both: a live frame's mask as prep cut the training masks (`carried`: the
-// colour models carried over the frames of a sequence, HeadMask's).
+// Both: a live frame's mask as prep cut the training masks (`fitted_landmarks`
+// in the crop's camera; `carried`: the colour models carried over the frames
+// of a sequence, HeadMask's).
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadModelOutput& posed, const HeadFitter& fitter,
+                     const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
                      const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {},
-                     HeadMaskModels* carried = nullptr);
+                     HeadMaskModels* carried = nullptr, double wanted_above_y = HUGE_VAL);
 
 }  // namespace headcast

@@ -14,10 +14,12 @@ void HeadMaskOptions::Check() const {
   c.InRange("hair_height", hair_height, 0, 3).InRange("head_width", head_width, 1, 3);
   c.InRange("neck_height", neck_height, 0, 3).InRange("min_face_height", min_face_height, 0, 2);
   c.InRange("background_ring", background_ring, 0, 2).InRange("refit_every", refit_every, 1, 1000);
+  c.InRange("wanted_margin", wanted_margin, 0, 1);
   c.ThrowIfErrors();
 }
 
-cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried) {
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried,
+                 double wanted_above_y) {
   o.Check();
   if (bgr.empty() || bgr.type() != CV_8UC3) throw std::invalid_argument("HeadMask: an 8-bit BGR image is needed");
   std::vector<cv::Point2f> pts;
@@ -85,7 +87,12 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   for (const auto& p : hull_f) hull.push_back(to_work(face_centre + (p - face_centre) * 0.9f));
   cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));
   if (carried && !carried->background.empty() && carried->frames_since_fit + 1 < o.refit_every) {
-    cv::grabCut(image, seeds, cv::Rect(), carried->background, carried->foreground, 1, cv::GC_EVAL_FREEZE_MODEL);
+    const double wanted_rows = (wanted_above_y - roi.y) * scale + o.wanted_margin * image.rows;
+    const int rows = wanted_rows < image.rows ? std::max(8, static_cast<int>(std::ceil(wanted_rows))) : image.rows;
+    cv::Mat band = seeds.rowRange(0, rows).clone();  // below: the seeds' probable head
+    cv::grabCut(image.rowRange(0, rows), band, cv::Rect(), carried->background, carried->foreground, 1,
+                cv::GC_EVAL_FREEZE_MODEL);
+    band.copyTo(seeds.rowRange(0, rows));
     ++carried->frames_since_fit;
   } else {
     cv::Mat bgd_model, fgd_model;

@@ -4,6 +4,7 @@
 // probable background, the rest background.
 #pragma once
 
+#include <cmath>
 #include <opencv2/core.hpp>
 
 #include "common/tracking/head_fitter.h"
@@ -30,6 +31,11 @@ struct HeadMaskOptions {
   // what is behind it keep their colours over a few frames, and the models
   // are what GrabCut's iterations spend most of their time refining.
   int refit_every = 1;
+  // A frame cut with carried models of which only the rows above a given one
+  // are wanted (HeadMask's `wanted_above_y`) is segmented down to that row
+  // and this much of the region's height further (the cut there still feels
+  // the rows beneath it); most of GrabCut's time scales with the pixels.
+  double wanted_margin = 0.1;
   void Check() const;
 };
 
@@ -43,9 +49,13 @@ struct HeadMaskModels {
 // CV_8U, 255 on the head. Throws std::invalid_argument on an empty image or
 // non-finite landmarks. With `carried`, the colour models are learnt or
 // reused as HeadMaskOptions::refit_every says (a sequence of frames: a live
-// sender); without, every mask learns its own.
+// sender); without, every mask learns its own. `wanted_above_y` (pixels of
+// `bgr`): only the mask above that row is wanted; a frame cut with carried
+// models is then segmented only there (HeadMaskOptions::wanted_margin), and
+// below it the mask is the seeds' probable head. A frame that learns its
+// models segments the whole region: they must know the face and the neck.
 cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {},
-                 HeadMaskModels* carried = nullptr);
+                 HeadMaskModels* carried = nullptr, double wanted_above_y = HUGE_VAL);
 
 // Intersection over union of two binary masks (non-zero = inside).
 double MaskIou(const cv::Mat& a, const cv::Mat& b);

@@ -169,7 +169,8 @@ TEST(FrameMask, TheCutMasksOutlineIsTheHeads) {
     Stopwatch watch;
     HeadModelOutput posed;
     model.Forward(identity, s.params.expression.cast<double>(), s.params.HeadPose(), &posed);
-    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, posed, fitter, s.params, MatteRules{});
+    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, posed, fitter.Project(s.params, crop->camera),
+                                     s.params, MatteRules{});
     std::printf("pitch %+.0f: mask cut in %.1f ms\n", pitch, watch.ElapsedMs());
     ASSERT_EQ(cut.rows, 256);
     cv::Mat truth = CropSquare(s.mask, crop->x0, crop->y0, crop->side, 256, cv::INTER_LINEAR);
@@ -215,6 +216,39 @@ TEST(HeadMask, CarriedColourModelsCutLikeAFramesOwn) {
   }
   HeadMaskOptions bad;
   bad.refit_every = 0;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
+TEST(HeadMask, ACarriedModelsCutOfTheWantedRowsIsTheWholeCutThere) {
+  const RestingHeadScenes scenes(11);
+  HeadMaskOptions o;
+  o.refit_every = 100;
+  for (double yaw : {-8.0, 0.0, 6.0}) {
+    HeadMaskModels learnt;
+    const RestingHeadScenes::Scene before = scenes.At(0.7, yaw - 3, 0);
+    HeadMask(before.image, before.landmarks, o, &learnt);
+    const RestingHeadScenes::Scene s = scenes.At(0.7, yaw, 0);
+    double brow_y = 0;  // the rows above the brows: the hair's outline
+    for (int k = 17; k <= 26; ++k) brow_y += 0.1 * s.landmarks[k].y();
+    HeadMaskModels for_whole{learnt.background.clone(), learnt.foreground.clone(), 0},
+        for_band{learnt.background.clone(), learnt.foreground.clone(), 0};
+    Stopwatch watch;
+    const cv::Mat whole = HeadMask(s.image, s.landmarks, o, &for_whole);
+    const double whole_ms = watch.ElapsedMs();
+    watch.Restart();
+    const cv::Mat band = HeadMask(s.image, s.landmarks, o, &for_band, brow_y);
+    const double band_ms = watch.ElapsedMs();
+    const cv::Range above(0, static_cast<int>(brow_y));
+    const double iou = MaskIou(band.rowRange(above), whole.rowRange(above));
+    std::printf("yaw %+.0f: above the brows IoU %.4f with the whole cut, %.4f with the truth; %.1f ms vs %.1f\n", yaw,
+                iou, MaskIou(band.rowRange(above), s.mask.rowRange(above)), band_ms, whole_ms);
+    EXPECT_GT(iou, 0.99) << "yaw " << yaw;
+    EXPECT_GT(MaskIou(band.rowRange(above), s.mask.rowRange(above)), 0.9) << "yaw " << yaw;
+    // Beneath, the seeds' probable head: still one head, the face in it.
+    EXPECT_GT(MaskIou(band, s.mask), 0.8) << "yaw " << yaw;
+  }
+  HeadMaskOptions bad;
+  bad.wanted_margin = -0.1;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
