@@ -34,7 +34,7 @@ LiveTracker::LiveTracker(const HeadModel& model, const LiveTrackerOptions& optio
   if (options.anchor) tracker_.SetAnchor(*options.anchor);
 }
 
-LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params, OutlineJob* deferred) {
+LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* params) {
   const cv::Mat& bgr = frame.bgr;
   if (!camera_) {
     auto [camera, why] = ChooseTrackingCamera(options_, frame.camera, bgr.cols, bgr.rows);
@@ -51,36 +51,37 @@ LiveTrackResult LiveTracker::Process(const CapturedFrame& frame, FrameParams* pa
                    options_.contract ? "these frames are not of the avatar's camera (another aspect)"
                                      : "no camera contract (--identity-from an avatar that records one)");
   }
-  const TrackedFrame t =
-      tracker_.Track(bgr, frame.depth_m, frame.capture_time_s, *camera_, params, frame.depth_on_demand.get());
+  Stopwatch watch;
+  const FaceObservation face = tracker_.Observe(bgr, frame.capture_time_s);
+  const double landmarks_ms = watch.ElapsedMs();
+  // The outline's head mask is cut beside the fit: it needs only the landmarks.
+  const bool outline = crop_ && face.status != FaceStatus::kNoFace;
+  if (outline) {
+    if (!outliner_)
+      outliner_ = std::make_unique<FrameOutliner>(model_, *crop_, options_.matte_rules, options_.outline_mask,
+                                                  options_.outline_beside_fit);
+    outliner_->Start(bgr, face.raw);
+  }
+  TrackedFrame t = tracker_.TrackObserved(bgr, frame.depth_m, face, *camera_, params, frame.depth_on_demand.get());
+  t.landmarks_ms = landmarks_ms;
   LiveTrackResult r{t.fitted,   t.with_depth,     t.face.status,          t.landmarks_ms,        t.fit_ms,
                     t.depth_ms, t.identity_frame, t.provisional_identity, t.identity_frozen_now, t.anchored,
                     t.anchor_ms};
-  if (!t.fitted) face_lost_ = true;
-  if (!t.fitted || !crop_) return r;
-  OutlineJob job{
-      deferred ? bgr.clone() : bgr, t.face.raw, *crop_, tracker_.fitter().Project(*params, crop_->camera), *params,
-      tracker_.identity(),          face_lost_};
-  face_lost_ = false;
-  if (deferred) {
-    *deferred = std::move(job);
-    r.outline_deferred = true;
+  if (!t.fitted) {
+    if (outliner_) outliner_->Forget();
     return r;
   }
-  if (!outliner_) outliner_ = MakeOutliner();
-  Stopwatch watch;
-  try {
-    params->outline = outliner_->Measure(job);
-  } catch (const std::exception& e) {  // a frame the mask cannot be cut on goes without an outline
-    spdlog::warn("frame without the hair's outline: {}", e.what());
+  if (outline) {
+    watch.Restart();
+    try {
+      params->outline =
+          outliner_->Finish(*params, tracker_.fitter().Project(*params, crop_->camera), tracker_.identity());
+    } catch (const std::exception& e) {  // a frame the mask cannot be cut on goes without an outline
+      spdlog::warn("frame without the hair's outline: {}", e.what());
+    }
+    r.outline_ms = watch.ElapsedMs();
   }
-  r.outline_ms = watch.ElapsedMs();
   return r;
-}
-
-std::unique_ptr<FrameOutliner> LiveTracker::MakeOutliner() const {
-  if (!options_.outline) return nullptr;
-  return std::make_unique<FrameOutliner>(model_, options_.matte_rules, options_.outline_mask);
 }
 
 }  // namespace headcast

@@ -32,9 +32,10 @@ struct LiveTrackerOptions {
   // outline (FrameParams::outline), measured on the frame's head mask cut as
   // the avatar's training masks were (CutFrameMask, at this resolution), so
   // that the receiver draws the hair's edge where the person's is. Off by
-  // default: it costs a GrabCut a frame (the benchmark report); the sender
-  // measures it on a worker thread beside the tracker (OutlinePipeline).
+  // default: it costs a GrabCut a frame, cut on a worker thread beside the
+  // fit (FrameOutliner; the benchmark report has what it costs).
   bool outline = false;
+  bool outline_beside_fit = true;  // false: the mask cut on the tracking thread after the fit
   int outline_resolution = 256;
   MatteRules matte_rules;  // the avatar's (its masks' rules)
   // GrabCut's: the training masks', except that a frame learns its own colour
@@ -59,8 +60,9 @@ struct LiveTrackResult {
   bool identity_frozen_now = false;   // RGB-D: the identity was made at this frame
   bool anchored = false;              // fitted again with the placement held to the anchor's references
   double anchor_ms = 0;               // the anchor's alignment and fit (within fit_ms)
-  double outline_ms = 0;              // the head mask and the outline measured on it
-  bool outline_deferred = false;      // the outline's job was handed to the caller instead
+  // The outline's share of the frame's time after its fit: waiting for its
+  // head mask, cutting it to the matte's rules, measuring the outline on it.
+  double outline_ms = 0;
 };
 
 // The camera to track `width` x `height` frames with, and where it came from.
@@ -73,13 +75,9 @@ class LiveTracker {
   // Throws std::invalid_argument naming an option out of range.
   LiveTracker(const HeadModel& model, const LiveTrackerOptions& options);
   // Tracks one frame; on success *params holds the frame's expression, jaw and
-  // cam_from_head (the caller stamps sequence and capture time). With the
-  // outline asked for, it is measured here, or with `deferred` handed over
-  // as a job (its frame copied) for the caller to measure (outline_deferred).
-  LiveTrackResult Process(const CapturedFrame& frame, FrameParams* params, OutlineJob* deferred = nullptr);
-  // What measures the outline of a deferred job as this tracker would
-  // (nothing when no outline is measured); one per thread.
-  std::unique_ptr<FrameOutliner> MakeOutliner() const;
+  // cam_from_head (the caller stamps sequence and capture time), and its
+  // outline when asked for.
+  LiveTrackResult Process(const CapturedFrame& frame, FrameParams* params);
   const Eigen::VectorXd& identity() const { return tracker_.identity(); }
 
  private:
@@ -89,11 +87,10 @@ class LiveTracker {
   std::optional<PinholeCamera> camera_;
   std::optional<FrameCrop> crop_;  // the avatar's square in this camera's frames (with the contract)
   bool outline_refused_ = false;   // asked for, but these frames have no square: said once
-  // Measures the outlines not deferred; its GrabCut colour models are carried
-  // from frame to frame and forgotten when the face is lost, so that a face
-  // that returns learns its own.
+  // Made with the crop; its GrabCut colour models are carried from frame to
+  // frame and forgotten when the face is lost, so that a face that returns
+  // learns its own.
   std::unique_ptr<FrameOutliner> outliner_;
-  bool face_lost_ = false;  // since the last outline's job
 };
 
 }  // namespace headcast

@@ -5,7 +5,6 @@
 #include <CLI/CLI.hpp>
 #include <cmath>
 #include <csignal>
-#include <deque>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -26,7 +25,6 @@
 #include "proto/recording.h"
 #include "sender/grpc_uplink.h"
 #include "sender/live_tracker.h"
-#include "sender/outline_pipeline.h"
 #include "sender/session_client.h"
 
 namespace headcast {
@@ -40,9 +38,8 @@ struct SenderFlags {
   int synthetic = 0, key_interval = 30;
   double duration = 0, error_m = 2e-4;
   bool loop = false;
-  bool photometric_anchor = true;           // the avatar's, when --identity-from names one that carries it
-  bool outline_on_tracking_thread = false;  // --outline measured after each fit instead of beside the next
-  double health_check_s = 0;                // > 0: only ask the receiver's health, this long at most
+  bool photometric_anchor = true;  // the avatar's, when --identity-from names one that carries it
+  double health_check_s = 0;       // > 0: only ask the receiver's health, this long at most
   std::string input, identity_from, intrinsics, camera_size = "640x480";
   SourceOptions source;
   LiveTrackerOptions live;
@@ -102,11 +99,11 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_flag("--outline", f.live.outline,
                "--input: measure the top of the head's outline on each frame (the frame's head mask cut as the "
                "avatar's training masks were) and send it, so the receiver draws the hair's edge where the person's "
-               "is; needs --identity-from an avatar that records its camera. Costs a GrabCut a frame, on a worker "
-               "thread beside the tracker (see outline_ms in --json)");
-  app.add_flag("--outline-on-tracking-thread", f.outline_on_tracking_thread,
-               "--outline: measure each frame's outline on the tracking thread after its fit (the frame's "
-               "parameters leave sooner; the tracker takes the next frame later)");
+               "is; needs --identity-from an avatar that records its camera. Costs a GrabCut a frame, cut on a "
+               "worker thread beside the fit (outline_ms in --json: what a frame waits for after its fit)");
+  app.add_flag("!--outline-on-tracking-thread", f.live.outline_beside_fit,
+               "--outline: cut each frame's head mask on the tracking thread after its fit (each frame then "
+               "waits a whole GrabCut after its fit)");
   app.add_option("--outline-mask-size", f.live.outline_mask.working_size,
                  "--input: the head mask the outline is measured on is segmented at about this many pixels across "
                  "(the training masks' by default; smaller is faster and coarser)")
@@ -235,55 +232,9 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     if (!frames_csv) throw std::runtime_error(f.frames_csv + ": cannot be written");
     frames_csv << "sequence,input_frame\n";
   }
-  // A fitted frame on its way to the session: its outline is measured on a
-  // worker beside the tracker (unless --outline-on-tracking-thread), and
-  // frames leave in the order they were read.
-  struct Tracked {
-    uint64_t index = 0;
-    double capture_time_s = 0, read_start_s = 0;
-    bool identity_frame = false, provisional_identity = false;
-  };
-  std::unique_ptr<OutlinePipeline> outlines;
-  if (!f.outline_on_tracking_thread)
-    if (std::unique_ptr<FrameOutliner> outliner = tracker.MakeOutliner())
-      outlines = std::make_unique<OutlinePipeline>(std::move(outliner));
-  std::deque<Tracked> waiting;  // pushed to `outlines`, in order
-  auto emit = [&](FrameParams& p, const Tracked& t, double frame_outline_ms) {
-    if (!p.outline.empty()) {
-      ++outlined;
-      outline_ms.Add(frame_outline_ms);
-    }
-    // Capture to parameters: from the capture stamp for live sources; for
-    // files read as fast as possible, from the read (decoding, rectifying,
-    // landmarks, depth, fit, outline).
-    const double now_s = SteadyNowSeconds();
-    const double frame_to_params_ms = 1e3 * (now_s - (f.source.realtime ? t.capture_time_s : t.read_start_s));
-    frame_ms.Add(frame_to_params_ms);
-    // The first RGB-D frames fit the person's shape too (far slower), or live
-    // are tracked while it is fitted beside them; after them, the tracking rate.
-    if (t.identity_frame)
-      ++identity_frames;
-    else if (t.provisional_identity)
-      provisional_frame_ms.Add(frame_to_params_ms);
-    else
-      tracking_frame_ms.Add(frame_to_params_ms);
-    ++fitted;
-    p.sequence = sequence++;
-    p.capture_time_s = f.source.realtime ? t.capture_time_s : now_s;
-    client.Submit(p);
-    if (recorder) recorder->Write(p);
-    if (frames_csv.is_open()) frames_csv << p.sequence << "," << t.index << "\n";
-  };
-  auto emit_outlined = [&](bool wait) {  // the frames whose outlines are measured (wait: all pushed)
-    while (std::optional<OutlinePipeline::Done> d = wait ? outlines->Pop() : outlines->TryPop()) {
-      emit(d->params, waiting.front(), d->outline_ms);
-      waiting.pop_front();
-    }
-  };
   while (!g_stop && !client.counters().gave_up && (f.duration <= 0 || clock.ElapsedSeconds() < f.duration)) {
     CapturedFrame frame;
     std::string problem;
-    const double read_start_s = SteadyNowSeconds();
     Stopwatch read_watch;
     const ReadStatus st = source->Read(&frame, &problem);
     if (st == ReadStatus::kEnd) {
@@ -298,8 +249,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     read_ms.Add(read_watch.ElapsedMs());
     ++read;
     FrameParams p;
-    OutlineJob job;
-    const LiveTrackResult r = tracker.Process(frame, &p, outlines ? &job : nullptr);
+    const LiveTrackResult r = tracker.Process(frame, &p);
     landmarks_ms.Add(r.landmarks_ms);
     with_depth += r.with_depth;
     if (r.identity_frozen_now) {
@@ -308,24 +258,37 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
       spdlog::info("RGB-D identity made at frame {} (shape {:.3f} {:.3f} {:.3f} ...)", read, beta[0],
                    beta.size() > 1 ? beta[1] : 0.0, beta.size() > 2 ? beta[2] : 0.0);
     }
-    if (outlines) emit_outlined(false);
     if (!r.fitted) continue;  // no face this frame: the receiver holds the last one
     if (!first_fit_s) first_fit_s = clock.ElapsedSeconds();
     fit_ms.Add(r.fit_ms);
     if (r.with_depth) depth_ms.Add(r.depth_ms);
     if (f.live.anchor && !r.with_depth) anchor_ms.Add(r.anchor_ms);
     anchored += r.anchored;
-    const Tracked t{frame.index, frame.capture_time_s, read_start_s, r.identity_frame, r.provisional_identity};
-    if (r.outline_deferred) {
-      outlines->Push(std::move(job));
-      waiting.push_back(t);
-      emit_outlined(false);
-    } else {
-      if (outlines) emit_outlined(true);  // the frames before this one go first
-      emit(p, t, r.outline_ms);
+    if (!p.outline.empty()) {
+      ++outlined;
+      outline_ms.Add(r.outline_ms);
     }
+    // Capture to parameters: from the capture stamp for live sources; for
+    // files read as fast as possible, the work on this thread (decoding,
+    // rectifying, landmarks, depth, fit).
+    const double frame_to_params_ms =
+        f.source.realtime ? 1e3 * (SteadyNowSeconds() - frame.capture_time_s) : read_watch.ElapsedMs();
+    frame_ms.Add(frame_to_params_ms);
+    // The first RGB-D frames fit the person's shape too (far slower), or live
+    // are tracked while it is fitted beside them; after them, the tracking rate.
+    if (r.identity_frame)
+      ++identity_frames;
+    else if (r.provisional_identity)
+      provisional_frame_ms.Add(frame_to_params_ms);
+    else
+      tracking_frame_ms.Add(frame_to_params_ms);
+    ++fitted;
+    p.sequence = sequence++;
+    p.capture_time_s = f.source.realtime ? frame.capture_time_s : SteadyNowSeconds();
+    client.Submit(p);
+    if (recorder) recorder->Write(p);
+    if (frames_csv.is_open()) frames_csv << p.sequence << "," << frame.index << "\n";
   }
-  if (outlines) emit_outlined(true);
   auto median = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Median(); };
   auto p95 = [](const SampleStats& s) { return s.empty() ? 0.0 : s.Percentile(95); };
   return {{"input", f.input},

@@ -237,12 +237,14 @@ RigidObservations FollowRigidPoints(const RigidObservations& reference, const cv
 TrackedFrame FrameTracker::Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
                                  FrameParams* params, const DepthOnDemand* depth_on_demand) {
   Stopwatch watch;
-  const FaceObservation face = faces_.Track(bgr, time_s);
+  const FaceObservation face = Observe(bgr, time_s);
   const double landmarks_ms = watch.ElapsedMs();
   TrackedFrame r = TrackObserved(bgr, depth_m, face, camera, params, depth_on_demand);
   r.landmarks_ms = landmarks_ms;
   return r;
 }
+
+FaceObservation FrameTracker::Observe(const cv::Mat& bgr, double time_s) { return faces_.Track(bgr, time_s); }
 
 TrackedFrame FrameTracker::TrackObserved(const cv::Mat& bgr, const cv::Mat& depth_m, const FaceObservation& face,
                                          const PinholeCamera& camera, FrameParams* params,

@@ -104,8 +104,11 @@ class FrameTracker {
   // with a neutral expression.
   TrackedFrame Track(const cv::Mat& bgr, const cv::Mat& depth_m, double time_s, const PinholeCamera& camera,
                      FrameParams* params, const DepthOnDemand* depth_on_demand = nullptr);
-  // The same with the face already observed (a recorded track smoothed
-  // offline, SmoothTrackTwoSided): only the fit runs; landmarks_ms stays 0.
+  // Track's first half: the face and its landmarks on the frame.
+  FaceObservation Observe(const cv::Mat& bgr, double time_s);
+  // The same with the face already observed (Observe, or a recorded track
+  // smoothed offline, SmoothTrackTwoSided): only the fit runs; landmarks_ms
+  // stays 0.
   TrackedFrame TrackObserved(const cv::Mat& bgr, const cv::Mat& depth_m, const FaceObservation& face,
                              const PinholeCamera& camera, FrameParams* params,
                              const DepthOnDemand* depth_on_demand = nullptr);

@@ -1,11 +1,16 @@
 // The camera contract from the avatar to the live tracker: which camera the
 // sender tracks with, and the contract read from an avatar's manifest; the
-// photometric anchor's references read from it too.
+// photometric anchor's references read from it too. The hair's outline cut
+// beside the fit.
 #include "sender/live_tracker.h"
 
 #include <gtest/gtest.h>
 
+#include "common/core/crop.h"
 #include "common/core/zip_archive.h"
+#include "common/headmodel/head_outline.h"
+#include "common/tracking/head_fitter.h"
+#include "tests/testing/resting_head_scenes.h"
 #include "tests/testing/test_data.h"
 
 namespace headcast {
@@ -101,6 +106,94 @@ TEST(AnchorReference, ReadFromTheAvatarsManifest) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("broken.hcavatar"), std::string::npos);
   }
+}
+
+// The renders' square, as an avatar's camera contract would give it.
+FrameCrop SceneCrop(const testing::RestingHeadScenes& scenes) {
+  CameraContract contract;
+  contract.source = scenes.camera();
+  contract.crop_x0 = 120;
+  contract.crop_y0 = 40;
+  contract.crop_side = 400;
+  return *ContractCrop(contract, scenes.camera(), 256);
+}
+
+std::vector<float> TrueOutline(const testing::RestingHeadScenes::Scene& s, const FrameCrop& crop) {
+  cv::Mat truth = CropSquare(s.mask, crop.x0, crop.y0, crop.side, crop.resolution, cv::INTER_LINEAR);
+  cv::threshold(truth, truth, 127, 255, cv::THRESH_BINARY);
+  const OutlineOptions o;
+  return MeasureOutline(truth, OutlineFrame::Of(crop.camera, s.params.CamFromHead(), o), o);
+}
+
+// The head mask cut on worker threads while the tracker fits (its colour
+// models learnt anew on a second one) gives the outline the tracking thread's
+// own cut gives, and both are the head's, over a turning head.
+TEST(FrameOutliner, BesideTheFitMeasuresWhatTheTrackingThreadWould) {
+  const testing::RestingHeadScenes scenes(9);
+  const FrameCrop crop = SceneCrop(scenes);
+  const HeadModel& model = scenes.model();
+  const HeadFitter fitter(model);
+  const Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
+  HeadMaskOptions mask;
+  mask.refit_every = 3;
+  FrameOutliner beside(model, crop, MatteRules{}, mask), after(model, crop, MatteRules{}, mask, false);
+  int known = 0;
+  for (int i = 0; i < 7; ++i) {
+    const testing::RestingHeadScenes::Scene s = scenes.At(0.7, -6 + 2 * i, 5);
+    beside.Start(s.image, s.landmarks);
+    after.Start(s.image, s.landmarks);
+    const Landmarks2d fitted = fitter.Project(s.params, crop.camera);
+    const std::vector<float> a = beside.Finish(s.params, fitted, identity),
+                             b = after.Finish(s.params, fitted, identity), truth = TrueOutline(s, crop);
+    ASSERT_EQ(a.size(), truth.size());
+    ASSERT_EQ(b.size(), truth.size());
+    for (size_t k = 0; k < truth.size(); ++k) {
+      if (truth[k] == kOutlineUnknown) continue;
+      ++known;
+      EXPECT_NEAR(a[k], truth[k], 3.0) << "frame " << i << " arc " << k;
+      EXPECT_NEAR(b[k], truth[k], 3.0) << "frame " << i << " arc " << k;
+      EXPECT_NEAR(a[k], b[k], 2.0) << "frame " << i << " arc " << k;
+    }
+  }
+  EXPECT_GE(known, 7 * 6);
+}
+
+// A frame whose mask cannot be cut goes without an outline and the next one is
+// measured; a frame not fitted is dropped; Finish needs a Start.
+TEST(FrameOutliner, AFrameItCannotCutGoesWithoutOne) {
+  const testing::RestingHeadScenes scenes(9);
+  const FrameCrop crop = SceneCrop(scenes);
+  const HeadModel& model = scenes.model();
+  const HeadFitter fitter(model);
+  const Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
+  HeadMaskOptions mask;
+  mask.refit_every = 4;
+  for (bool beside_fit : {true, false}) {
+    FrameOutliner outliner(model, crop, MatteRules{}, mask, beside_fit);
+    const testing::RestingHeadScenes::Scene s = scenes.At(0.7, 0, 0);
+    const Landmarks2d fitted = fitter.Project(s.params, crop.camera);
+    Landmarks2d broken = s.landmarks;
+    broken[5].x() = NAN;
+    outliner.Start(s.image, broken);
+    EXPECT_THROW(outliner.Finish(s.params, fitted, identity), std::invalid_argument);
+    EXPECT_THROW(outliner.Finish(s.params, fitted, identity), std::logic_error);  // no frame started
+    outliner.Start(s.image, s.landmarks);
+    outliner.Abandon();
+    outliner.Start(s.image, s.landmarks);
+    outliner.Forget();
+    outliner.Start(s.image, s.landmarks);
+    const std::vector<float> outline = outliner.Finish(s.params, fitted, identity), truth = TrueOutline(s, crop);
+    int known = 0;
+    for (size_t k = 0; k < truth.size(); ++k)
+      if (truth[k] != kOutlineUnknown) {
+        ++known;
+        EXPECT_NEAR(outline[k], truth[k], 3.0) << "arc " << k;
+      }
+    EXPECT_GE(known, 6);
+  }
+  HeadMaskOptions bad;
+  bad.refit_every = 0;
+  EXPECT_THROW(FrameOutliner(model, crop, MatteRules{}, bad), std::invalid_argument);
 }
 
 }  // namespace
