@@ -125,15 +125,23 @@ std::vector<float> TrueOutline(const testing::RestingHeadScenes::Scene& s, const
   return MeasureOutline(truth, OutlineFrame::Of(crop.camera, s.params.CamFromHead(), o), o);
 }
 
+// The scenes, their square and what a fit of them gives.
+struct OutlinerScenes : testing::RestingHeadScenes {
+  OutlinerScenes() : RestingHeadScenes(9) {}
+  const FrameCrop crop = SceneCrop(*this);
+  const HeadFitter fitter{model()};
+  const Eigen::VectorXd identity = Eigen::VectorXd::Zero(model().num_shape());
+};
+
 // The head mask cut on worker threads while the tracker fits (its colour
 // models learnt anew on a second one) gives the outline the tracking thread's
 // own cut gives, and both are the head's, over a turning head.
 TEST(FrameOutliner, BesideTheFitMeasuresWhatTheTrackingThreadWould) {
-  const testing::RestingHeadScenes scenes(9);
-  const FrameCrop crop = SceneCrop(scenes);
+  const OutlinerScenes scenes;
+  const FrameCrop& crop = scenes.crop;
   const HeadModel& model = scenes.model();
-  const HeadFitter fitter(model);
-  const Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
+  const HeadFitter& fitter = scenes.fitter;
+  const Eigen::VectorXd& identity = scenes.identity;
   HeadMaskOptions mask;
   mask.refit_every = 3;
   FrameOutliner beside(model, crop, MatteRules{}, mask), after(model, crop, MatteRules{}, mask, false);
@@ -161,11 +169,11 @@ TEST(FrameOutliner, BesideTheFitMeasuresWhatTheTrackingThreadWould) {
 // A frame whose mask cannot be cut goes without an outline and the next one is
 // measured; a frame not fitted is dropped; Finish needs a Start.
 TEST(FrameOutliner, AFrameItCannotCutGoesWithoutOne) {
-  const testing::RestingHeadScenes scenes(9);
-  const FrameCrop crop = SceneCrop(scenes);
+  const OutlinerScenes scenes;
+  const FrameCrop& crop = scenes.crop;
   const HeadModel& model = scenes.model();
-  const HeadFitter fitter(model);
-  const Eigen::VectorXd identity = Eigen::VectorXd::Zero(model.num_shape());
+  const HeadFitter& fitter = scenes.fitter;
+  const Eigen::VectorXd& identity = scenes.identity;
   HeadMaskOptions mask;
   mask.refit_every = 4;
   for (bool beside_fit : {true, false}) {
