@@ -138,21 +138,18 @@ struct OutlinerScenes : testing::RestingHeadScenes {
 // own cut gives, and both are the head's, over a turning head.
 TEST(FrameOutliner, BesideTheFitMeasuresWhatTheTrackingThreadWould) {
   const OutlinerScenes scenes;
-  const FrameCrop& crop = scenes.crop;
-  const HeadModel& model = scenes.model();
-  const HeadFitter& fitter = scenes.fitter;
-  const Eigen::VectorXd& identity = scenes.identity;
   HeadMaskOptions mask;
   mask.refit_every = 3;
-  FrameOutliner beside(model, crop, MatteRules{}, mask), after(model, crop, MatteRules{}, mask, false);
+  FrameOutliner beside(scenes.model(), scenes.crop, MatteRules{}, mask),
+      after(scenes.model(), scenes.crop, MatteRules{}, mask, false);
   int known = 0;
   for (int i = 0; i < 7; ++i) {
     const testing::RestingHeadScenes::Scene s = scenes.At(0.7, -6 + 2 * i, 5);
     beside.Start(s.image, s.landmarks);
     after.Start(s.image, s.landmarks);
-    const Landmarks2d fitted = fitter.Project(s.params, crop.camera);
-    const std::vector<float> a = beside.Finish(s.params, fitted, identity),
-                             b = after.Finish(s.params, fitted, identity), truth = TrueOutline(s, crop);
+    const Landmarks2d fitted = scenes.fitter.Project(s.params, scenes.crop.camera);
+    const std::vector<float> a = beside.Finish(s.params, fitted, scenes.identity),
+                             b = after.Finish(s.params, fitted, scenes.identity), truth = TrueOutline(s, scenes.crop);
     ASSERT_EQ(a.size(), truth.size());
     ASSERT_EQ(b.size(), truth.size());
     for (size_t k = 0; k < truth.size(); ++k) {
@@ -170,27 +167,24 @@ TEST(FrameOutliner, BesideTheFitMeasuresWhatTheTrackingThreadWould) {
 // measured; a frame not fitted is dropped; Finish needs a Start.
 TEST(FrameOutliner, AFrameItCannotCutGoesWithoutOne) {
   const OutlinerScenes scenes;
-  const FrameCrop& crop = scenes.crop;
-  const HeadModel& model = scenes.model();
-  const HeadFitter& fitter = scenes.fitter;
-  const Eigen::VectorXd& identity = scenes.identity;
   HeadMaskOptions mask;
   mask.refit_every = 4;
   for (bool beside_fit : {true, false}) {
-    FrameOutliner outliner(model, crop, MatteRules{}, mask, beside_fit);
+    FrameOutliner outliner(scenes.model(), scenes.crop, MatteRules{}, mask, beside_fit);
     const testing::RestingHeadScenes::Scene s = scenes.At(0.7, 0, 0);
-    const Landmarks2d fitted = fitter.Project(s.params, crop.camera);
+    const Landmarks2d fitted = scenes.fitter.Project(s.params, scenes.crop.camera);
     Landmarks2d broken = s.landmarks;
     broken[5].x() = NAN;
     outliner.Start(s.image, broken);
-    EXPECT_THROW(outliner.Finish(s.params, fitted, identity), std::invalid_argument);
-    EXPECT_THROW(outliner.Finish(s.params, fitted, identity), std::logic_error);  // no frame started
+    EXPECT_THROW(outliner.Finish(s.params, fitted, scenes.identity), std::invalid_argument);
+    EXPECT_THROW(outliner.Finish(s.params, fitted, scenes.identity), std::logic_error);  // no frame started
     outliner.Start(s.image, s.landmarks);
     outliner.Abandon();
     outliner.Start(s.image, s.landmarks);
     outliner.Forget();
     outliner.Start(s.image, s.landmarks);
-    const std::vector<float> outline = outliner.Finish(s.params, fitted, identity), truth = TrueOutline(s, crop);
+    const std::vector<float> outline = outliner.Finish(s.params, fitted, scenes.identity),
+                             truth = TrueOutline(s, scenes.crop);
     int known = 0;
     for (size_t k = 0; k < truth.size(); ++k)
       if (truth[k] != kOutlineUnknown) {
@@ -201,7 +195,7 @@ TEST(FrameOutliner, AFrameItCannotCutGoesWithoutOne) {
   }
   HeadMaskOptions bad;
   bad.refit_every = 0;
-  EXPECT_THROW(FrameOutliner(model, crop, MatteRules{}, bad), std::invalid_argument);
+  EXPECT_THROW(FrameOutliner(scenes.model(), scenes.crop, MatteRules{}, bad), std::invalid_argument);
 }
 
 }  // namespace
