@@ -12,7 +12,16 @@ namespace headcast {
 
 FrameOutliner::FrameOutliner(const HeadModel& model, const FrameCrop& crop, const MatteRules& rules,
                              const HeadMaskOptions& mask, bool beside_fit)
-    : model_(model), crop_(crop), rules_(rules), mask_(mask), beside_fit_(beside_fit) {
+    : model_(model),
+      crop_(crop),
+      rules_(rules),
+      mask_(mask),
+      frozen_([&] {
+        HeadMaskOptions o = mask;
+        o.refit_every = 1000;  // the learner refits the models
+        return o;
+      }()),
+      beside_fit_(beside_fit) {
   mask_.Check();
   if (!beside_fit_) return;
   cutter_ = std::thread([this] { CutLoop(); });
@@ -57,14 +66,7 @@ std::vector<float> FrameOutliner::Finish(const FrameParams& params, const Landma
                                          const Eigen::VectorXd& identity) {
   if (!started_) throw std::logic_error("FrameOutliner::Finish without Start");
   started_ = false;
-  cv::Mat grabcut;
-  try {
-    grabcut = WaitForCut();
-  } catch (...) {
-    bgr_ = cv::Mat();
-    throw;
-  }
-  bgr_ = cv::Mat();
+  const cv::Mat grabcut = WaitForCut();
   if (!identity_ || shape_.size() != identity.size() || shape_ != identity) {
     identity_ = model_.MakeIdentity(identity);
     shape_ = identity;
@@ -87,7 +89,6 @@ void FrameOutliner::Abandon() {
     cut_done_ = false;
     cut_ = cv::Mat();
   }
-  bgr_ = cv::Mat();
 }
 
 void FrameOutliner::Forget() {
@@ -123,9 +124,7 @@ cv::Mat FrameOutliner::Cut(const cv::Mat& bgr, const Landmarks2d& face, double c
     }
     return grabcut;
   }
-  HeadMaskOptions frozen = mask_;
-  frozen.refit_every = 1000;  // the learner refits them
-  const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, frozen, &carried, wanted_above_y);
+  const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, frozen_, &carried, wanted_above_y);
   bool ask = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);

@@ -62,12 +62,13 @@ class FrameOutliner {
   const FrameCrop crop_;
   const MatteRules rules_;
   const HeadMaskOptions mask_;
+  const HeadMaskOptions frozen_;  // mask_ for a cut with the carried models only
   const bool beside_fit_;
   Eigen::VectorXd shape_;  // the identity identity_ was made for
   std::optional<HeadIdentity> identity_;
   double centre_row_ = -1;  // the last outline's centre in the crop (< 0: none): the rows the next cut needs
 
-  // The frame being cut (Start to Finish).
+  // The frame being cut (Start to Finish; kept until the next Start).
   cv::Mat bgr_;
   Landmarks2d face_{};
   bool started_ = false;

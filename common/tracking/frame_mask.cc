@@ -39,9 +39,9 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
                      const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
                      const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options,
-                     HeadMaskModels* carried, double wanted_above_y) {
-  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried, wanted_above_y), model, posed,
-                     fitted_landmarks, params, crop.camera, rules);
+                     HeadMaskModels* carried) {
+  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried), model, posed, fitted_landmarks,
+                     params, crop.camera, rules);
 }
 
 }  // namespace headcast

@@ -50,6 +50,6 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
 cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
                      const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
                      const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {},
-                     HeadMaskModels* carried = nullptr, double wanted_above_y = HUGE_VAL);
+                     HeadMaskModels* carried = nullptr);
 
 }  // namespace headcast
