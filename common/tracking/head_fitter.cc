@@ -380,13 +380,8 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
   ceres::Problem problem;
   for (int l = 0; l < kNumLandmarks; ++l) {
     const double weight = l < kNumContourLandmarks ? options_.contour_weight : 1.0;
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<LandmarkResidual, 8>(new LandmarkResidual(
-        b.base.row(l).transpose(), b.dirs[l], b.jaw_weight[l], b.jaw_joint, observed[l], cam, weight));
-    cost->AddParameterBlock(3);
-    cost->AddParameterBlock(3);
-    cost->AddParameterBlock(num_expression_);
-    cost->AddParameterBlock(3);
-    cost->SetNumResiduals(2);
+    auto* cost =
+        new LandmarkCost(b.base.row(l).transpose(), b.dirs[l], b.jaw_weight[l], b.jaw_joint, observed[l], cam, weight);
     problem.AddResidualBlock(cost, new ceres::HuberLoss(options_.huber_px),
                              {rotation, translation, expression.data(), jaw});
   }
@@ -404,7 +399,7 @@ LandmarkFitResult HeadFitter::Fit(const Landmarks2d& observed, const PinholeCame
   const bool gaze = irises && AddGaze(&problem, *irises, cam, rotation, translation, left_eye, right_eye);
   AddLidGaze(&problem, expression.data(), left_eye, right_eye, gaze);
   ceres::Solver::Options solver;
-  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   solver.max_num_iterations = options_.max_iterations;
   solver.num_threads = 1;
   ceres::Solver::Summary summary;

@@ -1,5 +1,5 @@
-// The head fitter's residuals (landmark reprojection by Ceres autodiff; the lids' tie to the gaze), in a
-// header so tests can check them with ceres::GradientChecker.
+// The head fitter's residuals (landmark reprojection; the lids' tie to the gaze), in a header so tests can
+// check them with ceres::GradientChecker.
 #pragma once
 
 #include <ceres/ceres.h>
@@ -24,50 +24,87 @@ void ProjectionResidual(const T* cam_rotation, const T* cam_translation, const T
   residual[1] = T(weight) * (T(cam.fy) * x[1] / x[2] + T(cam.cy) - T(observed.y()));
 }
 
-// One landmark of one frame: expression-linear position, jaw skinning, cam_from_head, pinhole projection.
-struct LandmarkResidual {
-  LandmarkResidual(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
-                   const Eigen::Vector3d& jaw_joint, const Eigen::Vector2d& observed, const PinholeCamera& cam,
-                   double weight)
-      : base(base),
-        dirs(dirs),
-        jaw_weight(jaw_weight),
-        jaw_joint(jaw_joint),
-        observed(observed),
-        cam(cam),
-        weight(weight) {}
-
-  // DynamicAutoDiffCostFunction's form: the blocks are rotation, translation, expression, jaw.
-  template <typename T>
-  bool operator()(T const* const* blocks, T* residual) const {
-    return (*this)(blocks[0], blocks[1], blocks[2], blocks[3], residual);
+// One landmark of one frame: expression-linear position, jaw skinning,
+// cam_from_head, pinhole projection; blocks rotation, translation,
+// expression, jaw. Its Jacobian is written out: the position is linear in the
+// expression, so one product with the landmark's directions gives that block,
+// where autodiff would carry a derivative per coefficient through every step.
+// Only the two rotations go through jets (three derivatives each).
+class LandmarkCost : public ceres::CostFunction {
+ public:
+  LandmarkCost(const Eigen::Vector3d& base, const Eigen::Matrix<double, 3, Eigen::Dynamic>& dirs, double jaw_weight,
+               const Eigen::Vector3d& jaw_joint, const Eigen::Vector2d& observed, const PinholeCamera& cam,
+               double weight)
+      : base_(base),
+        dirs_(dirs),
+        jaw_weight_(jaw_weight),
+        jaw_joint_(jaw_joint),
+        observed_(observed),
+        cam_(cam),
+        weight_(weight) {
+    set_num_residuals(2);
+    *mutable_parameter_block_sizes() = {3, 3, static_cast<int>(dirs.cols()), 3};
   }
 
-  template <typename T>
-  bool operator()(const T* cam_rotation, const T* cam_translation, const T* expression, const T* jaw,
-                  T* residual) const {
-    T p[3];
-    for (int c = 0; c < 3; ++c) {
-      p[c] = T(base[c]);
-      for (int k = 0; k < dirs.cols(); ++k) p[c] += T(dirs(c, k)) * expression[k];
-    }
-    if (jaw_weight > 0) {
+  bool Evaluate(double const* const* blocks, double* residual, double** jacobians) const override {
+    const int k = static_cast<int>(dirs_.cols());
+    const Eigen::Vector3d unskinned = base_ + dirs_ * Eigen::Map<const Eigen::VectorXd>(blocks[2], k);
+    Eigen::Vector3d p = unskinned;
+    Eigen::Matrix3d by_unskinned = Eigen::Matrix3d::Identity(), by_jaw = Eigen::Matrix3d::Zero();
+    if (jaw_weight_ > 0) {
       // Linear blend skinning between the head (identity) and the jaw joint's rotation.
-      T rel[3] = {p[0] - T(jaw_joint[0]), p[1] - T(jaw_joint[1]), p[2] - T(jaw_joint[2])}, rotated[3];
-      ceres::AngleAxisRotatePoint(jaw, rel, rotated);
-      for (int c = 0; c < 3; ++c) p[c] = (T(1) - T(jaw_weight)) * p[c] + T(jaw_weight) * (rotated[c] + T(jaw_joint[c]));
+      Eigen::Matrix3d jaw_rotation;
+      const Eigen::Vector3d rotated = Rotate(blocks[3], unskinned - jaw_joint_, &by_jaw, &jaw_rotation);
+      p = (1 - jaw_weight_) * unskinned + jaw_weight_ * (rotated + jaw_joint_);
+      by_unskinned = (1 - jaw_weight_) * Eigen::Matrix3d::Identity() + jaw_weight_ * jaw_rotation;
+      by_jaw *= jaw_weight_;
     }
-    ProjectionResidual(cam_rotation, cam_translation, p, cam, observed, weight, residual);
+    Eigen::Matrix3d x_by_rotation, cam_rotation;
+    const Eigen::Vector3d x =
+        Rotate(blocks[0], p, &x_by_rotation, &cam_rotation) + Eigen::Map<const Eigen::Vector3d>(blocks[1]);
+    residual[0] = weight_ * (cam_.fx * x[0] / x[2] + cam_.cx - observed_.x());
+    residual[1] = weight_ * (cam_.fy * x[1] / x[2] + cam_.cy - observed_.y());
+    if (!jacobians) return true;
+    Eigen::Matrix<double, 2, 3> r_by_x;
+    r_by_x << cam_.fx / x[2], 0, -cam_.fx * x[0] / (x[2] * x[2]), 0, cam_.fy / x[2], -cam_.fy * x[1] / (x[2] * x[2]);
+    r_by_x *= weight_;
+    using RowMajor2x3 = Eigen::Matrix<double, 2, 3, Eigen::RowMajor>;
+    if (jacobians[0]) Eigen::Map<RowMajor2x3>{jacobians[0]} = r_by_x * x_by_rotation;
+    if (jacobians[1]) Eigen::Map<RowMajor2x3>{jacobians[1]} = r_by_x;
+    const Eigen::Matrix<double, 2, 3> r_by_p = r_by_x * cam_rotation;
+    if (jacobians[2])
+      Eigen::Map<Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor>>(jacobians[2], 2, k) =
+          (r_by_p * by_unskinned) * dirs_;
+    if (jacobians[3]) Eigen::Map<RowMajor2x3>{jacobians[3]} = r_by_p * by_jaw;
     return true;
   }
 
-  Eigen::Vector3d base;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dirs;
-  double jaw_weight;
-  Eigen::Vector3d jaw_joint;
-  Eigen::Vector2d observed;
-  PinholeCamera cam;
-  double weight;
+ private:
+  // `point` turned by the axis-angle `angle_axis` as ceres::AngleAxisRotatePoint
+  // turns it, with the derivative by the angle-axis and the rotation's matrix
+  // (the derivative by the point: the same function's columns, as it is linear there).
+  static Eigen::Vector3d Rotate(const double* angle_axis, const Eigen::Vector3d& point, Eigen::Matrix3d* by_angle_axis,
+                                Eigen::Matrix3d* matrix) {
+    using Jet = ceres::Jet<double, 3>;
+    const Jet w[3] = {Jet(angle_axis[0], 0), Jet(angle_axis[1], 1), Jet(angle_axis[2], 2)};
+    const Jet q[3] = {Jet(point[0]), Jet(point[1]), Jet(point[2])};
+    Jet out[3];
+    ceres::AngleAxisRotatePoint(w, q, out);
+    for (int c = 0; c < 3; ++c) {
+      by_angle_axis->row(c) = out[c].v.transpose();
+      const double unit[3] = {c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0};
+      ceres::AngleAxisRotatePoint(angle_axis, unit, matrix->col(c).data());
+    }
+    return {out[0].a, out[1].a, out[2].a};
+  }
+
+  Eigen::Vector3d base_;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dirs_;
+  double jaw_weight_;
+  Eigen::Vector3d jaw_joint_;
+  Eigen::Vector2d observed_;
+  PinholeCamera cam_;
+  double weight_;
 };
 
 // A point of the head that no expression moves (head frame), seen at

@@ -487,7 +487,7 @@ TEST(HeadFitter, CalibrationKeepsAKnownFocalLength) {
   EXPECT_GT(std::abs(free.camera.fx - given.fx), 0.01 * given.fx);  // free calibration does move it
 }
 
-// ceres::GradientChecker on the autodiff landmark residuals (per-frame and calibration).
+// ceres::GradientChecker on the landmark residuals (per-frame, written out; calibration, autodiff).
 TEST(HeadFitter, LandmarkResidualJacobiansMatchNumericOnes) {
   std::mt19937 rng(2);
   std::uniform_real_distribution<double> u(-1, 1);
@@ -504,16 +504,16 @@ TEST(HeadFitter, LandmarkResidualJacobiansMatchNumericOnes) {
   const Eigen::Vector3d base(0.02, -0.04, 0.08), joint(0, -0.02, -0.01);
   ceres::NumericDiffOptions numeric;
   {
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<LandmarkResidual, 8>(
-        new LandmarkResidual(base, edirs, 0.7, joint, Eigen::Vector2d(300, 260), cam, 1.0));
-    for (int size : {3, 3, E, 3}) cost->AddParameterBlock(size);
-    cost->SetNumResiduals(2);
+    auto* cost = new LandmarkCost(base, edirs, 0.7, joint, Eigen::Vector2d(300, 260), cam, 1.0);
     std::unique_ptr<ceres::CostFunction> owned(cost);
     const std::vector<const ceres::Manifold*> none(4, nullptr);
     ceres::GradientChecker checker(cost, &none, numeric);
     ceres::GradientChecker::ProbeResults results;
     double* blocks[] = {rotation, translation, expression, jaw};
     EXPECT_TRUE(checker.Probe(blocks, 1e-5, &results)) << results.error_log;
+    double closed_jaw[3] = {0, 0, 0};  // the rotation's small-angle branch
+    double* closed[] = {rotation, translation, expression, closed_jaw};
+    EXPECT_TRUE(checker.Probe(closed, 1e-5, &results)) << results.error_log;
   }
   {
     auto* cost = new ceres::DynamicAutoDiffCostFunction<CalibrationResidual, 8>(
