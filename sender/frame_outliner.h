@@ -1,6 +1,6 @@
 // The top of the head's outline on tracked live frames (FrameParams::outline):
 // each frame's head mask cut as the avatar's training masks were
-// (CutFrameMask), measured as the receiver moves its avatar's edge
+// (CropGrabCutMask, CutCropMask), measured as the receiver moves its avatar's edge
 // (common/headmodel/head_outline.h).
 //
 // The mask's GrabCut needs only the frame and its landmarks, so it runs on a

@@ -30,7 +30,7 @@ struct LiveTrackerOptions {
   std::optional<AnchorReference> anchor;
   // With the contract: each fitted frame carries the top of its head's
   // outline (FrameParams::outline), measured on the frame's head mask cut as
-  // the avatar's training masks were (CutFrameMask, at this resolution), so
+  // the avatar's training masks were (CutCropMask, at this resolution), so
   // that the receiver draws the hair's edge where the person's is. Off by
   // default: it costs a GrabCut a frame, cut on a worker thread beside the
   // fit (FrameOutliner; the benchmark report has what it costs).

@@ -270,7 +270,7 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
     }
     // Capture to parameters: from the capture stamp for live sources; for
     // files read as fast as possible, the work on this thread (decoding,
-    // rectifying, landmarks, depth, fit).
+    // rectifying, landmarks, depth, fit, the outline's wait and measure).
     const double frame_to_params_ms =
         f.source.realtime ? 1e3 * (SteadyNowSeconds() - frame.capture_time_s) : read_watch.ElapsedMs();
     frame_ms.Add(frame_to_params_ms);

@@ -36,12 +36,4 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
   return CutTrainingMask(grabcut, silhouette.Mask(), fitted_landmarks, rules);
 }
 
-cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
-                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask_options,
-                     HeadMaskModels* carried) {
-  return CutCropMask(CropGrabCutMask(bgr, face_landmarks, crop, mask_options, carried), model, posed, fitted_landmarks,
-                     params, crop.camera, rules);
-}
-
 }  // namespace headcast

@@ -44,12 +44,4 @@ cv::Mat CutCropMask(const cv::Mat& grabcut, const HeadModel& model, const HeadMo
                     const Landmarks2d& fitted_landmarks, const FrameParams& params, const PinholeCamera& crop_camera,
                     const MatteRules& rules);
 
-// Both: a live frame's mask as prep cut the training masks (`fitted_landmarks`
-// in the crop's camera; `carried`: the colour models carried over the frames
-// of a sequence, HeadMask's).
-cv::Mat CutFrameMask(const cv::Mat& bgr, const Landmarks2d& face_landmarks, const FrameCrop& crop,
-                     const HeadModel& model, const HeadModelOutput& posed, const Landmarks2d& fitted_landmarks,
-                     const FrameParams& params, const MatteRules& rules, const HeadMaskOptions& mask = {},
-                     HeadMaskModels* carried = nullptr);
-
 }  // namespace headcast

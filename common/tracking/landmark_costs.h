@@ -80,9 +80,9 @@ class LandmarkCost : public ceres::CostFunction {
   }
 
  private:
-  // `point` turned by the axis-angle `angle_axis` as ceres::AngleAxisRotatePoint
-  // turns it, with the derivative by the angle-axis and the rotation's matrix
-  // (the derivative by the point: the same function's columns, as it is linear there).
+  // `point` turned by the axis-angle `angle_axis` (ceres::AngleAxisRotatePoint),
+  // with the derivative by the angle-axis and the rotation's matrix (the
+  // derivative by the point).
   static Eigen::Vector3d Rotate(const double* angle_axis, const Eigen::Vector3d& point, Eigen::Matrix3d* by_angle_axis,
                                 Eigen::Matrix3d* matrix) {
     using Jet = ceres::Jet<double, 3>;
@@ -90,11 +90,8 @@ class LandmarkCost : public ceres::CostFunction {
     const Jet q[3] = {Jet(point[0]), Jet(point[1]), Jet(point[2])};
     Jet out[3];
     ceres::AngleAxisRotatePoint(w, q, out);
-    for (int c = 0; c < 3; ++c) {
-      by_angle_axis->row(c) = out[c].v.transpose();
-      const double unit[3] = {c == 0 ? 1.0 : 0.0, c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0};
-      ceres::AngleAxisRotatePoint(angle_axis, unit, matrix->col(c).data());
-    }
+    for (int c = 0; c < 3; ++c) by_angle_axis->row(c) = out[c].v.transpose();
+    ceres::AngleAxisToRotationMatrix(angle_axis, matrix->data());  // column-major, as Eigen's
     return {out[0].a, out[1].a, out[2].a};
   }
 

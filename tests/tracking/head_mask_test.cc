@@ -127,8 +127,8 @@ TEST(FrameMask, TheCutMasksOutlineIsTheHeads) {
     Stopwatch watch;
     HeadModelOutput posed;
     model.Forward(identity, s.params.expression.cast<double>(), s.params.HeadPose(), &posed);
-    const cv::Mat cut = CutFrameMask(s.image, s.landmarks, *crop, model, posed, fitter.Project(s.params, crop->camera),
-                                     s.params, MatteRules{});
+    const cv::Mat cut = CutCropMask(CropGrabCutMask(s.image, s.landmarks, *crop), model, posed,
+                                    fitter.Project(s.params, crop->camera), s.params, crop->camera, MatteRules{});
     std::printf("pitch %+.0f: mask cut in %.1f ms\n", pitch, watch.ElapsedMs());
     ASSERT_EQ(cut.rows, 256);
     cv::Mat truth = CropSquare(s.mask, crop->x0, crop->y0, crop->side, 256, cv::INTER_LINEAR);
