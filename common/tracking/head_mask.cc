@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "common/core/options.h"
+#include "common/tracking/colour_cut.h"
 
 namespace headcast {
 
@@ -90,8 +91,7 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
     const double wanted_rows = (wanted_above_y - roi.y) * scale + o.wanted_margin * image.rows;
     const int rows = wanted_rows < image.rows ? std::max(8, static_cast<int>(std::ceil(wanted_rows))) : image.rows;
     cv::Mat band = seeds.rowRange(0, rows).clone();  // below: the seeds' probable head
-    cv::grabCut(image.rowRange(0, rows), band, cv::Rect(), carried->background, carried->foreground, 1,
-                cv::GC_EVAL_FREEZE_MODEL);
+    CutWithColourModels(image.rowRange(0, rows), band, carried->background, carried->foreground);
     band.copyTo(seeds.rowRange(0, rows));
     ++carried->frames_since_fit;
   } else {

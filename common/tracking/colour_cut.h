@@ -1,0 +1,30 @@
+// GrabCut's segmentation step with colour models that stay as they are: one
+// minimum cut of the energy cv::grabCut minimises (a pixel pays the negative
+// log-likelihood of its colour under the side's colour mixture; neighbours of
+// like colour pay to be split), for a live sender's frames between the frames
+// that learn the models (HeadMaskOptions::refit_every).
+//
+// cv::grabCut(GC_EVAL_FREEZE_MODEL) cuts the same energy, but builds a graph
+// vertex for every pixel — the certain background and head too, which can
+// never change side — and evaluates the mixtures in double precision with one
+// exponential per component. Here only the undecided pixels are vertices (a
+// certain neighbour's link is folded into the pixel's own terminal weight)
+// and the mixtures are evaluated in float, in log space: same minimum, a
+// fraction of the work.
+#pragma once
+
+#include <opencv2/core.hpp>
+
+namespace headcast {
+
+// `labels`: CV_8U of cv::GC_BGD / GC_FGD / GC_PR_BGD / GC_PR_FGD, the size of
+// `bgr` (CV_8UC3). Every probable pixel is set to the side the cut puts it on;
+// the certain ones stay. `background` / `foreground`: colour models in
+// cv::grabCut's layout (1×65 CV_64F: five weights, five means, five 3×3
+// covariances), as a learning cv::grabCut leaves them. Throws
+// std::invalid_argument on images, labels or models of another type or size,
+// a model whose weights are not a distribution or whose covariances are not
+// positive definite.
+void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& background, const cv::Mat& foreground);
+
+}  // namespace headcast
