@@ -46,6 +46,7 @@ struct SenderFlags {
   CLI::Option* stats_interval = nullptr;
   CLI::Option* key_interval_flag = nullptr;
   CLI::Option* error_flag = nullptr;
+  CLI::Option* outline_flag = nullptr;
 };
 
 void AddFlags(CLI::App& app, SenderFlags& f) {
@@ -96,11 +97,14 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
   app.add_flag("!--no-landmark-repair", f.live.tracker.face.repair.repair,
                "keep the shape predictor's brows and mouth where they jump against the flow from the previous "
                "frame (no repair; as the avatar's prep did)");
-  app.add_flag("--outline", f.live.outline,
-               "--input: measure the top of the head's outline on each frame (the frame's head mask cut as the "
-               "avatar's training masks were) and send it, so the receiver draws the hair's edge where the person's "
-               "is; needs --identity-from an avatar that records its camera. Costs a GrabCut a frame, cut on a "
-               "worker thread beside the fit (outline_ms in --json: what a frame waits for after its fit)");
+  f.live.outline = true;
+  f.outline_flag = app.add_flag(
+      "--outline,!--no-outline", f.live.outline,
+      "--input: measure the top of the head's outline on each frame (the frame's head mask cut as the avatar's "
+      "training masks were) and send it, so the receiver draws the hair's edge where the person's is. On by "
+      "default when --identity-from names an avatar that records its camera, except on narrow links (--max-kbps "
+      "below 32), where its bits would crowd out the face's; --outline asks for it there too. Costs a GrabCut a "
+      "frame, cut on a worker thread beside the fit (outline_ms in --json: what a frame waits for after its fit)");
   app.add_flag("!--outline-on-tracking-thread", f.live.outline_beside_fit,
                "--outline: cut each frame's head mask on the tracking thread after its fit (each frame then "
                "waits a whole GrabCut after its fit)");
@@ -371,6 +375,23 @@ nlohmann::json Report(const SenderCounters& c, double seconds) {
           {"budget_kbps_final", c.budget_kbps}};
 }
 
+// Whether live frames measure and carry the hair's outline: asked for with
+// --outline, or by default where it can be measured (the avatar records its
+// camera) and the link is not narrow.
+void DecideOutline(SenderFlags& f) {
+  if (!f.live.outline || f.input.empty() || f.outline_flag->count() > 0) return;
+  const char* why = nullptr;
+  if (f.session.max_kbps > 0 && f.session.max_kbps < kNarrowLinkKbps)
+    why = "a narrow link (--outline sends it anyway)";
+  else if (f.identity_from.empty())
+    why = "no --identity-from avatar to take its camera from";
+  else if (!ReadAvatarCameraContract(f.identity_from))
+    why = "the avatar records no camera";
+  if (!why) return;
+  f.live.outline = false;
+  spdlog::info("the hair's outline is not sent: {}", why);
+}
+
 int Run(SenderFlags& f) {
   InitLogging(f.log_level);
   StopOnSignals(&g_stop);
@@ -401,7 +422,8 @@ int Run(SenderFlags& f) {
     if (f.error_flag->count() == 0) f.error_m = kNarrowLinkQuantisationError;
   }
   if (f.key_interval < 1) throw std::invalid_argument("--key-interval must be at least 1");
-  // The outline's values travel when frames may carry one (a live --outline, or a recording that may hold them).
+  DecideOutline(f);
+  // The outline's values travel when frames may carry one (a live outline, or a recording that may hold them).
   const int outline_bins = f.live.outline || !f.params.empty() ? OutlineOptions{}.bins : 0;
   const CodecLayout layout =
       CodecLayout::FromModel(model, f.error_m, ParseComponents(f.components), f.key_interval, true, outline_bins);

@@ -1,16 +1,16 @@
-// GrabCut's segmentation step with colour models that stay as they are: one
-// minimum cut of the energy cv::grabCut minimises (a pixel pays the negative
+// GrabCut (Rother et al. 2004) for a live sender: a minimum cut of the
+// energy cv::grabCut minimises (a pixel pays the negative
 // log-likelihood of its colour under the side's colour mixture; neighbours of
-// like colour pay to be split), for a live sender's frames between the frames
-// that learn the models (HeadMaskOptions::refit_every).
+// like colour pay to be split), with colour models carried from the frames
+// that learn them (HeadMaskOptions::refit_every), and the learning itself.
 //
 // cv::grabCut(GC_EVAL_FREEZE_MODEL) cuts the same energy, but builds a graph
 // vertex for every pixel — the certain background and head too, which can
 // never change side — and evaluates the mixtures in double precision with one
 // exponential per component. Here only the undecided pixels are vertices (a
 // certain neighbour's link is folded into the pixel's own terminal weight)
-// and the mixtures are evaluated in float, in log space: same minimum, a
-// fraction of the work.
+// and the mixtures are evaluated in log space: the same cut for a fraction of
+// the work. Learning is cv::grabCut's, with these cuts.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -23,8 +23,18 @@ namespace headcast {
 // cv::grabCut's layout (1×65 CV_64F: five weights, five means, five 3×3
 // covariances), as a learning cv::grabCut leaves them. Throws
 // std::invalid_argument on images, labels or models of another type or size,
-// a model whose weights are not a distribution or whose covariances are not
-// positive definite.
+// a model whose weights are not a distribution or whose covariances are
+// singular.
 void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& background, const cv::Mat& foreground);
+
+// Colour models learnt as cv::grabCut(GC_INIT_WITH_MASK) learns them: each
+// side's pixels (certain and probable) clustered by k-means into five
+// components, then `iterations` rounds of giving each pixel its side's
+// likeliest component, refitting both mixtures and cutting with them (as
+// CutWithColourModels). `labels` leaves with the last cut, `background` and
+// `foreground` with the models (cv::grabCut's layout). Throws
+// std::invalid_argument as CutWithColourModels, or when either side has
+// fewer pixels than a mixture has components.
+void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground);
 
 }  // namespace headcast

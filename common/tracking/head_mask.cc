@@ -96,7 +96,7 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
     ++carried->frames_since_fit;
   } else {
     cv::Mat bgd_model, fgd_model;
-    cv::grabCut(image, seeds, cv::Rect(), bgd_model, fgd_model, o.iterations, cv::GC_INIT_WITH_MASK);
+    LearnColourModels(image, seeds, o.iterations, &bgd_model, &fgd_model);
     if (carried) *carried = {bgd_model, fgd_model, 0};
   }
   cv::Mat fg = (seeds == cv::GC_FGD) | (seeds == cv::GC_PR_FGD);

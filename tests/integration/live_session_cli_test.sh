@@ -62,7 +62,8 @@ if [ -f "$src/models/demo_avatar.hcavatar" ]; then
     [ -s "$tmp/demo/side_by_side.mp4" ] && [ -s "$tmp/demo/latency.png" ] && grep -q "glass to glass p50" "$tmp/demo.out" &&
     ok "deploy/demo.sh: $frames, $(json "$tmp/demo/report.json" "round(j['glass_to_glass_ms']['p50'])") ms glass to glass (p50)" ||
     bad "demo: $frames $(head -5 "$tmp/demo.out")"
-  # With the avatar's camera the sender measures the hair's outline on each frame and the receiver gets it.
+  # With the avatar's camera the sender measures the hair's outline on each frame by default and the receiver gets
+  # it; --no-outline sends none.
   "$bin/headcast-receiver" --listen "127.0.0.1:$((port + 1))" --plaintext --allow-no-token \
     --avatar "demo=$src/models/demo_avatar.hcavatar" --display none --record "$tmp/outlined.hcrec" \
     > /dev/null 2> "$tmp/rx2.log" &
@@ -70,14 +71,20 @@ if [ -f "$src/models/demo_avatar.hcavatar" ]; then
   wait_for "$tmp/rx2.log" listening || bad "second receiver never listened"
   "$bin/headcast-sender" --target "127.0.0.1:$((port + 1))" --plaintext --avatar-id demo \
     --input "$src/models/demo/demo_sequence.mp4" --identity-from "$src/models/demo_avatar.hcavatar" --pacing none \
-    --duration 3 --outline --json "$tmp/tx2.json" > /dev/null 2> "$tmp/tx2.log"
+    --duration 3 --json "$tmp/tx2.json" > /dev/null 2> "$tmp/tx2.log"
+  "$bin/headcast-sender" --target "127.0.0.1:$((port + 1))" --plaintext --avatar-id demo \
+    --input "$src/models/demo/demo_sequence.mp4" --identity-from "$src/models/demo_avatar.hcavatar" --pacing none \
+    --duration 1 --no-outline --json "$tmp/tx3.json" > /dev/null 2> "$tmp/tx3.log"
   sleep 0.5
   kill -INT "$rx"; wait "$rx"; rx=
   outlined=$(json "$tmp/tx2.json" "j['tracking']['frames_with_outline']")
   [ "${outlined:-0}" -ge 5 ] && [ "$outlined" = "$(json "$tmp/tx2.json" "j['tracking']['frames_fitted']")" ] &&
     [ "$(json "$tmp/tx2.json" "j['frames_sent']")" = "$outlined" ] && [ -s "$tmp/outlined.hcrec" ] &&
-    ok "--outline with the demo avatar's camera: $outlined frames carried the hair's outline, all sent" ||
-    bad "--outline with the demo avatar: outlined=$outlined $(tail -2 "$tmp/tx2.log")"
+    ok "by default with the demo avatar's camera: $outlined frames carried the hair's outline, all sent" ||
+    bad "the default outline with the demo avatar: outlined=$outlined $(tail -2 "$tmp/tx2.log")"
+  [ "$(json "$tmp/tx3.json" "j['tracking']['frames_with_outline']")" = 0 ] &&
+    [ "$(json "$tmp/tx3.json" "j['frames_sent'] > 0")" = True ] && ok "--no-outline: frames sent without the outline" ||
+    bad "--no-outline: $(json "$tmp/tx3.json" "j['tracking']") $(tail -2 "$tmp/tx3.log")"
   # The shipped avatar reproduces its subject (32.4 dB when made; a bound below it, not the figure).
   psnr=$(json "$tmp/demo/report.json" "j['avatar_vs_truth']['psnr_db']")
   "$python" -c "import sys; sys.exit(0 if float('${psnr:-0}') >= 31 else 1)" &&
