@@ -488,8 +488,9 @@ int main(int argc, char** argv) {
                    "avatar's; 0: sharp)")
       ->capture_default_str();
   eval->add_option("--outline-bins", e.outline_bins,
-                   "each frame carries the top of its mask's outline in this many arcs, as a sender with --outline "
-                   "measures it on its frame (12: the sender's; 0: none, the avatar alone, as the default sender's)")
+                   "each frame carries the top of its mask's outline in this many arcs, as the sender measures it "
+                   "on its frame (12: the sender's, by default with an avatar that records its camera; 0: none, the "
+                   "avatar alone, as a sender with --no-outline or on a narrow link)")
       ->capture_default_str();
   eval->add_option("--outline-every", e.outline_every,
                    "with --outline-bins: the outline measured on every Nth frame only, the others carrying the last "

@@ -588,9 +588,8 @@ nlohmann::json RunEval(const EvalOptions& o) {
                                          {"ramp", avatar.config().outline_ramp},
                                          {"matte_scale", avatar.config().outline_matte_scale},
                                          {"how",
-                                          "each frame carries the top of its mask's outline, as a sender with "
-                                          "--outline measures it on its frame's mask; the avatar's outline is moved "
-                                          "there"}}},
+                                          "each frame carries the top of its mask's outline, as the sender "
+                                          "measures it on its frame's mask; the avatar's outline is moved there"}}},
         {"lpips", "not computed (needs LPIPS weights, which cannot be downloaded here)"},
         {"expression_fidelity",
          agreement ? nlohmann::json{{"how",
