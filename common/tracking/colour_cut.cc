@@ -158,7 +158,7 @@ void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& bac
   CheckImageAndLabels("CutWithColourModels", bgr, labels);
   const Mixture back(background, "background"), head(foreground, "foreground");
 
-  // The contrast scale: neighbours split at the image's mean colour step pay about a third of gamma.
+  // The contrast scale: neighbours split at the image's mean colour step pay exp(-1/2) of gamma.
   const int rows = bgr.rows, cols = bgr.cols;
   int64_t sum_d2 = 0, pairs = 0;
   for (int y = 0; y < rows; ++y)

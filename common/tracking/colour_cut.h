@@ -1,16 +1,15 @@
-// GrabCut (Rother et al. 2004) for a live sender: a minimum cut of the
-// energy cv::grabCut minimises (a pixel pays the negative
+// GrabCut (Rother et al. 2004), the head masks' segmentation (HeadMask): a
+// minimum cut of the energy cv::grabCut minimises (a pixel pays the negative
 // log-likelihood of its colour under the side's colour mixture; neighbours of
-// like colour pay to be split), with colour models carried from the frames
-// that learn them (HeadMaskOptions::refit_every), and the learning itself.
+// like colour pay to be split) with given colour models — a live sender's,
+// carried from the frames that learn them (HeadMaskOptions::refit_every) —
+// and the models' learning.
 //
-// cv::grabCut(GC_EVAL_FREEZE_MODEL) cuts the same energy, but builds a graph
-// vertex for every pixel — the certain background and head too, which can
-// never change side — and evaluates the mixtures in double precision with one
-// exponential per component. Here only the undecided pixels are vertices (a
-// certain neighbour's link is folded into the pixel's own terminal weight)
-// and the mixtures are evaluated in log space: the same cut for a fraction of
-// the work. Learning is cv::grabCut's, with these cuts.
+// cv::grabCut builds a graph vertex for every pixel — the certain background
+// and head too, which can never change side. Here only the undecided pixels
+// are vertices (a certain neighbour's link is folded into the pixel's own
+// terminal weight): the same cut for a fraction of the work. Learning is
+// cv::grabCut's, with these cuts; its masks come out as cv::grabCut's.
 #pragma once
 
 #include <opencv2/core.hpp>
