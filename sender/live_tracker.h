@@ -31,9 +31,10 @@ struct LiveTrackerOptions {
   // With the contract: each fitted frame carries the top of its head's
   // outline (FrameParams::outline), measured on the frame's head mask cut as
   // the avatar's training masks were (CutCropMask, at this resolution), so
-  // that the receiver draws the hair's edge where the person's is. Off by
-  // default: it costs a GrabCut a frame, cut on a worker thread beside the
-  // fit (FrameOutliner; the benchmark report has what it costs).
+  // that the receiver draws the hair's edge where the person's is. It costs
+  // a GrabCut a frame, cut on a worker thread beside the fit (FrameOutliner;
+  // the benchmark report has what it costs); headcast-sender turns it on
+  // where it can be measured.
   bool outline = false;
   bool outline_beside_fit = true;  // false: the mask cut on the tracking thread after the fit
   int outline_resolution = 256;

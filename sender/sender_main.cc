@@ -194,7 +194,6 @@ nlohmann::json StreamLive(SenderFlags& f, const HeadModel& model, SenderClient& 
   ParseSize(f.camera_size, "--camera-size", &f.source.width, &f.source.height);
   if (!f.identity_from.empty()) {
     f.live.identity = ReadTrackingIdentity(f.identity_from, model);
-    f.live.contract = ReadAvatarCameraContract(f.identity_from);
     if (const std::optional<MatteRules> rules = ReadAvatarMatteRules(f.identity_from)) f.live.matte_rules = *rules;
     // The avatar learnt the codes of its training fits: the live fit makes them the same way.
     if (const std::optional<ExpressionFitSettings> fit = ReadAvatarExpressionFit(f.identity_from)) {
@@ -377,7 +376,7 @@ nlohmann::json Report(const SenderCounters& c, double seconds) {
 
 // Whether live frames measure and carry the hair's outline: asked for with
 // --outline, or by default where it can be measured (the avatar records its
-// camera) and the link is not narrow.
+// camera: f.live.contract) and the link is not narrow.
 void DecideOutline(SenderFlags& f) {
   if (!f.live.outline || f.input.empty() || f.outline_flag->count() > 0) return;
   const char* why = nullptr;
@@ -385,7 +384,7 @@ void DecideOutline(SenderFlags& f) {
     why = "a narrow link (--outline sends it anyway)";
   else if (f.identity_from.empty())
     why = "no --identity-from avatar to take its camera from";
-  else if (!ReadAvatarCameraContract(f.identity_from))
+  else if (!f.live.contract)
     why = "the avatar records no camera";
   if (!why) return;
   f.live.outline = false;
@@ -422,6 +421,8 @@ int Run(SenderFlags& f) {
     if (f.error_flag->count() == 0) f.error_m = kNarrowLinkQuantisationError;
   }
   if (f.key_interval < 1) throw std::invalid_argument("--key-interval must be at least 1");
+  // The avatar's camera: the live tracker's, and whether the outline can be measured.
+  if (!f.input.empty() && !f.identity_from.empty()) f.live.contract = ReadAvatarCameraContract(f.identity_from);
   DecideOutline(f);
   // The outline's values travel when frames may carry one (a live outline, or a recording that may hold them).
   const int outline_bins = f.live.outline || !f.params.empty() ? OutlineOptions{}.bins : 0;

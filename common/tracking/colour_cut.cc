@@ -1,4 +1,4 @@
-// One graph cut of GrabCut's energy over the undecided pixels only.
+// GrabCut's energy cut over the undecided pixels only, and its colour models' learning.
 #include "common/tracking/colour_cut.h"
 
 #include <algorithm>
@@ -152,72 +152,98 @@ int SquaredDistance(const uchar* a, const uchar* b) {
 // The neighbours a pixel links to behind it in scan order: left, up-left, up, up-right.
 constexpr int kBehind[4][2] = {{0, -1}, {-1, -1}, {-1, 0}, {-1, 1}};
 
+// What a cut of an image and its seeds is made of, apart from the colours'
+// terms: which pixel each vertex is (the undecided ones, in scan order), the
+// links between undecided neighbours, and the links to certain ones (each
+// paid when the undecided pixel takes the other side). The undecided pixels
+// stay undecided whatever side a cut puts them on, so a learning's rounds
+// cut the same graph with other colour models.
+class CutGraph {
+ public:
+  CutGraph(const cv::Mat& bgr, const cv::Mat& labels) {
+    // The contrast scale: neighbours split at the image's mean colour step pay exp(-1/2) of gamma.
+    const int rows = bgr.rows, cols = bgr.cols;
+    int64_t sum_d2 = 0, pairs = 0;
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x)
+        for (const auto& d : kBehind) {
+          const int qy = y + d[0], qx = x + d[1];
+          if (qy < 0 || qx < 0 || qx >= cols) continue;
+          sum_d2 += SquaredDistance(bgr.ptr<uchar>(y, x), bgr.ptr<uchar>(qy, qx));
+          ++pairs;
+        }
+    const double beta = sum_d2 > 0 ? pairs / (2.0 * sum_d2) : 0.0;
+    std::vector<int> vertex(static_cast<size_t>(rows) * cols, -1);
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x)
+        if (Undecided(labels.at<uchar>(y, x))) {
+          vertex[static_cast<size_t>(y) * cols + x] = static_cast<int>(pixels_.size());
+          pixels_.emplace_back(x, y);
+        }
+    for (int y = 0; y < rows; ++y)
+      for (int x = 0; x < cols; ++x)
+        for (int k = 0; k < 4; ++k) {
+          const int qy = y + kBehind[k][0], qx = x + kBehind[k][1];
+          if (qy < 0 || qx < 0 || qx >= cols) continue;
+          const int vp = vertex[static_cast<size_t>(y) * cols + x], vq = vertex[static_cast<size_t>(qy) * cols + qx];
+          if (vp < 0 && vq < 0) continue;
+          const double w = (k % 2 ? kGamma / std::sqrt(2.0) : kGamma) *
+                           std::exp(-beta * SquaredDistance(bgr.ptr<uchar>(y, x), bgr.ptr<uchar>(qy, qx)));
+          if (vp >= 0 && vq >= 0) {
+            links_.push_back({vp, vq, w});
+          } else {
+            const uchar certain = vp >= 0 ? labels.at<uchar>(qy, qx) : labels.at<uchar>(y, x);
+            certain_.push_back({vp >= 0 ? vp : vq, certain == cv::GC_FGD, w});
+          }
+        }
+  }
+
+  // One minimum cut with these colour models: every undecided label set to its side.
+  void Cut(const cv::Mat& bgr, const Mixture& back, const Mixture& head, cv::Mat& labels) const {
+    const int n = static_cast<int>(pixels_.size());
+    if (n == 0) return;
+    // Per vertex: its link to the head's terminal (paid when it goes to the
+    // background) and to the background's (paid when it goes to the head).
+    std::vector<double> to_head(n), to_back(n);
+    for (int v = 0; v < n; ++v) {
+      const uchar* c = bgr.ptr<uchar>(pixels_[v].y, pixels_[v].x);
+      to_head[v] = back.NegLogLikelihood(c);
+      to_back[v] = head.NegLogLikelihood(c);
+    }
+    for (const Certain& l : certain_) (l.head ? to_head : to_back)[l.v] += l.w;
+    cv::detail::GCGraph<double> graph(static_cast<unsigned>(n), static_cast<unsigned>(2 * links_.size()));
+    for (int v = 0; v < n; ++v) graph.addVtx();
+    for (const Link& l : links_) graph.addEdges(l.p, l.q, l.w, l.w);
+    for (int v = 0; v < n; ++v) graph.addTermWeights(v, to_head[v], to_back[v]);
+    const bool any_link = !links_.empty();
+    if (any_link) graph.maxFlow();  // (GCGraph refuses a graph without edges)
+    for (int v = 0; v < n; ++v) {
+      const bool head_side = any_link ? graph.inSourceSegment(v) : to_head[v] > to_back[v];
+      labels.at<uchar>(pixels_[v].y, pixels_[v].x) = head_side ? cv::GC_PR_FGD : cv::GC_PR_BGD;
+    }
+  }
+
+ private:
+  struct Link {
+    int p, q;
+    double w;
+  };
+  struct Certain {
+    int v;
+    bool head;  // the certain neighbour is head
+    double w;
+  };
+  std::vector<cv::Point> pixels_;
+  std::vector<Link> links_;
+  std::vector<Certain> certain_;  // in scan order, as they are summed
+};
+
 }  // namespace
 
 void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& background, const cv::Mat& foreground) {
   CheckImageAndLabels("CutWithColourModels", bgr, labels);
   const Mixture back(background, "background"), head(foreground, "foreground");
-
-  // The contrast scale: neighbours split at the image's mean colour step pay exp(-1/2) of gamma.
-  const int rows = bgr.rows, cols = bgr.cols;
-  int64_t sum_d2 = 0, pairs = 0;
-  for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < cols; ++x)
-      for (const auto& d : kBehind) {
-        const int qy = y + d[0], qx = x + d[1];
-        if (qy < 0 || qx < 0 || qx >= cols) continue;
-        sum_d2 += SquaredDistance(bgr.ptr<uchar>(y, x), bgr.ptr<uchar>(qy, qx));
-        ++pairs;
-      }
-  const double beta = sum_d2 > 0 ? pairs / (2.0 * sum_d2) : 0.0;
-
-  std::vector<int> vertex(static_cast<size_t>(rows) * cols, -1);
-  // Per vertex: its link to the head's terminal (paid when it goes to the
-  // background) and to the background's (paid when it goes to the head).
-  std::vector<double> to_head, to_back;
-  for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < cols; ++x)
-      if (Undecided(labels.at<uchar>(y, x))) {
-        vertex[static_cast<size_t>(y) * cols + x] = static_cast<int>(to_head.size());
-        const uchar* c = bgr.ptr<uchar>(y, x);
-        to_head.push_back(back.NegLogLikelihood(c));
-        to_back.push_back(head.NegLogLikelihood(c));
-      }
-  const int n = static_cast<int>(to_head.size());
-  if (n == 0) return;
-
-  cv::detail::GCGraph<double> graph(static_cast<unsigned>(n), static_cast<unsigned>(8 * n));
-  for (int v = 0; v < n; ++v) graph.addVtx();
-  bool any_edge = false;
-  for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < cols; ++x)
-      for (int k = 0; k < 4; ++k) {
-        const int qy = y + kBehind[k][0], qx = x + kBehind[k][1];
-        if (qy < 0 || qx < 0 || qx >= cols) continue;
-        const int vp = vertex[static_cast<size_t>(y) * cols + x], vq = vertex[static_cast<size_t>(qy) * cols + qx];
-        if (vp < 0 && vq < 0) continue;
-        const double w = (k % 2 ? kGamma / std::sqrt(2.0) : kGamma) *
-                         std::exp(-beta * SquaredDistance(bgr.ptr<uchar>(y, x), bgr.ptr<uchar>(qy, qx)));
-        if (vp >= 0 && vq >= 0) {
-          graph.addEdges(vp, vq, w, w);
-          any_edge = true;
-          continue;
-        }
-        // A certain neighbour never changes side: its link is paid when the
-        // undecided pixel takes the other one.
-        const int v = vp >= 0 ? vp : vq;
-        const uchar certain = vp >= 0 ? labels.at<uchar>(qy, qx) : labels.at<uchar>(y, x);
-        (certain == cv::GC_FGD ? to_head : to_back)[v] += w;
-      }
-  for (int v = 0; v < n; ++v) graph.addTermWeights(v, to_head[v], to_back[v]);
-  if (any_edge) graph.maxFlow();  // (GCGraph refuses a graph without edges)
-  for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < cols; ++x) {
-      const int v = vertex[static_cast<size_t>(y) * cols + x];
-      if (v < 0) continue;
-      const bool head_side = any_edge ? graph.inSourceSegment(v) : to_head[v] > to_back[v];
-      labels.at<uchar>(y, x) = head_side ? cv::GC_PR_FGD : cv::GC_PR_BGD;
-    }
+  CutGraph(bgr, labels).Cut(bgr, back, head, labels);
 }
 
 void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground) {
@@ -248,6 +274,7 @@ void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::
   }
   *background = sums[0].Model();
   *foreground = sums[1].Model();
+  const CutGraph graph(bgr, labels);
   for (int it = 0; it < iterations; ++it) {
     const Mixture mixtures[2] = {Mixture(*background, "background"), Mixture(*foreground, "foreground")};
     MixtureSums refit[2];
@@ -259,7 +286,7 @@ void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::
       }
     *background = refit[0].Model();
     *foreground = refit[1].Model();
-    CutWithColourModels(bgr, labels, *background, *foreground);
+    graph.Cut(bgr, Mixture(*background, "background"), Mixture(*foreground, "foreground"), labels);
   }
 }
 
