@@ -42,6 +42,7 @@ struct BenchOptions {
   int key_interval = 30;               // codec: key-frame interval
   double codec_error_m = 2e-4;         // codec: the quantisation's vertex error per step
   RefineBenchOptions refine;
+  int outline_band = 8;  // outline: the band's width (HeadMaskOptions::band)
 };
 
 // Times `fn` (after warm-up) and returns microseconds per call.
@@ -60,5 +61,6 @@ nlohmann::json RunMeshFitSuite(const BenchOptions& options);
 nlohmann::json RunRgbdSuite(const BenchOptions& options);
 nlohmann::json RunTrainSuite(const BenchOptions& options);
 nlohmann::json RunRefineSuite(const BenchOptions& options);
+nlohmann::json RunOutlineSuite(const BenchOptions& options);
 
 }  // namespace headcast::bench

@@ -62,6 +62,18 @@ int main(int argc, char** argv) {
   track->add_option("--avatar", options.avatar,
                     "an .hcavatar carrying a photometric anchor (prepared with one): also track as the sender does "
                     "with it, side by side");
+  auto* outline = app.add_subcommand(
+      "outline", "the sender's hair outline per frame: the whole head region cut against a band near the last outline");
+  outline->add_option("--json", options.json_path, "write the results to this JSON file");
+  outline->add_option("--video", options.video, "video to track")->required();
+  outline->add_option("--avatar", options.avatar, "the .hcavatar the sender takes its camera and identity from")
+      ->required();
+  outline->add_option("--head-model", options.head_model, "builtin or a model .npz");
+  outline->add_option("--frames", options.repeats, "the video's first N frames (0: all)")
+      ->check(CLI::Range(0, 1000000));
+  outline->add_option("--outline-band", options.outline_band, "the band's width, working pixels")
+      ->check(CLI::Range(1, 200))
+      ->capture_default_str();
   headmodel->add_option("--head-model", options.head_model, "also time this model .npz (builtin: only the built-in)");
   render->add_option("--head-model", options.head_model,
                      "builtin or a model .npz: the head the random avatars are made for (its expression count sets "
@@ -127,6 +139,7 @@ int main(int argc, char** argv) {
   try {
     InitLogging("warn");
     if (train->parsed() && train->count("--iterations") == 0) options.repeats = 30;
+    if (outline->parsed() && outline->count("--frames") == 0) options.repeats = 0;
     if (render->parsed() && options.compare_headnerf && options.resolution != 256)
       throw std::invalid_argument("--compare-headnerf is defined at --resolution 256 (HeadNeRF's 32x32 feature map)");
     nlohmann::json result = headmodel->parsed() ? bench::RunHeadModelSuite(options)
@@ -138,6 +151,7 @@ int main(int argc, char** argv) {
                             : rgbd->parsed()    ? bench::RunRgbdSuite(options)
                             : train->parsed()   ? bench::RunTrainSuite(options)
                             : refine->parsed()  ? bench::RunRefineSuite(options)
+                            : outline->parsed() ? bench::RunOutlineSuite(options)
                                                 : bench::RunQualitySuite(options);
     std::string cmd = "build/bin/headcast-bench";
     for (int i = 1; i < argc; ++i) cmd += std::string(" ") + argv[i];

@@ -95,6 +95,7 @@ void FrameOutliner::Forget() {
   Abandon();
   std::lock_guard<std::mutex> lock(mutex_);
   models_ = {};
+  ++models_version_;
   ++generation_;
   frames_since_learnt_ = 0;
   learn_bgr_ = cv::Mat();
@@ -108,23 +109,27 @@ cv::Mat FrameOutliner::Cut(const cv::Mat& bgr, const Landmarks2d& face, double c
   const double wanted_above_y = centre_row >= 0 ? centre_row : HUGE_VAL;
   if (!beside_fit_) return CropGrabCutMask(bgr, face, crop_, mask_, &models_, wanted_above_y);
   if (mask_.refit_every == 1) return CropGrabCutMask(bgr, face, crop_, mask_);  // every frame learns its own
-  HeadMaskModels carried;
   int generation = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    carried = {models_.background.clone(), models_.foreground.clone(), 0};
     generation = generation_;
+    if (cutting_version_ != models_version_) {  // new models: this frame is cut whole, not near the last outline
+      cutting_ = {models_.background.clone(), models_.foreground.clone(), 0, {}, {}};
+      cutting_version_ = models_version_;
+    }
   }
-  if (carried.background.empty()) {  // the first frame of a face learns its models here
-    const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, mask_, &carried);
+  if (cutting_.background.empty()) {  // the first frame of a face learns its models here
+    const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, mask_, &cutting_);
     std::lock_guard<std::mutex> lock(mutex_);
     if (generation == generation_) {
-      models_ = carried;
+      models_ = {cutting_.background, cutting_.foreground, 0, {}, {}};
+      cutting_version_ = ++models_version_;
       frames_since_learnt_ = 0;
     }
     return grabcut;
   }
-  const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, frozen_, &carried, wanted_above_y);
+  cutting_.frames_since_fit = 0;  // the learner refits them
+  const cv::Mat grabcut = CropGrabCutMask(bgr, face, crop_, frozen_, &cutting_, wanted_above_y);
   bool ask = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -196,7 +201,10 @@ void FrameOutliner::LearnLoop() {
     }
     std::lock_guard<std::mutex> lock(mutex_);
     learning_ = false;
-    if (generation == generation_ && !fresh.background.empty()) models_ = fresh;
+    if (generation == generation_ && !fresh.background.empty()) {
+      models_ = {fresh.background, fresh.foreground, 0, {}, {}};
+      ++models_version_;
+    }
   }
 }
 

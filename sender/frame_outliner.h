@@ -79,8 +79,13 @@ class FrameOutliner {
   bool cut_asked_ = false, cut_done_ = false;
   cv::Mat cut_;
   std::string cut_error_;
-  HeadMaskModels models_;  // carried; replaced by the learner
-  int generation_ = 0;     // bumped by Forget: a learning from before is dropped
+  HeadMaskModels models_;   // carried; replaced by the learner
+  int models_version_ = 0;  // bumped when models_ is replaced
+  // The cutting thread's copy of models_ and the last mask cut with them
+  // (HeadMaskOptions::band); remade when models_version_ moves on.
+  HeadMaskModels cutting_;
+  int cutting_version_ = 0;
+  int generation_ = 0;  // bumped by Forget: a learning from before is dropped
   int frames_since_learnt_ = 0;
   cv::Mat learn_bgr_;  // a frame for the learner (empty: none asked)
   Landmarks2d learn_face_{};

@@ -40,11 +40,13 @@ struct LiveTrackerOptions {
   int outline_resolution = 256;
   MatteRules matte_rules;  // the avatar's (its masks' rules)
   // GrabCut's: the training masks', except that a frame learns its own colour
-  // models only every 8th frame (HeadMaskOptions::refit_every; the benchmark
-  // report has what that costs and saves).
+  // models only every 8th frame (HeadMaskOptions::refit_every) and the
+  // frames between are cut near the last one's outline (band; the benchmark
+  // report has what each costs and saves).
   HeadMaskOptions outline_mask = [] {
     HeadMaskOptions o;
     o.refit_every = 8;
+    o.band = 8;
     return o;
   }();
 };

@@ -119,6 +119,11 @@ void AddFlags(CLI::App& app, SenderFlags& f) {
                  "--input: that GrabCut learns its colour models on every Nth frame only; the frames between cut "
                  "once with the last ones (1: every frame learns its own, as the training masks did)")
       ->capture_default_str();
+  app.add_option("--outline-band", f.live.outline_mask.band,
+                 "--input: a frame cut with the last colour models is segmented only within this many pixels (of "
+                 "the mask's working size) of the last frame's outline, moved with the face (0: the whole head "
+                 "region; a frame after new models is cut whole)")
+      ->capture_default_str();
   app.add_flag("!--no-gaze", f.live.tracker.face.locate_irises,
                "--input: do not locate the irises (the eyes look straight ahead)");
   AddCameraFlags(app, f.source, f.camera_size);

@@ -15,9 +15,38 @@ void HeadMaskOptions::Check() const {
   c.InRange("hair_height", hair_height, 0, 3).InRange("head_width", head_width, 1, 3);
   c.InRange("neck_height", neck_height, 0, 3).InRange("min_face_height", min_face_height, 0, 2);
   c.InRange("background_ring", background_ring, 0, 2).InRange("refit_every", refit_every, 1, 1000);
-  c.InRange("wanted_margin", wanted_margin, 0, 1);
+  c.InRange("wanted_margin", wanted_margin, 0, 1).InRange("band", band, 0, 200);
   c.ThrowIfErrors();
 }
+
+namespace {
+
+// Undecided pixels of `labels` (the working region: `roi` of the frame at
+// `scale`) further than `band` working pixels from `last`'s outline, moved by
+// `shift` (frame pixels), become certain: head inside it, background outside.
+void SettleFarFromOutline(const cv::Mat& last, cv::Point2f shift, const cv::Rect& roi, double scale, int band,
+                          cv::Mat& labels) {
+  const cv::Matx23d frame_to_work(scale, 0, (shift.x - roi.x) * scale, 0, scale, (shift.y - roi.y) * scale);
+  cv::Mat moved;
+  cv::warpAffine(last, moved, frame_to_work, labels.size(), cv::INTER_NEAREST, cv::BORDER_CONSTANT, cv::Scalar(0));
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * band + 1, 2 * band + 1));
+  cv::Mat inside, reach;
+  cv::erode(moved, inside, disc, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  cv::dilate(moved, reach, disc, cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
+  for (int y = 0; y < labels.rows; ++y) {
+    uchar* l = labels.ptr<uchar>(y);
+    const uchar *in = inside.ptr<uchar>(y), *near = reach.ptr<uchar>(y);
+    for (int x = 0; x < labels.cols; ++x) {
+      if (l[x] != cv::GC_PR_FGD && l[x] != cv::GC_PR_BGD) continue;
+      if (in[x])
+        l[x] = cv::GC_FGD;
+      else if (!near[x])
+        l[x] = cv::GC_BGD;
+    }
+  }
+}
+
+}  // namespace
 
 cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried,
                  double wanted_above_y) {
@@ -28,6 +57,8 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
     if (!p.allFinite()) throw std::invalid_argument("HeadMask: non-finite landmarks");
     pts.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
   }
+  cv::Point2f landmarks_centre(0, 0);
+  for (const auto& p : pts) landmarks_centre += p * (1.0f / pts.size());
   // Face geometry from the landmarks: brow line, chin, jaw width, the face's up direction.
   const cv::Point2f chin = pts[8];
   cv::Point2f brow(0, 0);
@@ -87,17 +118,25 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   std::vector<cv::Point> hull;
   for (const auto& p : hull_f) hull.push_back(to_work(face_centre + (p - face_centre) * 0.9f));
   cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));
-  if (carried && !carried->background.empty() && carried->frames_since_fit + 1 < o.refit_every) {
+  const bool cut_with_carried =
+      carried && !carried->background.empty() && carried->frames_since_fit + 1 < o.refit_every;
+  if (cut_with_carried) {
     const double wanted_rows = (wanted_above_y - roi.y) * scale + o.wanted_margin * image.rows;
     const int rows = wanted_rows < image.rows ? std::max(8, static_cast<int>(std::ceil(wanted_rows))) : image.rows;
-    cv::Mat band = seeds.rowRange(0, rows).clone();  // below: the seeds' probable head
-    CutWithColourModels(image.rowRange(0, rows), band, carried->background, carried->foreground);
-    band.copyTo(seeds.rowRange(0, rows));
+    cv::Mat cut = seeds.rowRange(0, rows).clone();              // below: the seeds' probable head
+    if (o.band > 0 && carried->last_mask.size() == bgr.size())  // near the last outline, moved with the face
+      SettleFarFromOutline(carried->last_mask, landmarks_centre - carried->last_centre, roi, scale, o.band, cut);
+    CutWithColourModels(image.rowRange(0, rows), cut, carried->background, carried->foreground);
+    cut.copyTo(seeds.rowRange(0, rows));
     ++carried->frames_since_fit;
   } else {
     cv::Mat bgd_model, fgd_model;
     LearnColourModels(image, seeds, o.iterations, &bgd_model, &fgd_model);
-    if (carried) *carried = {bgd_model, fgd_model, 0};
+    // The first cut with new models is made whole (no last mask): a band
+    // would keep what the old models made far from the outline. (A learning
+    // kept near the last outline as well learns other models, and the masks
+    // they cut differ more than the band's.)
+    if (carried) *carried = {bgd_model, fgd_model, 0, {}, {}};
   }
   cv::Mat fg = (seeds == cv::GC_FGD) | (seeds == cv::GC_PR_FGD);
   // The largest connected piece only, holes filled.
@@ -114,6 +153,10 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   cv::resize(clean, back, roi.size(), 0, 0, cv::INTER_LINEAR);
   cv::threshold(back, back, 127, 255, cv::THRESH_BINARY);
   back.copyTo(full(roi));
+  if (cut_with_carried) {
+    carried->last_mask = full.clone();  // the caller may write to what it is given
+    carried->last_centre = landmarks_centre;
+  }
   return full;
 }
 

@@ -36,6 +36,13 @@ struct HeadMaskOptions {
   // and this much of the region's height further (the cut there still feels
   // the rows beneath it); most of GrabCut's time scales with the pixels.
   double wanted_margin = 0.1;
+  // A frame cut with carried models right after another one (HeadMaskModels'
+  // last mask) is segmented only within this many working pixels of that
+  // mask's outline, moved with the face: further inside it is head, further
+  // out background. A head's outline moves a few pixels between frames, and
+  // the minimum cut's time scales with the pixels it may move. 0: the whole
+  // region, every frame.
+  int band = 0;
   void Check() const;
 };
 
@@ -44,6 +51,11 @@ struct HeadMaskOptions {
 struct HeadMaskModels {
   cv::Mat background, foreground;  // cv::grabCut's
   int frames_since_fit = 0;
+  // The last mask cut with them (the frame's size; empty: none yet) and the
+  // centre of the landmarks it was seeded by: where the next frame's outline
+  // is looked for (HeadMaskOptions::band).
+  cv::Mat last_mask;
+  cv::Point2f last_centre;
 };
 
 // CV_8U, 255 on the head. Throws std::invalid_argument on an empty image or
@@ -54,6 +66,10 @@ struct HeadMaskModels {
 // models is then segmented only there (HeadMaskOptions::wanted_margin), and
 // below it the mask is the seeds' probable head. A frame that learns its
 // models segments the whole region: they must know the face and the neck.
+// A mask cut with carried models is kept in `carried` (its last_mask): the
+// next frame cut with them looks for its outline near it
+// (HeadMaskOptions::band). A learning leaves none: the first cut with new
+// models is whole.
 cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {},
                  HeadMaskModels* carried = nullptr, double wanted_above_y = HUGE_VAL);
 

@@ -47,6 +47,18 @@ class RestingHeadScenes {
     s.params.SetCamFromHead(cam_from_head);
     return s;
   }
+  // `s`'s head moved across the picture by `shift` pixels (in front of the
+  // same background; its params are left as they were).
+  Scene Moved(const Scene& s, cv::Point2f shift) const {
+    const cv::Matx23d by(1, 0, shift.x, 0, 1, shift.y);
+    cv::Mat head, mask;
+    cv::warpAffine(s.image, head, by, s.image.size(), cv::INTER_NEAREST);
+    cv::warpAffine(s.mask, mask, by, s.mask.size(), cv::INTER_NEAREST);
+    Scene moved{background_.clone(), mask, s.landmarks, s.params};
+    head.copyTo(moved.image, mask);
+    for (auto& p : moved.landmarks) p += Eigen::Vector2d(shift.x, shift.y);
+    return moved;
+  }
   const HeadModel& model() const { return model_; }
   const PinholeCamera& camera() const { return cam_; }
 

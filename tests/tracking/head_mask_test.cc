@@ -188,8 +188,8 @@ TEST(HeadMask, ACarriedModelsCutOfTheWantedRowsIsTheWholeCutThere) {
     const RestingHeadScenes::Scene s = scenes.At(0.7, yaw, 0);
     double brow_y = 0;  // the rows above the brows: the hair's outline
     for (int k = 17; k <= 26; ++k) brow_y += 0.1 * s.landmarks[k].y();
-    HeadMaskModels for_whole{learnt.background.clone(), learnt.foreground.clone(), 0},
-        for_band{learnt.background.clone(), learnt.foreground.clone(), 0};
+    HeadMaskModels for_whole{learnt.background.clone(), learnt.foreground.clone(), 0, {}, {}},
+        for_band{learnt.background.clone(), learnt.foreground.clone(), 0, {}, {}};
     Stopwatch watch;
     const cv::Mat whole = HeadMask(s.image, s.landmarks, o, &for_whole);
     const double whole_ms = watch.ElapsedMs();
@@ -207,6 +207,57 @@ TEST(HeadMask, ACarriedModelsCutOfTheWantedRowsIsTheWholeCutThere) {
   }
   HeadMaskOptions bad;
   bad.wanted_margin = -0.1;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
+// A frame cut near the last one's outline (HeadMaskOptions::band) comes out
+// as the whole region's cut while the outline moves less than the band, and
+// the band moves with the face; a last mask far off holds the cut near it.
+TEST(HeadMask, ACutNearTheLastOutlineIsTheWholeCutWhileTheHeadMovesWithin) {
+  const RestingHeadScenes scenes(11);
+  HeadMaskOptions whole_o, band_o;
+  whole_o.refit_every = band_o.refit_every = 100;
+  band_o.band = 8;
+  HeadMaskModels whole, banded;
+  const RestingHeadScenes::Scene first = scenes.At(0.7, -6, 0);
+  HeadMask(first.image, first.landmarks, band_o, &banded);
+  EXPECT_TRUE(banded.last_mask.empty()) << "a learning leaves no last mask: the next cut is whole";
+  whole = {banded.background.clone(), banded.foreground.clone(), 0, {}, {}};
+  int frame = 0;
+  for (const auto& [yaw, shift] : std::vector<std::pair<double, cv::Point2f>>{
+           {-6, {0, 0}}, {-3, {0, 0}}, {0, {0, 0}}, {3, {0, 0}}, {3, {30, 12}}, {5, {-10, 20}}}) {
+    const RestingHeadScenes::Scene s = scenes.Moved(scenes.At(0.7, yaw, 0), shift);
+    Stopwatch watch;
+    const cv::Mat near = HeadMask(s.image, s.landmarks, band_o, &banded);
+    const double near_ms = watch.ElapsedMs();
+    watch.Restart();
+    const cv::Mat all = HeadMask(s.image, s.landmarks, whole_o, &whole);
+    const double all_ms = watch.ElapsedMs();
+    ASSERT_EQ(banded.last_mask.size(), s.image.size());
+    EXPECT_EQ(cv::countNonZero(banded.last_mask != near), 0);
+    std::printf(
+        "yaw %+.0f, moved (%+.0f, %+.0f) px: IoU %.4f with the whole cut, %.4f with the truth; %.1f ms vs %.1f\n", yaw,
+        shift.x, shift.y, MaskIou(near, all), MaskIou(near, s.mask), near_ms, all_ms);
+    if (frame++ > 0) {  // the first is cut whole
+      EXPECT_GT(MaskIou(near, all), 0.99) << "yaw " << yaw;
+    }
+    EXPECT_GT(MaskIou(near, s.mask), 0.9) << "yaw " << yaw;
+  }
+  // A last mask 40 px inside the head's: the cut cannot reach the true outline.
+  const RestingHeadScenes::Scene s = scenes.At(0.7, 0, 0);
+  cv::Mat shrunk;
+  cv::erode(s.mask, shrunk, cv::getStructuringElement(cv::MORPH_ELLIPSE, {81, 81}));
+  banded.last_mask = shrunk;
+  banded.last_centre = {0, 0};
+  for (const auto& p : s.landmarks) banded.last_centre += cv::Point2f(p.x(), p.y()) * (1.f / kNumLandmarks);
+  const cv::Mat held = HeadMask(s.image, s.landmarks, band_o, &banded);
+  const cv::Mat all = HeadMask(s.image, s.landmarks, whole_o, &whole);
+  std::printf("last mask 40 px inside: %d head pixels against %d cut whole\n", cv::countNonZero(held),
+              cv::countNonZero(all));
+  EXPECT_LT(cv::countNonZero(held), 0.9 * cv::countNonZero(all));
+  EXPECT_GT(MaskIou(all, s.mask), 0.9);
+  HeadMaskOptions bad;
+  bad.band = -1;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
