@@ -39,7 +39,8 @@ nlohmann::json RunOutlineSuite(const BenchOptions& options) {
   std::optional<FrameCrop> crop;
   std::optional<PinholeCamera> camera;
   std::unique_ptr<FrameOutliner> a, b;
-  SampleStats whole_ms, band_ms, difference_mm;
+  SampleStats whole_ms, band_ms, difference_mm, learn_with_mask_ms, learn_alone_ms;
+  int learnings = 0, learnings_equal = 0;
   int frames = 0, outlined = 0, bins = 0, equal_bins = 0;
   cv::Mat frame;
   FrameParams params;
@@ -83,6 +84,22 @@ nlohmann::json RunOutlineSuite(const BenchOptions& options) {
       }
       (first_a ? whole_ms : band_ms).Add(watch.ElapsedMs());
     }
+    // The learner thread's work on the frames it learns on: HeadMask's
+    // learning, and the models alone (its last cut left out).
+    if (outlined % whole.refit_every == 0) {
+      HeadMaskModels with_mask;
+      cv::theRNG().state = random_state;
+      Stopwatch watch;
+      HeadMask(frame, face.raw, whole, &with_mask);
+      learn_with_mask_ms.Add(watch.ElapsedMs());
+      cv::theRNG().state = random_state;
+      watch.Restart();
+      const HeadMaskModels alone = LearnHeadMaskModels(frame, face.raw, whole);
+      learn_alone_ms.Add(watch.ElapsedMs());
+      ++learnings;
+      learnings_equal += cv::norm(with_mask.background, alone.background, cv::NORM_INF) == 0 &&
+                         cv::norm(with_mask.foreground, alone.foreground, cv::NORM_INF) == 0;
+    }
     if (outline_a.empty() || outline_b.empty()) continue;
     ++outlined;
     for (size_t i = 0; i < outline_a.size(); ++i) {
@@ -110,6 +127,14 @@ nlohmann::json RunOutlineSuite(const BenchOptions& options) {
   AddStats(&out, "band_ms", band_ms);
   out["whole_ms_total"] = whole_ms.Mean() * whole_ms.count();
   out["band_ms_total"] = band_ms.Mean() * band_ms.count();
+  out["learner_what"] =
+      "the learner thread's work on every " + std::to_string(whole.refit_every) +
+      "th outlined frame: HeadMask's learning (its mask made) and LearnHeadMaskModels (the models alone, the "
+      "learning's last cut left out), ms, from the same random state; learnings whose models are equal";
+  AddStats(&out, "learn_with_mask_ms", learn_with_mask_ms);
+  AddStats(&out, "learn_alone_ms", learn_alone_ms);
+  out["learnings"] = learnings;
+  out["learnings_equal"] = learnings_equal;
   out["bins_compared"] = bins;
   out["bins_equal_share"] = bins ? static_cast<double>(equal_bins) / bins : 0.0;
   out["difference_mm_mean"] = difference_mm.empty() ? 0.0 : difference_mm.Mean();

@@ -195,7 +195,7 @@ void FrameOutliner::LearnLoop() {
     }
     HeadMaskModels fresh;
     try {
-      HeadMask(bgr, face, mask_, &fresh);
+      fresh = LearnHeadMaskModels(bgr, face, mask_);
     } catch (const std::exception&) {  // a frame it cannot be learnt on: the models stay
       fresh = {};
     }

@@ -8,7 +8,8 @@
 // fit): the frame's parameters leave a few milliseconds after its fit rather
 // than a GrabCut later. Its colour models are carried from frame to frame and
 // learnt anew every HeadMaskOptions::refit_every frames on a second, lower-
-// priority thread, so that no frame waits for the learning.
+// priority thread (the models alone, LearnHeadMaskModels), so that no frame
+// waits for the learning.
 #pragma once
 
 #include <condition_variable>

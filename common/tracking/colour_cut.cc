@@ -246,7 +246,8 @@ void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& bac
   CutGraph(bgr, labels).Cut(bgr, back, head, labels);
 }
 
-void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground) {
+void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground,
+                       bool cut_last) {
   CheckImageAndLabels("LearnColourModels", bgr, labels);
   if (iterations < 1) throw std::invalid_argument("LearnColourModels: at least one iteration");
   // Each side's colours clustered: the components' first assignment.
@@ -286,6 +287,7 @@ void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::
       }
     *background = refit[0].Model();
     *foreground = refit[1].Model();
+    if (it + 1 == iterations && !cut_last) break;  // the last cut changes only the labels
     graph.Cut(bgr, Mixture(*background, "background"), Mixture(*foreground, "foreground"), labels);
   }
 }

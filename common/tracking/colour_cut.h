@@ -33,7 +33,10 @@ void CutWithColourModels(const cv::Mat& bgr, cv::Mat& labels, const cv::Mat& bac
 // CutWithColourModels). `labels` leaves with the last cut, `background` and
 // `foreground` with the models (cv::grabCut's layout). Throws
 // std::invalid_argument as CutWithColourModels, or when either side has
-// fewer pixels than a mixture has components.
-void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground);
+// fewer pixels than a mixture has components. `cut_last` false: the last
+// round's cut, which changes only `labels`, is left out (a learner that
+// keeps only the models); `labels` then leaves with the round before's.
+void LearnColourModels(const cv::Mat& bgr, cv::Mat& labels, int iterations, cv::Mat* background, cv::Mat* foreground,
+                       bool cut_last = true);
 
 }  // namespace headcast

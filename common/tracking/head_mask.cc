@@ -2,6 +2,7 @@
 #include "common/tracking/head_mask.h"
 
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <stdexcept>
 
 #include "common/core/options.h"
@@ -46,10 +47,16 @@ void SettleFarFromOutline(const cv::Mat& last, cv::Point2f shift, const cv::Rect
   }
 }
 
-}  // namespace
+// The head's region of `bgr`, scaled to the working size, and GrabCut's
+// seeds there; nothing when the region is too small to cut.
+struct SeededRegion {
+  cv::Rect roi;  // of the frame
+  double scale = 1;
+  cv::Mat image, seeds;          // working size
+  cv::Point2f landmarks_centre;  // frame pixels
+};
 
-cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried,
-                 double wanted_above_y) {
+std::optional<SeededRegion> SeedHeadRegion(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o) {
   o.Check();
   if (bgr.empty() || bgr.type() != CV_8UC3) throw std::invalid_argument("HeadMask: an 8-bit BGR image is needed");
   std::vector<cv::Point2f> pts;
@@ -89,8 +96,7 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   const int pad = static_cast<int>(0.25 * std::max(roi.width, roi.height));
   roi = cv::Rect(roi.x - pad, roi.y - pad, roi.width + 2 * pad, roi.height + 2 * pad) &
         cv::Rect(0, 0, bgr.cols, bgr.rows);
-  cv::Mat full(bgr.size(), CV_8U, cv::Scalar(0));
-  if (roi.width < 8 || roi.height < 8) return full;
+  if (roi.width < 8 || roi.height < 8) return std::nullopt;
   const double scale = std::min(1.0, static_cast<double>(o.working_size) / std::max(roi.width, roi.height));
   cv::Mat image;
   cv::resize(bgr(roi), image, cv::Size(), scale, scale, cv::INTER_AREA);
@@ -118,6 +124,21 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
   std::vector<cv::Point> hull;
   for (const auto& p : hull_f) hull.push_back(to_work(face_centre + (p - face_centre) * 0.9f));
   cv::fillConvexPoly(seeds, hull, cv::Scalar(cv::GC_FGD));
+  return SeededRegion{roi, scale, image, seeds, landmarks_centre};
+}
+
+}  // namespace
+
+cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o, HeadMaskModels* carried,
+                 double wanted_above_y) {
+  std::optional<SeededRegion> region = SeedHeadRegion(bgr, landmarks, o);
+  cv::Mat full(bgr.size(), CV_8U, cv::Scalar(0));
+  if (!region) return full;
+  const cv::Rect roi = region->roi;
+  const double scale = region->scale;
+  const cv::Mat& image = region->image;
+  cv::Mat& seeds = region->seeds;
+  const cv::Point2f landmarks_centre = region->landmarks_centre;
   const bool cut_with_carried =
       carried && !carried->background.empty() && carried->frames_since_fit + 1 < o.refit_every;
   if (cut_with_carried) {
@@ -158,6 +179,14 @@ cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMas
     carried->last_centre = landmarks_centre;
   }
   return full;
+}
+
+HeadMaskModels LearnHeadMaskModels(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& o) {
+  std::optional<SeededRegion> region = SeedHeadRegion(bgr, landmarks, o);
+  if (!region) throw std::invalid_argument("LearnHeadMaskModels: the head's region is too small to learn on");
+  HeadMaskModels models;
+  LearnColourModels(region->image, region->seeds, o.iterations, &models.background, &models.foreground, false);
+  return models;
 }
 
 double MaskIou(const cv::Mat& a, const cv::Mat& b) {

@@ -73,6 +73,13 @@ struct HeadMaskModels {
 cv::Mat HeadMask(const cv::Mat& bgr, const Landmarks2d& landmarks, const HeadMaskOptions& options = {},
                  HeadMaskModels* carried = nullptr, double wanted_above_y = HUGE_VAL);
 
+// The colour models HeadMask would learn on this frame (and carry), without
+// its mask: the learning's last cut, which changes only the mask, is left
+// out. Throws std::invalid_argument as HeadMask, or when the head's region is
+// too small to learn on (where HeadMask gives an empty mask).
+HeadMaskModels LearnHeadMaskModels(const cv::Mat& bgr, const Landmarks2d& landmarks,
+                                   const HeadMaskOptions& options = {});
+
 // Intersection over union of two binary masks (non-zero = inside).
 double MaskIou(const cv::Mat& a, const cv::Mat& b);
 

@@ -109,6 +109,26 @@ TEST(ColourCut, LearnsAsGrabCutLearns) {
                std::invalid_argument);
 }
 
+// A learner that keeps only the models leaves out the last round's cut: the
+// same models, the labels of the round before.
+TEST(ColourCut, LearningWithoutTheLastCutLearnsTheSameModels) {
+  const RestingHeadScenes scenes(13);
+  const RestingHeadScenes::Scene s = scenes.At(0.7, 4, -4);
+  const cv::Mat seeds = SeedsAround(s.mask);
+  cv::Mat cut_last = seeds.clone(), not_cut = seeds.clone(), two_rounds = seeds.clone();
+  cv::Mat back[3], head[3];
+  cv::theRNG().state = 7;
+  LearnColourModels(s.image, cut_last, 3, &back[0], &head[0]);
+  cv::theRNG().state = 7;
+  LearnColourModels(s.image, not_cut, 3, &back[1], &head[1], false);
+  cv::theRNG().state = 7;
+  LearnColourModels(s.image, two_rounds, 2, &back[2], &head[2]);
+  EXPECT_EQ(cv::norm(back[0], back[1], cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(head[0], head[1], cv::NORM_INF), 0.0);
+  EXPECT_EQ(Differing(not_cut, two_rounds), 0);
+  EXPECT_GT(cv::norm(head[0], head[2], cv::NORM_INF), 0.0);  // the third round did refit
+}
+
 TEST(ColourCut, WithoutUndecidedPixelsNothingChanges) {
   const RestingHeadScenes scenes(13);
   const RestingHeadScenes::Scene s = scenes.At(0.7, 0, 0);

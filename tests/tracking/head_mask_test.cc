@@ -261,6 +261,29 @@ TEST(HeadMask, ACutNearTheLastOutlineIsTheWholeCutWhileTheHeadMovesWithin) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// What a learner keeps: the models HeadMask learns on the frame, without its mask.
+TEST(HeadMask, ItsModelsAloneAreTheModelsItLearns) {
+  const RestingHeadScenes scenes(11);
+  const RestingHeadScenes::Scene s = scenes.At(0.7, -5, 3);
+  HeadMaskModels learnt;
+  cv::theRNG().state = 5;
+  Stopwatch watch;
+  HeadMask(s.image, s.landmarks, {}, &learnt);
+  const double mask_ms = watch.ElapsedMs();
+  cv::theRNG().state = 5;
+  watch.Restart();
+  const HeadMaskModels alone = LearnHeadMaskModels(s.image, s.landmarks);
+  std::printf("learnt with the mask %.1f ms, alone %.1f ms\n", mask_ms, watch.ElapsedMs());
+  ASSERT_FALSE(alone.background.empty());
+  EXPECT_EQ(cv::norm(learnt.background, alone.background, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(learnt.foreground, alone.foreground, cv::NORM_INF), 0.0);
+  EXPECT_TRUE(alone.last_mask.empty());
+  Landmarks2d tiny = s.landmarks;
+  for (auto& p : tiny) p = Eigen::Vector2d(1, 1) + 1e-3 * p;  // a head a pixel across
+  EXPECT_THROW(LearnHeadMaskModels(s.image, tiny), std::invalid_argument);
+  EXPECT_EQ(cv::countNonZero(HeadMask(s.image, tiny)), 0);
+}
+
 TEST(HeadMask, BadInputIsRefused) {
   Landmarks2d l;
   for (auto& p : l) p = Eigen::Vector2d(10, 10);
