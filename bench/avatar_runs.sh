@@ -18,3 +18,15 @@ ict_and_general() {
       --head-model "$model" --resolution 128 --iterations 4000 --processes 2 --out "$general"; }
   fi
 }
+# The four-clip table's prep and fine-tune, in one place, so that every script
+# that runs "the table's settings" runs the same commands (needs model).
+prep_clip() {  # prep_clip LOG VIDEO DS [PREP FLAGS...]: 256² crops, the last 150 frames held out
+  local log=$1 video=$2 ds=$3; shift 3
+  run "$log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$ds" --resolutions 256 \
+    --test-frames 150 "$@"
+}
+fine_tune_clip() {  # fine_tune_clip LOG GENERAL DS AVATAR STEPS [SUBJECT FLAGS...]: at 256², 2 processes
+  local log=$1 from=$2 ds=$3 avatar=$4 steps=$5; shift 5
+  run "$log" "$bin/headcast-train" subject --head-model "$model" --general "$from" --data "$ds" --resolution 256 \
+    --processes 2 --iterations "$steps" --z-augmentation "${z_augmentation:-0}" --out "$avatar" "$@"
+}

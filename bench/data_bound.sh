@@ -41,8 +41,7 @@ ds=$out/ds_$clip
 if [ "$reuse" = 0 ] || [ ! -f "$ds/dataset.json" ]; then
   step "$clip: prep"
   rm -rf "$ds"
-  run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$ds" \
-    --resolutions 256 --test-frames 150
+  prep_clip "prep_$clip.log" "$video" "$ds"
 fi
 for n in $trains; do
   tag=${clip}_train$n
@@ -65,8 +64,7 @@ m["split"].update(train=n, test=m["frames_fitted"] - n)
 json.dump(m, open(sys.argv[2], "w"), indent=1)
 EOF
   step "$tag: fine-tune ($iterations steps)"
-  run "subject_$tag.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" --data "$variant" \
-    --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 --out "$out/avatar_$tag.hcavatar"
+  fine_tune_clip "subject_$tag.log" "$general" "$variant" "$out/avatar_$tag.hcavatar" "$iterations"
   step "$tag: eval on the held-out frames"
   run "eval_$tag.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$tag.hcavatar" \
     --data "$ds" --out "$out/eval_$tag" --orbit-frames 0 --no-landmarks

@@ -32,8 +32,7 @@ source "$root/bench/avatar_runs.sh"
 ict_and_general
 if [ -z "$dataset" ]; then
   dataset=$out/ds
-  [ -f "$dataset/dataset.json" ] || { step "prep"; run prep.log "$bin/headcast-train" prep --input "$video" \
-    --head-model "$model" --out "$dataset" --resolutions 256 --test-frames 150; }
+  [ -f "$dataset/dataset.json" ] || { step "prep"; prep_clip prep.log "$video" "$dataset"; }
 fi
 names=()
 for variant in "${variants[@]}"; do
@@ -42,9 +41,8 @@ for variant in "${variants[@]}"; do
   if [ $reuse = 0 ] || [ ! -f "$out/avatar_$vname.hcavatar" ]; then
     step "$vname: fine-tune ($iterations steps) $flags"
     # shellcheck disable=SC2086  # the variant's flags are words
-    run "subject_$vname.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
-      --data "$dataset" --resolution 256 --processes 2 --iterations "$iterations" --z-augmentation 0 \
-      --json "$out/subject_$vname.json" --out "$out/avatar_$vname.hcavatar" $flags
+    fine_tune_clip "subject_$vname.log" "$general" "$dataset" "$out/avatar_$vname.hcavatar" "$iterations" \
+      --json "$out/subject_$vname.json" $flags
   fi
   step "$vname: eval"
   run "eval_$vname.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$vname.hcavatar" \

@@ -56,14 +56,12 @@ for clip in $clips; do
   step "$clip: prep $prep_flags"
   rm -rf "$out/ds_$clip"
   # shellcheck disable=SC2086  # the extra flags are words
-  run "prep_$clip.log" "$bin/headcast-train" prep --input "$video" --head-model "$model" --out "$out/ds_$clip" \
-    --resolutions 256 --test-frames 150 $prep_flags
+  prep_clip "prep_$clip.log" "$video" "$out/ds_$clip" $prep_flags
   t1=$(date +%s.%N)
   step "$clip: fine-tune ($iterations steps) $subject_flags"
   # shellcheck disable=SC2086  # the extra flags are words
-  run "subject_$clip.log" "$bin/headcast-train" subject --head-model "$model" --general "$general" \
-    --data "$out/ds_$clip" --resolution 256 --processes 2 --iterations "$iterations" \
-    --z-augmentation "$z_augmentation" --json "$out/subject_$clip.json" --out "$out/avatar_$clip.hcavatar" $subject_flags
+  fine_tune_clip "subject_$clip.log" "$general" "$out/ds_$clip" "$out/avatar_$clip.hcavatar" "$iterations" \
+    --json "$out/subject_$clip.json" $subject_flags
   t2=$(date +%s.%N)
   "$python" -c "import json; json.dump({'prep_s': $t1 - $t0, 'fine_tune_s': $t2 - $t1}, open('$out/time_$clip.json', 'w'))"
   step "$clip: eval"

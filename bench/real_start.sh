@@ -48,9 +48,8 @@ source "$root/bench/avatar_runs.sh"
 fine_tune() {  # fine_tune LABEL GENERAL STEPS: as bench/four_clips.sh fine-tunes, then eval
   local label=$1 from=$2 steps=$3
   step "$clip: fine-tune $label ($steps steps)"
-  run "subject_$label.log" "$bin/headcast-train" subject --head-model "$model" --general "$from" \
-    --data "$datasets/ds_$clip" --resolution 256 --processes 2 --iterations "$steps" --z-augmentation 0 \
-    --json "$out/subject_$label.json" --out "$out/avatar_$label.hcavatar"
+  fine_tune_clip "subject_$label.log" "$from" "$datasets/ds_$clip" "$out/avatar_$label.hcavatar" "$steps" \
+    --json "$out/subject_$label.json"
   step "$clip: eval $label"
   run "eval_$label.log" "$bin/headcast-train" eval --head-model "$model" --avatar "$out/avatar_$label.hcavatar" \
     --data "$datasets/ds_$clip" --out "$out/eval_$label" --orbit-frames 0
